@@ -1,0 +1,148 @@
+"""``qgl`` — the stack's command line: bring it up, run episodes, inspect the graph and bags.
+
+ros2cli, launch and rosbag2 have no wheels here; ``qgl`` covers what the stack needs of them and
+stays compatible with a full ROS 2 install (``ros2 run``, ``ros2 service call``).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import sys
+from pathlib import Path
+
+from qg_learning_node.cli.launcher import Launcher, StackConfigError, load_stack_config
+from qg_learning_node.cli.ros_env import repo_root, stack_env
+
+__all__ = ["main", "build_parser"]
+
+
+def _cmd_up(args: argparse.Namespace) -> int:
+    specs = load_stack_config(Path(args.config))
+    launcher = Launcher(env=stack_env(), log_dir=Path(args.log_dir) if args.log_dir else None)
+    stopping = False
+
+    def on_signal(signum: int, frame: object) -> None:
+        nonlocal stopping
+        stopping = True
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, on_signal)
+    launcher.start(specs)
+    print(f"[qgl] started {', '.join(f'{n} (pid {p})' for n, p in launcher.pids().items())}; "
+          "Ctrl-C stops all", flush=True)
+    try:
+        name, code = launcher.wait_any()
+        print(f"[qgl] process '{name}' exited with code {code}; stopping the stack", flush=True)
+        launcher.stop()
+        return code if code != 0 else 1
+    except KeyboardInterrupt:
+        codes = launcher.stop()
+        bad = {n: c for n, c in codes.items() if c not in (0, -signal.SIGINT)}
+        print(f"[qgl] stopped: {codes}", flush=True)
+        return 1 if bad else 0
+
+
+def _cmd_episode(args: argparse.Namespace) -> int:
+    from qg_interfaces.srv import StartEpisode, StopEpisode
+
+    from qg_learning_node.cli.ros_client import CliNode, call_service
+    with CliNode() as cli:
+        if args.action == "start":
+            req = StartEpisode.Request(mode=args.mode, initial_pose=args.initial_pose,
+                                       seed=args.seed, reward=args.reward)
+            resp = call_service(cli, StartEpisode, "/executor/start_episode", req, args.timeout)
+        else:
+            resp = call_service(cli, StopEpisode, "/executor/stop_episode",
+                                StopEpisode.Request(reason=args.reason), args.timeout)
+        print(f"success={resp.success} episode_id={resp.episode_id!r} message={resp.message!r}")
+        if resp.success and args.action == "start" and args.wait:
+            from qg_learning_node.cli.episode_wait import wait_for_episode
+            return wait_for_episode(cli, resp.episode_id, args.timeout_episode)
+        return 0 if resp.success else 1
+
+
+def _cmd_nodes(args: argparse.Namespace) -> int:
+    from qg_learning_node.cli.ros_client import CliNode
+    with CliNode() as cli:
+        cli.spin_for(args.wait)
+        own = cli.node.get_name()
+        nodes = sorted(f"{ns.rstrip('/')}/{n}" for n, ns in cli.node.get_node_names_and_namespaces()
+                       if n != own)
+        print("nodes:")
+        for n in nodes:
+            print(f"  {n}")
+        print("topics:")
+        for name, types in sorted(cli.node.get_topic_names_and_types()):
+            if name not in ("/rosout", "/parameter_events"):
+                print(f"  {name} [{', '.join(types)}]")
+        print("services:")
+        for name, types in sorted(cli.node.get_service_names_and_types()):
+            if not any(name.endswith(s) for s in _PARAM_SERVICES):
+                print(f"  {name} [{', '.join(types)}]")
+    return 0
+
+
+_PARAM_SERVICES = ("/describe_parameters", "/get_parameter_types", "/get_parameters",
+                   "/list_parameters", "/set_parameters", "/set_parameters_atomically",
+                   "/get_type_description")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="qgl", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    up = sub.add_parser("up", help="start the stack's processes; Ctrl-C stops all")
+    up.add_argument("--config", default=str(repo_root() / "config" / "stack.yaml"),
+                    help="stack file listing the processes (default: config/stack.yaml)")
+    up.add_argument("--log-dir", default=None, help="also write each process's output here")
+    up.set_defaults(func=_cmd_up)
+
+    ep = sub.add_parser("episode", help="start or stop an episode")
+    ep_sub = ep.add_subparsers(dest="action", required=True)
+    start = ep_sub.add_parser("start", help="call /executor/start_episode")
+    start.add_argument("--mode", default="train", help="train | test")
+    start.add_argument("--initial-pose", type=int, default=-1, help="-1 (next) or 0..7")
+    start.add_argument("--seed", type=int, default=0)
+    start.add_argument("--reward", default="", help="sparse | dense (default: configured)")
+    start.add_argument("--wait", action="store_true", help="wait until the episode ends")
+    start.add_argument("--timeout-episode", type=float, default=600.0)
+    stop = ep_sub.add_parser("stop", help="call /executor/stop_episode")
+    stop.add_argument("--reason", default="stopped from qgl")
+    for p in (start, stop):
+        p.add_argument("--timeout", type=float, default=10.0, help="service timeout [s]")
+    ep.set_defaults(func=_cmd_episode)
+
+    nodes = sub.add_parser("nodes", help="list discovered nodes, topics and services")
+    nodes.add_argument("--wait", type=float, default=2.0, help="discovery time [s]")
+    nodes.set_defaults(func=_cmd_nodes)
+
+    try:
+        from qg_learning_node.cli import bag_commands
+    except ImportError:
+        bag_commands = None
+    if bag_commands is not None:
+        bag_commands.add_parsers(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if os.environ.get("QG_STACK_ENV") != "1":
+        # Type support of our interfaces needs LD_LIBRARY_PATH before Python starts.
+        try:
+            env = stack_env()
+        except FileNotFoundError as exc:
+            print(f"qgl: {exc}", file=sys.stderr)
+            return 2
+        os.execve(sys.executable, [sys.executable, "-m", "qg_learning_node.cli.main", *argv], env)
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except (StackConfigError, TimeoutError, FileNotFoundError) as exc:
+        print(f"qgl: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

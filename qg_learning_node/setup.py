@@ -1,0 +1,26 @@
+from setuptools import find_packages, setup
+
+package_name = 'qg_learning_node'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+    ],
+    include_package_data=True,
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='QG developers',
+    maintainer_email='dev@qg.local',
+    description='QG-DDPG: the residual force-policy executor (episodes, rewards, MCAP recording) and the learner (Q-Graph, replay memory, networks, checkpoints).',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'executor = qg_learning_node.executor_node:main',
+            'learner = qg_learning_node.learner_node:main',
+        ],
+    },
+)

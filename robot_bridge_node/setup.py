@@ -1,0 +1,27 @@
+from setuptools import find_packages, setup
+
+package_name = 'robot_bridge_node'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+    ],
+    include_package_data=True,
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='QG developers',
+    maintainer_email='dev@qg.local',
+    description='Hardware bridge: 1 kHz hybrid force/impedance (Panda) or task-space position (Nextage) control with safety limits, and the EKF contact-wrench estimator.',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'bridge = robot_bridge_node.bridge_node:main',
+            'wrench_estimator = robot_bridge_node.estimator_node:main',
+            'robot = robot_bridge_node.robot_process:main',
+        ],
+    },
+)

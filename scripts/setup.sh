@@ -1,0 +1,79 @@
+#!/usr/bin/env bash
+# One idempotent setup step for a bare machine: .venv with pinned dependencies, the wheel
+# CMake-path fix, the colcon build of ros_ws, and the `qgl` command. Both README commands call it.
+# A second run with nothing changed only compares stamps and returns in a few seconds.
+#
+#   scripts/setup.sh            set up (or verify) everything
+#   scripts/setup.sh --relock   rewrite scripts/constraints.txt from the current .venv
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+VENV="$ROOT/.venv"
+PY="$VENV/bin/python"
+STAMPS="$VENV/.qg-stamps"
+log() { printf '[setup] %s\n' "$*" >&2; }
+
+if [[ "${1:-}" == "--relock" ]]; then
+  { echo "# Exact versions the stack was tested with (pip freeze of a fresh setup). Regenerate with scripts/setup.sh --relock."
+    "$VENV/bin/pip" freeze --exclude-editable | grep -v -E '^torch=='; echo "torch==2.13.0"; } > "$ROOT/scripts/constraints.txt"
+  log "wrote scripts/constraints.txt"; exit 0
+fi
+
+hash_of() { cat "$@" 2>/dev/null | sha256sum | cut -c1-16; }
+
+# 1. The virtual environment.
+if [[ ! -x "$PY" ]]; then
+  log "creating .venv"
+  python3 -m venv "$VENV"
+fi
+mkdir -p "$STAMPS"
+
+# 2. Pinned dependencies (torch==2.13.0 exactly: it is the local CPU wheel; anything else pulls CUDA).
+deps_hash="$(hash_of "$ROOT/scripts/requirements.txt" "$ROOT/scripts/constraints.txt")"
+if [[ "$(cat "$STAMPS/deps" 2>/dev/null)" != "$deps_hash" ]]; then
+  log "installing pinned dependencies (a few minutes on a bare machine)"
+  "$VENV/bin/pip" install --quiet --disable-pip-version-check \
+    -r "$ROOT/scripts/requirements.txt" -c "$ROOT/scripts/constraints.txt"
+  echo "$deps_hash" > "$STAMPS/deps"
+fi
+
+# 3. The wheels were built in a manylinux container: point their hard-coded Python and numpy
+#    include paths at this interpreter, or rosidl's Python generator cannot compile.
+if [[ "$(cat "$STAMPS/cmakefix" 2>/dev/null)" != "$deps_hash" ]]; then
+  py_inc="$("$PY" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')"
+  np_inc="$("$PY" -c 'import numpy; print(numpy.get_include())')"
+  grep -rl --include='*.cmake' '/opt/python/cp311-cp311' "$VENV/share" 2>/dev/null | while read -r f; do
+    sed -i -e "s#/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include#${np_inc}#g" \
+           -e "s#/opt/python/cp311-cp311/include/python3.11#${py_inc}#g" "$f"
+  done
+  echo "$deps_hash" > "$STAMPS/cmakefix"
+fi
+
+# 4. Our packages' sources are importable from .venv (the pure-Python cores need no ROS
+#    environment), and `qgl` is a console script of the venv.
+site="$("$PY" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
+printf '%s\n' "$ROOT/sim_robot_node" "$ROOT/robot_bridge_node" "$ROOT/qg_learning_node" > "$site/qg_stack_sources.pth"
+cat > "$VENV/bin/qgl" <<EOF
+#!$PY
+import sys
+from qg_learning_node.cli.main import main
+sys.exit(main())
+EOF
+chmod +x "$VENV/bin/qgl"
+
+# 5. colcon build of the workspace (interface package + the three ament_python packages).
+src_hash="$(cd "$ROOT" && find ros_ws/src/qg_interfaces sim_robot_node robot_bridge_node qg_learning_node \
+  -type f \( -name '*.msg' -o -name '*.srv' -o -name 'CMakeLists.txt' -o -name 'package.xml' \
+  -o -name 'setup.py' -o -name 'setup.cfg' \) -print0 | sort -z | xargs -0 cat | sha256sum | cut -c1-16)"
+if [[ "$(cat "$STAMPS/colcon" 2>/dev/null)" != "$src_hash" || ! -f "$ROOT/ros_ws/install/setup.bash" ]]; then
+  log "colcon build"
+  ( cd "$ROOT/ros_ws"
+    export AMENT_PREFIX_PATH="$VENV" PATH="$VENV/bin:$PATH"
+    unset CMAKE_PREFIX_PATH
+    "$VENV/bin/colcon" --log-base log build --symlink-install \
+      --event-handlers console_direct- console_cohesion- summary+ \
+      --cmake-args -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$PY" >"$ROOT/ros_ws/log/last_build.txt" 2>&1 \
+      || { tail -40 "$ROOT/ros_ws/log/last_build.txt" >&2; exit 1; } )
+  echo "$src_hash" > "$STAMPS/colcon"
+fi
+log "ready: .venv, ros_ws/install, qgl"

@@ -1,0 +1,25 @@
+from setuptools import find_packages, setup
+
+package_name = 'sim_robot_node'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+    ],
+    include_package_data=True,
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='QG developers',
+    maintainer_email='dev@qg.local',
+    description='Simulated hardware: pybullet Panda with a shaft/bearing press fit and a Nextage arm with peg-in-hole, 1 kHz, ground truth for evaluation.',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'sim = sim_robot_node.sim_node:main',
+        ],
+    },
+)
