@@ -10,7 +10,7 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
     ],
-    include_package_data=True,
+    package_data={package_name: ['assets/**/*', 'assets/*/*']},
     install_requires=['setuptools'],
     zip_safe=True,
     maintainer='QG developers',

@@ -117,6 +117,8 @@ def build_parser() -> argparse.ArgumentParser:
     nodes.add_argument("--wait", type=float, default=2.0, help="discovery time [s]")
     nodes.set_defaults(func=_cmd_nodes)
 
+    from qg_learning_node.cli import demo
+    demo.add_parser(sub)
     try:
         from qg_learning_node.cli import bag_commands
     except ImportError:
@@ -139,7 +141,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (StackConfigError, TimeoutError, FileNotFoundError) as exc:
+    except (StackConfigError, TimeoutError, FileNotFoundError, RuntimeError) as exc:
         print(f"qgl: {exc}", file=sys.stderr)
         return 2
 

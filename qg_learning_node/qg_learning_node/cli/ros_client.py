@@ -18,12 +18,16 @@ __all__ = ["CliNode", "call_service"]
 class CliNode:
     """A context manager owning an rclpy context, one node and an executor."""
 
-    def __init__(self, name: str = "qgl") -> None:
+    def __init__(self, name: str = "qgl", domain_id: int | None = None) -> None:
         self.name = name
+        self.domain_id = domain_id
 
     def __enter__(self) -> "CliNode":
         self.context = rclpy.Context()
-        rclpy.init(context=self.context)
+        if self.domain_id is None:
+            rclpy.init(context=self.context)
+        else:
+            rclpy.init(context=self.context, domain_id=self.domain_id)
         self.node = Node(f"{self.name}_{int(time.time() * 1000) % 100000}", context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)

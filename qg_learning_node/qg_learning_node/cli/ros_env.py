@@ -68,3 +68,11 @@ def stack_env(base: Mapping[str, str] | None = None, domain_id: str | None = Non
     env.setdefault("PYTHONUNBUFFERED", "1")
     env["QG_STACK_ENV"] = "1"
     return env
+
+
+if __name__ == "__main__":
+    # `eval "$(python -m qg_learning_node.cli.ros_env)"` gives a shell the stack's environment.
+    import shlex
+    for key, value in sorted(stack_env().items()):
+        if key.isidentifier() and os.environ.get(key) != value:
+            print(f"export {key}={shlex.quote(value)}")

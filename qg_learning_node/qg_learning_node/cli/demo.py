@@ -1,0 +1,130 @@
+"""``qgl demo`` — the main job: the real ROS stack learns the insertion, episode by episode.
+
+Brings the stack up (``config/stack.yaml``), trains QG-DDPG for a few episodes by calling
+``/executor/start_episode`` like any client would, tests on the 8 initial poses, and saves a
+learning-curve PNG next to the MCAP episodes the stack recorded.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from qg_learning_node.cli.launcher import Launcher, load_stack_config
+from qg_learning_node.cli.ros_env import repo_root, stack_env
+
+__all__ = ["add_parser", "EpisodeOutcome"]
+
+
+@dataclass
+class EpisodeOutcome:
+    """What the executor reported at the end of one episode."""
+    index: int
+    mode: str
+    episode_id: str
+    initial_pose: int
+    steps: int
+    episode_return: float
+    success: bool
+    wall_time: float
+
+
+def _run_episode(cli, index: int, mode: str, pose: int, seed: int, timeout: float) -> EpisodeOutcome:
+    from qg_interfaces.msg import EpisodeStatus
+    from qg_interfaces.srv import StartEpisode
+
+    from qg_learning_node.cli.episode_wait import FINAL_STATES
+    from qg_learning_node.cli.ros_client import call_service
+    from qg_learning_node.executor_node import LATCHED
+
+    # Keyed by id: the final status may arrive while the service call is still being answered.
+    final: dict[str, EpisodeStatus] = {}
+
+    def on_status(msg: EpisodeStatus) -> None:
+        if msg.state in FINAL_STATES:
+            final[msg.episode_id] = msg
+
+    sub = cli.node.create_subscription(EpisodeStatus, "/episode_status", on_status, LATCHED)
+    t0 = time.monotonic()
+    try:
+        resp = call_service(cli, StartEpisode, "/executor/start_episode",
+                            StartEpisode.Request(mode=mode, initial_pose=pose, seed=seed), 30.0)
+        if not resp.success:
+            raise RuntimeError(f"StartEpisode refused: {resp.message}")
+        if not cli.spin_until(lambda: resp.episode_id in final, timeout):
+            raise TimeoutError(f"episode {resp.episode_id} did not end within {timeout:.0f} s")
+    finally:
+        cli.node.destroy_subscription(sub)
+    msg = final[resp.episode_id]
+    return EpisodeOutcome(index, mode, msg.episode_id, msg.initial_pose, int(msg.step),
+                          float(msg.episode_return), bool(msg.success), time.monotonic() - t0)
+
+
+def _plot(outcomes: list[EpisodeOutcome], path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    for mode, colour in (("train", "tab:blue"), ("test", "tab:green")):
+        xs = [o.index for o in outcomes if o.mode == mode]
+        ys = [o.steps for o in outcomes if o.mode == mode]
+        ax.plot(xs, ys, "o-", color=colour, label=f"{mode} episodes")
+    ax.set_xlabel("episode")
+    ax.set_ylabel("steps to insert (cap = not inserted)")
+    ax.set_title("QG-DDPG on the simulated Panda, through the ROS stack")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from qg_learning_node.cli.ros_client import CliNode
+    run_dir = Path(args.runs_dir) / time.strftime("demo_%Y%m%d_%H%M%S")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    env = stack_env(log_dir=run_dir / "ros_log")
+    env["QG_RUNS_DIR"] = str(run_dir / "episodes")
+    launcher = Launcher(env=env, out=None, log_dir=run_dir / "logs")
+    launcher.start(load_stack_config(Path(args.config)))
+    schedule = [("train", -1)] * args.train_episodes + [("test", p) for p in range(args.test_poses)]
+    outcomes: list[EpisodeOutcome] = []
+    print(f"[qgl demo] stack up (logs: {run_dir / 'logs'}); {args.train_episodes} training "
+          f"episodes, then tests on {args.test_poses} poses", flush=True)
+    try:
+        with CliNode("qgl_demo", domain_id=int(env["ROS_DOMAIN_ID"])) as cli, \
+                tqdm(total=len(schedule), unit="episode", dynamic_ncols=True) as bar:
+            for i, (mode, pose) in enumerate(schedule):
+                died = launcher.poll()
+                if died:
+                    raise RuntimeError(f"process {died[0][0]} exited with code {died[0][1]}")
+                outcome = _run_episode(cli, i, mode, pose, seed=args.seed + i,
+                                       timeout=args.episode_timeout)
+                outcomes.append(outcome)
+                bar.set_postfix(mode=mode, steps=outcome.steps, inserted=outcome.success)
+                bar.update(1)
+    finally:
+        codes = launcher.stop()
+    (run_dir / "episodes.json").write_text(json.dumps([asdict(o) for o in outcomes], indent=1))
+    _plot(outcomes, run_dir / "learning_curve.png")
+    tests = [o for o in outcomes if o.mode == "test"]
+    bags = sorted(p.parent for p in (run_dir / "episodes").glob("*/metadata.yaml"))
+    print(f"[qgl demo] test: {sum(o.success for o in tests)}/{len(tests)} inserted, mean steps "
+          f"{sum(o.steps for o in tests) / max(1, len(tests)):.1f}; {len(bags)} MCAP episodes in "
+          f"{run_dir / 'episodes'}; plot {run_dir / 'learning_curve.png'}; exit codes {codes}")
+    return 0 if all(c == 0 for c in codes.values()) else 1
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    demo = sub.add_parser("demo", help="the main job: train on the ROS stack, test, plot")
+    demo.add_argument("--config", default=str(repo_root() / "config" / "stack.yaml"))
+    demo.add_argument("--runs-dir", default=str(repo_root() / "runs"))
+    demo.add_argument("--train-episodes", type=int, default=8)
+    demo.add_argument("--test-poses", type=int, default=8)
+    demo.add_argument("--seed", type=int, default=1)
+    demo.add_argument("--episode-timeout", type=float, default=900.0, help="[s]")
+    demo.set_defaults(func=_cmd_demo)

@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# Runs the whole test suite on a bare machine: setup (idempotent), then pytest in the stack's
+# ROS environment (what `source ros_ws/install/setup.bash` gives, plus loopback-only discovery).
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+bash scripts/setup.sh
+export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+export ROS_LOG_DIR="${ROS_LOG_DIR:-$ROOT/runs/ros_log}"
+eval "$(.venv/bin/python -m qg_learning_node.cli.ros_env)"
+exec .venv/bin/python -m pytest "$@"

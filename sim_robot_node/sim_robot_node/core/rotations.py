@@ -1,0 +1,40 @@
+"""Rotation helpers shared by the simulator and the controller (no other dependencies)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["axis_angle_matrix", "rotation_log", "tilt_from_down"]
+
+
+def axis_angle_matrix(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation matrix about the unit vector ``axis`` by ``angle`` [rad] (Rodrigues)."""
+    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
+
+
+def rotation_log(rotation: np.ndarray) -> np.ndarray:
+    """Angle-axis vector of a rotation matrix (for angles up to pi)."""
+    cos = max(-1.0, min(1.0, (float(np.trace(rotation)) - 1.0) / 2.0))
+    angle = math.acos(cos)
+    w = np.array([rotation[2, 1] - rotation[1, 2], rotation[0, 2] - rotation[2, 0],
+                  rotation[1, 0] - rotation[0, 1]])
+    if angle < 1e-9:
+        return w / 2.0
+    if angle > math.pi - 1e-6:  # the skew part vanishes at 180 deg: axis from the diagonal
+        axis = np.sqrt(np.maximum(np.diag(rotation) + 1.0, 0.0) / 2.0)
+        return axis * angle
+    return w * angle / (2.0 * math.sin(angle))
+
+
+def tilt_from_down(rotation: np.ndarray) -> tuple[float, np.ndarray]:
+    """Angle [rad] of the frame's z axis from straight down, and the unit axis (same frame as
+    ``rotation``'s columns) about which a positive rotation turns it back; zero axis if aligned.
+    """
+    zx, zy, zz = (float(v) for v in rotation[:, 2])
+    sin = math.hypot(zx, zy)                      # |z x (0, 0, -1)| = |(-zy, zx, 0)|
+    angle = math.atan2(sin, -zz)
+    if sin < 1e-12:
+        return angle, np.zeros(3)
+    return angle, np.array([-zy / sin, zx / sin, 0.0])

@@ -1,0 +1,89 @@
+"""Every executable starts as a real process, is discovered, answers, and stops cleanly."""
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+pytestmark = pytest.mark.ros
+
+EXECUTABLES = [
+    ("sim", "sim_robot_node", "sim", {"/sim"}),
+    ("bridge", "robot_bridge_node", "bridge", {"/bridge"}),
+    ("wrench_estimator", "robot_bridge_node", "wrench_estimator", {"/wrench_estimator"}),
+    ("robot", "robot_bridge_node", "robot", {"/sim", "/bridge", "/wrench_estimator"}),
+    ("executor", "qg_learning_node", "executor", {"/executor"}),
+    ("learner", "qg_learning_node", "learner", {"/learner"}),
+]
+
+
+def discovered_nodes(cli) -> set[str]:
+    return {f"{ns.rstrip('/')}/{n}" for n, ns in cli.node.get_node_names_and_namespaces()}
+
+
+def test_every_executable_starts_is_discovered_and_exits_zero_on_sigint(stack):
+    stack.start(*[(name, pkg, exe) for name, pkg, exe, _ in EXECUTABLES])
+    expected = set().union(*(nodes for *_, nodes in EXECUTABLES))
+    with stack.client() as cli:
+        found = cli.spin_until(lambda: expected <= discovered_nodes(cli), timeout=30.0)
+        assert found, f"missing {expected - discovered_nodes(cli)}\n{stack.logs()}"
+    t0 = time.monotonic()
+    codes = stack.stop(grace=5.0)
+    elapsed = time.monotonic() - t0
+    assert codes == {name: 0 for name, *_ in EXECUTABLES}, stack.logs()
+    assert elapsed < 5.0
+
+
+def test_sigterm_also_exits_zero(stack):
+    stack.start(("learner", "qg_learning_node", "learner"))
+    with stack.client() as cli:
+        assert cli.spin_until(lambda: "/learner" in discovered_nodes(cli), timeout=30.0)
+    proc = stack.launcher.running[0].popen
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=5.0) == 0, stack.logs()
+
+
+def test_start_episode_crosses_processes_and_rejects_bad_fields(stack):
+    from qg_interfaces.srv import StartEpisode
+
+    from qg_learning_node.cli.ros_client import call_service
+    stack.start(("executor", "qg_learning_node", "executor"))
+    with stack.client() as cli:
+        bad = call_service(cli, StartEpisode, "/executor/start_episode",
+                           StartEpisode.Request(mode="fly", initial_pose=8, reward="lots"), 30.0)
+        assert not bad.success
+        for word in ("mode", "initial_pose", "reward"):
+            assert word in bad.message
+        assert bad.episode_id == ""
+    assert stack.launcher.poll() == [], "the executor must survive bad requests"
+
+
+def qgl(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "qg_learning_node.cli.main", *args],
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def test_qgl_up_with_missing_or_malformed_config_says_one_line_and_exits_2(tmp_path):
+    missing = qgl("up", "--config", str(tmp_path / "nope.yaml"))
+    assert missing.returncode == 2
+    assert missing.stderr.strip().count("\n") == 0 and "not found" in missing.stderr
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("processes: [\n  - name: x\n")
+    malformed = qgl("up", "--config", str(bad))
+    assert malformed.returncode == 2
+    assert malformed.stderr.strip().count("\n") == 0 and "malformed YAML" in malformed.stderr
+
+
+def test_qgl_up_reports_a_dying_node_and_exits_nonzero(tmp_path):
+    cfg = tmp_path / "stack.yaml"
+    # A params file that does not exist makes the learner fail at start-up.
+    cfg.write_text("processes:\n"
+                   "  - {name: executor, package: qg_learning_node, executable: executor}\n"
+                   "  - {name: learner, package: qg_learning_node, executable: learner,\n"
+                   "     args: [--ros-args, --params-file, /nonexistent/learner.yaml]}\n")
+    result = qgl("up", "--config", str(cfg), timeout=60.0)
+    assert result.returncode != 0
+    assert "process 'learner' exited" in result.stdout
