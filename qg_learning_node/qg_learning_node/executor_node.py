@@ -1,62 +1,250 @@
-"""The ``executor`` node: runs episodes of the residual force policy on request."""
+"""The ``executor`` node: runs episodes of the residual force policy on request.
+
+State machine idle -> resetting -> running -> done (or aborted), published on
+``/episode_status``. One RL step: choose the action (local actor from the latest
+``/actor_parameters``, plus exploration noise in training), send the wrench setpoint, wait for
+the robot's at-rest event, turn it into (s', r, terminal), publish the transition (reliable QoS).
+When the learner goes silent the robot stays safe: the zero residual is sent, the status says
+``degraded``, and the episode goes on.
+"""
 from __future__ import annotations
 
-import uuid
+import threading
+import time
 
+import numpy as np
 import rclpy.qos
-from qg_interfaces.msg import ActorParameters, EpisodeStatus, Transition, WrenchSetpoint
-from qg_interfaces.srv import StartEpisode, StopEpisode
+from qg_interfaces.msg import (ActorParameters, AtRest, EpisodeStatus, LearnerDiagnostics,
+                               Transition, WrenchSetpoint)
+from qg_interfaces.srv import ResetSim, StartEpisode, StopEpisode
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 
 from sim_robot_node.node_runtime import node_params, run_nodes
 
-from qg_learning_node.core.episode_request import EpisodeRequest
+from qg_learning_node.conversions import (actor_tensors_from_msg, observation_from_msg,
+                                          transition_to_msg)
+from qg_learning_node.core.episode import Episode
+from qg_learning_node.core.episode_request import N_POSES, EpisodeRequest
+from qg_learning_node.core.noise import ActionNoise, NoiseConfig
+from qg_learning_node.core.residual_task import ACTION_DIM, ResidualTask, TaskConfig
+from qg_learning_node.ddpg import ActorMLP
 
 RELIABLE_DEEP = rclpy.qos.QoSProfile(depth=1000, reliability=rclpy.qos.ReliabilityPolicy.RELIABLE)
 LATCHED = rclpy.qos.QoSProfile(depth=1, reliability=rclpy.qos.ReliabilityPolicy.RELIABLE,
                                durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
 
 
+class EpisodeAborted(Exception):
+    """The episode cannot go on (stop request, robot gone, reset refused)."""
+
+
 class ExecutorNode(Node):
-    """Episode state machine idle -> resetting -> running -> done, started by service call."""
+    """Episodes by service call; one episode at a time, run on its own thread."""
 
     def __init__(self) -> None:
         super().__init__("executor", automatically_declare_parameters_from_overrides=True)
-        self.params = node_params(self)
-        self.status = self.create_publisher(EpisodeStatus, "/episode_status", LATCHED)
-        self.transitions = self.create_publisher(Transition, "/transitions", RELIABLE_DEEP)
-        self.setpoints = self.create_publisher(WrenchSetpoint, "/wrench_setpoint", 10)
-        self.create_subscription(ActorParameters, "/actor_parameters", self._on_actor, LATCHED)
-        self.create_service(StartEpisode, "/executor/start_episode", self._on_start)
-        self.create_service(StopEpisode, "/executor/stop_episode", self._on_stop)
+        p = node_params(self)
+        self.task = ResidualTask(TaskConfig.from_dict(p.get("task", {})))
+        self.noise_config = NoiseConfig.from_dict(p.get("noise", {}))
+        self.step_timeout = float(p.get("step_timeout", 10.0))
+        self.reset_timeout = float(p.get("reset_timeout", 30.0))
+        self.keepalive_period = float(p.get("keepalive_period", 0.005))
+        self.learner_timeout = float(p.get("learner_timeout", 2.0))
+
+        self.status_pub = self.create_publisher(EpisodeStatus, "/episode_status", LATCHED)
+        self.transition_pub = self.create_publisher(Transition, "/transitions", RELIABLE_DEEP)
+        self.setpoint_pub = self.create_publisher(WrenchSetpoint, "/wrench_setpoint", 10)
+        callbacks = ReentrantCallbackGroup()
+        self.create_subscription(ActorParameters, "/actor_parameters", self._on_actor, LATCHED,
+                                 callback_group=callbacks)
+        self.create_subscription(LearnerDiagnostics, "/learner/diagnostics", self._on_learner,
+                                 10, callback_group=callbacks)
+        self.create_subscription(AtRest, "/ee_at_rest", self._on_at_rest, 10,
+                                 callback_group=callbacks)
+        self.reset_client = self.create_client(ResetSim, "/sim/reset", callback_group=callbacks)
+        services = MutuallyExclusiveCallbackGroup()
+        self.create_service(StartEpisode, "/executor/start_episode", self._on_start,
+                            callback_group=services)
+        self.create_service(StopEpisode, "/executor/stop_episode", self._on_stop,
+                            callback_group=services)
+        self.create_timer(0.5, self._publish_status, callback_group=callbacks)
+
+        self.lock = threading.Lock()
+        self.actor: ActorMLP | None = None
+        self.actor_version = 0
+        self.last_learner_time = -float("inf")
+        self.at_rest: dict[int, AtRest] = {}
+        self.at_rest_event = threading.Event()
+        self.seq = 0
+        self.episode: Episode | None = None
         self.state = "idle"
-        self.episode_id = ""
+        self.message = ""
+        self.degraded = False
+        self.episodes_started = 0
+        self.stop_requested = threading.Event()
+        self.worker: threading.Thread | None = None
 
+    # --- inputs ---------------------------------------------------------------------------
     def _on_actor(self, msg: ActorParameters) -> None:
-        pass
+        try:
+            actor = ActorMLP.from_tensors(actor_tensors_from_msg(msg))
+        except (ValueError, KeyError) as exc:
+            self.get_logger().error(f"ignoring malformed actor parameters v{msg.version}: {exc}")
+            return
+        with self.lock:
+            self.actor, self.actor_version = actor, int(msg.version)
+            self.last_learner_time = time.monotonic()
 
+    def _on_learner(self, msg: LearnerDiagnostics) -> None:
+        self.last_learner_time = time.monotonic()
+
+    def _on_at_rest(self, msg: AtRest) -> None:
+        with self.lock:
+            self.at_rest[int(msg.seq)] = msg
+        self.at_rest_event.set()
+
+    def learner_alive(self) -> bool:
+        return time.monotonic() - self.last_learner_time < self.learner_timeout
+
+    # --- services -------------------------------------------------------------------------
     def _on_start(self, request: StartEpisode.Request,
                   response: StartEpisode.Response) -> StartEpisode.Response:
         try:
-            EpisodeRequest(request.mode, request.initial_pose, request.seed, request.reward)
+            req = EpisodeRequest(request.mode, request.initial_pose, request.seed, request.reward)
         except ValueError as exc:
             response.success, response.message = False, str(exc)
             return response
-        self.episode_id = uuid.uuid4().hex[:12]
-        self.state = "done"
-        self._publish_status()
-        response.success, response.message, response.episode_id = True, "started", self.episode_id
+        if self.worker is not None and self.worker.is_alive():
+            response.success = False
+            response.message = f"episode {self.episode.episode_id if self.episode else ''} " \
+                               "is still running: stop it first (/executor/stop_episode)"
+            return response
+        if not self.reset_client.service_is_ready():
+            response.success = False
+            response.message = "the robot side is not up (/sim/reset unavailable): start " \
+                               "`robot_bridge_node robot`"
+            return response
+        index = self.episodes_started
+        self.episodes_started += 1
+        pose = req.initial_pose if req.initial_pose >= 0 else index % N_POSES
+        reward = req.reward or self.task.config.reward
+        episode_id = f"{time.strftime('%Y%m%d_%H%M%S')}_{index:04d}_{req.mode}_p{pose}"
+        seed = req.seed if req.seed != 0 else 1000 + index
+        self.episode = Episode(episode_id, req.mode, pose, reward, self.task,
+                               ActionNoise(self.noise_config, ACTION_DIM, seed))
+        self.stop_requested.clear()
+        self._set_state("resetting", f"reset to pose {pose}")
+        self.worker = threading.Thread(target=self._run_episode, args=(self.episode,),
+                                       name="episode", daemon=True)
+        self.worker.start()
+        response.success, response.message, response.episode_id = True, "started", episode_id
         return response
 
     def _on_stop(self, request: StopEpisode.Request,
                  response: StopEpisode.Response) -> StopEpisode.Response:
-        response.success, response.message = False, "no episode is running"
+        if self.worker is None or not self.worker.is_alive() or self.episode is None:
+            response.success, response.message = False, "no episode is running"
+            return response
+        self.stop_requested.set()
+        self.at_rest_event.set()
+        self.worker.join(timeout=self.step_timeout + 1.0)
+        response.success = True
+        response.episode_id = self.episode.episode_id
+        response.message = f"aborted: {request.reason}" if request.reason else "aborted"
         return response
 
+    # --- the episode ----------------------------------------------------------------------
+    def _run_episode(self, episode: Episode) -> None:
+        try:
+            episode.begin(observation_from_msg(self._reset(episode)))
+            self._set_state("running")
+            while not episode.done:
+                if self.stop_requested.is_set():
+                    raise EpisodeAborted("stop requested")
+                alive = self.learner_alive()
+                if alive != (not self.degraded):
+                    self.degraded = not alive
+                    self.get_logger().warning("learner silent: zero residual until it is back"
+                                              if self.degraded else "learner is back")
+                with self.lock:
+                    actor = self.actor if alive else None
+                action = episode.choose_action(actor)
+                at_rest = self._execute(self.task.wrench(action))
+                record = episode.observe(action, observation_from_msg(at_rest))
+                self.transition_pub.publish(transition_to_msg(record))
+                self._publish_status()
+            self._set_state("done", episode.end_reason)
+        except EpisodeAborted as exc:
+            episode.abort("aborted")
+            self._send_zero_residual()
+            self._set_state("aborted", str(exc))
+        except Exception as exc:  # noqa: BLE001 - a failed episode must never kill the node
+            episode.abort("error")
+            self.get_logger().error(f"episode {episode.episode_id} failed: {exc!r}")
+            self._send_zero_residual()
+            self._set_state("aborted", f"error: {exc}")
+
+    def _reset(self, episode: Episode) -> AtRest:
+        request = ResetSim.Request(initial_pose=episode.initial_pose, housing_yaw=0.0,
+                                   seed=self.episodes_started)
+        future = self.reset_client.call_async(request)
+        deadline = time.monotonic() + self.reset_timeout
+        while not future.done():
+            if time.monotonic() > deadline:
+                raise EpisodeAborted(f"/sim/reset did not answer within {self.reset_timeout} s")
+            if self.stop_requested.wait(0.002):
+                raise EpisodeAborted("stop requested during reset")
+        result = future.result()
+        if result is None or not result.success:
+            raise EpisodeAborted(f"reset refused: {getattr(result, 'message', 'no answer')}")
+        return result.observation
+
+    def _execute(self, wrench: np.ndarray) -> AtRest:
+        """Send one setpoint and wait for its at-rest event, re-sending it as a keep-alive."""
+        self.seq += 1
+        msg = WrenchSetpoint(seq=self.seq, reference_from_current=True)
+        msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = (float(v) for v in wrench[:3])
+        msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z = (float(v) for v in wrench[3:])
+        deadline = time.monotonic() + self.step_timeout
+        while True:
+            msg.header.stamp = self.get_clock().now().to_msg()
+            self.setpoint_pub.publish(msg)
+            self.at_rest_event.wait(self.keepalive_period)
+            with self.lock:
+                self.at_rest_event.clear()
+                event = self.at_rest.pop(self.seq, None)
+                self.at_rest = {k: v for k, v in self.at_rest.items() if k > self.seq}
+            if event is not None:
+                return event
+            if self.stop_requested.is_set():
+                raise EpisodeAborted("stop requested")
+            if time.monotonic() > deadline:
+                raise EpisodeAborted(f"no at-rest event within {self.step_timeout} s "
+                                     "(is the robot process up?)")
+
+    def _send_zero_residual(self) -> None:
+        """Leave the robot pushing with the base force only, from where it is."""
+        self.seq += 1
+        msg = WrenchSetpoint(seq=self.seq, reference_from_current=True)
+        msg.wrench.force.z = float(self.task.config.base_force)
+        self.setpoint_pub.publish(msg)
+
+    # --- status ---------------------------------------------------------------------------
+    def _set_state(self, state: str, message: str = "") -> None:
+        self.state, self.message = state, message
+        self._publish_status()
+
     def _publish_status(self) -> None:
-        msg = EpisodeStatus(episode_id=self.episode_id, state=self.state)
+        ep = self.episode
+        msg = EpisodeStatus(state=self.state, message=self.message, degraded=self.degraded,
+                            actor_version=self.actor_version)
         msg.stamp = self.get_clock().now().to_msg()
-        self.status.publish(msg)
+        if ep is not None:
+            msg.episode_id, msg.mode, msg.reward_type = ep.episode_id, ep.mode, ep.reward_kind
+            msg.initial_pose, msg.step, msg.max_steps = ep.initial_pose, ep.step, ep.max_steps
+            msg.episode_return, msg.success = ep.episode_return, ep.success
+        self.status_pub.publish(msg)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -1,12 +1,35 @@
-"""The ``learner`` node: QG-DDPG on the transitions the executor publishes."""
+"""The ``learner`` node: QG-DDPG on the transitions the executor publishes.
+
+Every ``cycle_steps`` transitions it trains ``iterations_per_cycle`` times and publishes the new
+actor (latched, so a restarted executor gets it at once) and its diagnostics. At the end of
+every episode it checkpoints networks, optimizers, Q-Graph and replay memory; with
+``resume: true`` a restarted learner continues from the last checkpoint.
+"""
 from __future__ import annotations
 
-from qg_interfaces.msg import ActorParameters, LearnerDiagnostics, Transition
+import os
+import threading
+from pathlib import Path
+
+from qg_interfaces.msg import ActorParameters, EpisodeStatus, LearnerDiagnostics, Transition
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 
 from sim_robot_node.node_runtime import node_params, run_nodes
 
+from qg_learning_node.conversions import actor_to_msg, transition_from_msg
+from qg_learning_node.core.learner_params import learner_config_from_params
+from qg_learning_node.core.residual_task import ACTION_DIM, STATE_DIM
 from qg_learning_node.executor_node import LATCHED, RELIABLE_DEEP
+from qg_learning_node.learner_core import LearnerCore
+
+CHECKPOINT_NAME = "learner.pt"
+
+
+def runs_dir() -> Path:
+    """Where runs go: ``$QG_RUNS_DIR``, else ``<repo>/runs``."""
+    env = os.environ.get("QG_RUNS_DIR")
+    return Path(env) if env else Path(__file__).resolve().parents[2] / "runs"
 
 
 class LearnerNode(Node):
@@ -14,14 +37,83 @@ class LearnerNode(Node):
 
     def __init__(self) -> None:
         super().__init__("learner", automatically_declare_parameters_from_overrides=True)
-        self.params = node_params(self)
-        self.actor = self.create_publisher(ActorParameters, "/actor_parameters", LATCHED)
-        self.diagnostics = self.create_publisher(LearnerDiagnostics, "/learner/diagnostics", 10)
-        self.create_subscription(Transition, "/transitions", self._on_transition, RELIABLE_DEEP)
-        self.received = 0
+        p = node_params(self)
+        config = learner_config_from_params(p.get("learner", {}))
+        self.checkpoint = Path(p.get("checkpoint_dir") or runs_dir() / "checkpoints") / CHECKPOINT_NAME
+        if p.get("resume", False) and self.checkpoint.is_file():
+            self.core = LearnerCore.load(self.checkpoint)
+            self.get_logger().info(f"resumed from {self.checkpoint}: {self.core.steps} "
+                                   f"transitions, actor v{self.core.actor_version}")
+        else:
+            self.core = LearnerCore(config, STATE_DIM, ACTION_DIM)
+        self.lock = threading.Lock()
+        self.received: dict[str, int] = {}        # transitions per episode id
+        self.pending_checkpoint: dict[str, int] = {}  # episode id -> its final step count
+        self.checkpointed: set[str] = set()
+        self.last_diagnostics: dict = {}
+
+        self.actor_pub = self.create_publisher(ActorParameters, "/actor_parameters", LATCHED)
+        self.diagnostics_pub = self.create_publisher(LearnerDiagnostics, "/learner/diagnostics", 10)
+        group = MutuallyExclusiveCallbackGroup()
+        self.create_subscription(Transition, "/transitions", self._on_transition, RELIABLE_DEEP,
+                                 callback_group=group)
+        self.create_subscription(EpisodeStatus, "/episode_status", self._on_status, LATCHED,
+                                 callback_group=group)
+        # A heartbeat, so the executor knows the learner is alive between training cycles.
+        self.create_timer(0.5, self._publish_diagnostics)
+        self._publish_actor()
 
     def _on_transition(self, msg: Transition) -> None:
-        self.received += 1
+        t = transition_from_msg(msg)
+        with self.lock:
+            cycle_due = self.core.add_transition(t.state, t.action, t.reward, t.next_state,
+                                                 t.terminal)
+            self.received[t.episode_id] = self.received.get(t.episode_id, 0) + 1
+            if cycle_due:
+                self.last_diagnostics = self.core.train_cycle()
+        if cycle_due:
+            self._publish_actor()
+            self._publish_diagnostics()
+        self._maybe_checkpoint(t.episode_id)
+
+    def _on_status(self, msg: EpisodeStatus) -> None:
+        if msg.state in ("done", "aborted") and msg.episode_id and msg.mode == "train" \
+                and msg.episode_id not in self.checkpointed:
+            self.pending_checkpoint[msg.episode_id] = int(msg.step)
+            self._maybe_checkpoint(msg.episode_id)
+
+    def _maybe_checkpoint(self, episode_id: str) -> None:
+        """Checkpoint once every transition of the ended episode has arrived."""
+        final = self.pending_checkpoint.get(episode_id)
+        if final is None or self.received.get(episode_id, 0) < final:
+            return
+        del self.pending_checkpoint[episode_id]
+        self.checkpointed.add(episode_id)
+        self.checkpoint.parent.mkdir(parents=True, exist_ok=True)
+        tmp = self.checkpoint.with_suffix(".tmp")
+        with self.lock:
+            self.core.save(tmp)
+        tmp.replace(self.checkpoint)          # atomic: a crash never leaves half a checkpoint
+        self.get_logger().info(f"checkpoint after {episode_id}: {self.core.steps} transitions")
+
+    def _publish_actor(self) -> None:
+        with self.lock:
+            msg = actor_to_msg(self.core.actor_version, self.core.agent.actor_tensors())
+        self.actor_pub.publish(msg)
+
+    def _publish_diagnostics(self) -> None:
+        d = self.last_diagnostics
+        msg = LearnerDiagnostics(actor_version=self.core.actor_version,
+                                 updates=self.core.actor_version * self.core.config.iterations_per_cycle,
+                                 transitions=self.core.steps)
+        msg.stamp = self.get_clock().now().to_msg()
+        for key in ("critic_loss", "actor_loss", "mean_q", "frac_raised_lower",
+                    "frac_lowered_upper", "frac_outside_range"):
+            setattr(msg, key, float(d.get(key, 0.0)))
+        msg.graph_transitions = len(self.core.graph) if self.core.graph is not None else 0
+        for key in ("directly_connected", "connected", "disconnected", "loose_end"):
+            setattr(msg, key, int(d.get(key, 0)))
+        self.diagnostics_pub.publish(msg)
 
 
 def main(args: list[str] | None = None) -> int:

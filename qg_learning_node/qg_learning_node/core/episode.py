@@ -1,0 +1,105 @@
+"""One episode of the residual policy as a small state machine over RL steps.
+
+The ROS executor drives it from service calls and at-rest events; the fast runner drives it in a
+plain loop. Both get identical transitions, step caps and end reasons from this one class.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from qg_learning_node.core.noise import ActionNoise
+from qg_learning_node.core.residual_task import Observation, ResidualTask
+
+__all__ = ["Episode", "TransitionRecord", "Actor"]
+
+#: The local policy: scaled state -> actor output in [-1, 1]^2.
+Actor = Callable[[np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True)
+class TransitionRecord:
+    """One RL step (s, a, r, s'), as published on ``/transitions`` and stored by the learner."""
+    episode_id: str
+    step: int
+    state: np.ndarray
+    action: np.ndarray
+    reward: float
+    next_state: np.ndarray
+    terminal: bool
+    timeout: bool
+    zero_action: bool
+
+
+class Episode:
+    """Step bookkeeping: state, action choice (with exploration in training), rewards, the end.
+
+    :param mode: ``train`` (noise on) or ``test`` (deterministic).
+    :param noise: exploration noise, used in training only.
+    """
+
+    def __init__(self, episode_id: str, mode: str, initial_pose: int, reward_kind: str,
+                 task: ResidualTask, noise: ActionNoise | None = None) -> None:
+        self.episode_id = episode_id
+        self.mode = mode
+        self.initial_pose = initial_pose
+        self.reward_kind = reward_kind
+        self.task = task
+        self.noise = noise
+        self.max_steps = task.config.max_steps(mode)
+        self.step = 0
+        self.episode_return = 0.0
+        self.success = False
+        self.end_reason = ""
+        self.state: np.ndarray | None = None
+
+    @property
+    def done(self) -> bool:
+        return bool(self.end_reason)
+
+    def begin(self, obs: Observation) -> np.ndarray:
+        """The settled start: the first state."""
+        self.state = self.task.state(obs)
+        if obs.success:          # already inserted: nothing to learn from this start
+            self.success, self.end_reason = True, "goal"
+        return self.state
+
+    def choose_action(self, actor: Actor | None) -> np.ndarray:
+        """Actor output (+ noise in training); the zero residual when there is no actor.
+
+        A non-finite actor output is replaced by the zero residual, never sent to the robot.
+        """
+        assert self.state is not None, "begin() first"
+        action = np.zeros(2) if actor is None else np.asarray(actor(self.state), dtype=np.float64)
+        if not np.all(np.isfinite(action)):
+            action = np.zeros(2)
+        if self.mode == "train" and self.noise is not None and actor is not None:
+            action = self.noise.perturb(action)
+        return np.clip(action, -1.0, 1.0)
+
+    def observe(self, action: np.ndarray, obs: Observation) -> TransitionRecord:
+        """Close the step that executed ``action`` and ended at rest in ``obs``."""
+        assert self.state is not None and not self.done, "episode not running"
+        next_state = self.task.state(obs)
+        reward = float(self.task.reward(obs, self.reward_kind))
+        terminal = bool(obs.success)
+        self.step += 1
+        self.episode_return += reward
+        if terminal:
+            self.success, self.end_reason = True, "goal"
+        elif self.task.left_bore(obs):
+            self.end_reason = "left_bore"
+        elif self.step >= self.max_steps:
+            self.end_reason = "step_cap"
+        record = TransitionRecord(
+            self.episode_id, self.step - 1, self.state.copy(), np.asarray(action, float).copy(),
+            reward, next_state.copy(), terminal, self.done and not terminal,
+            bool(np.all(np.asarray(action) == 0.0)))
+        self.state = next_state
+        return record
+
+    def abort(self, reason: str = "aborted") -> None:
+        if not self.done:
+            self.end_reason = reason

@@ -1,0 +1,71 @@
+"""Exploration noise for the residual torques, and the random baselines built from it.
+
+The thesis compares uniform sampling with Gaussian and Ornstein-Uhlenbeck noise (theta = 1,
+dt = 0.01) for the random baselines; the same processes serve as exploration noise in training.
+All live in actor-output units, [-1, 1] per dimension, and the result is clipped to that box.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ["NoiseConfig", "ActionNoise", "KINDS"]
+
+KINDS = ("none", "gaussian", "ou", "uniform")
+
+
+@dataclass(frozen=True)
+class NoiseConfig:
+    """:param kind: none | gaussian | ou | uniform.
+    :param sigma: standard deviation (gaussian, ou); ignored by uniform (the whole box).
+    :param theta: OU mean reversion; :param dt: OU time step.
+    """
+    kind: str = "gaussian"
+    sigma: float = 0.3
+    theta: float = 1.0
+    dt: float = 0.01
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"noise kind must be one of {KINDS}, got {self.kind!r}")
+        if self.sigma < 0 or self.theta < 0 or self.dt <= 0:
+            raise ValueError(f"noise needs sigma >= 0, theta >= 0, dt > 0; got {self}")
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> "NoiseConfig":
+        return cls(**{k: v for k, v in values.items() if k in cls.__dataclass_fields__})
+
+
+class ActionNoise:
+    """Noise added to the actor's output (or, with a zero actor, a random policy).
+
+    :param dim: action dimension.
+    """
+
+    def __init__(self, config: NoiseConfig, dim: int, seed: int = 0) -> None:
+        self.config = config
+        self.dim = dim
+        self.reset(seed)
+
+    def reset(self, seed: int) -> None:
+        """Start a new episode's noise sequence (OU state back to 0)."""
+        self.rng = np.random.default_rng(seed)
+        self.ou_state = np.zeros(self.dim)
+
+    def sample(self) -> np.ndarray:
+        c = self.config
+        if c.kind == "gaussian":
+            return self.rng.normal(0.0, c.sigma, self.dim)
+        if c.kind == "ou":
+            self.ou_state = (self.ou_state - c.theta * self.ou_state * c.dt
+                             + c.sigma * np.sqrt(c.dt) * self.rng.normal(size=self.dim))
+            return self.ou_state.copy()
+        if c.kind == "uniform":
+            return self.rng.uniform(-1.0, 1.0, self.dim)
+        return np.zeros(self.dim)
+
+    def perturb(self, action: np.ndarray) -> np.ndarray:
+        """``action`` plus one noise sample, clipped to [-1, 1]."""
+        return np.clip(action + self.sample(), -1.0, 1.0)

@@ -1,0 +1,67 @@
+"""Learner core: cycles, zero-action loops in graph and replay, exact checkpoint restore."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from qg_learning_node.ddpg import DDPGConfig
+from qg_learning_node.learner_core import LearnerConfig, LearnerCore
+
+torch.set_num_threads(1)
+
+
+def config(**kw) -> LearnerConfig:
+    base = dict(ddpg={'bounds': 'qgraph+apriori', 'actor_hidden': [16, 16],
+                      'critic_hidden': [16, 16]}, zero_action=[0.0, 0.0], iterations_per_cycle=3)
+    base.update(kw)
+    return LearnerConfig.from_dict(base)
+
+
+def feed(core: LearnerCore, steps: int, seed: int = 0) -> list[bool]:
+    rng = np.random.default_rng(seed)
+    s, due = rng.uniform(-1, 1, 4), []
+    for t in range(steps):
+        s2 = rng.uniform(-1, 1, 4)
+        due.append(core.add_transition(s, rng.uniform(-1, 1, 2), -1.0, s2, t % 25 == 24))
+        s = s2
+    return due
+
+
+def test_cycles_and_zero_action_loops():
+    core = LearnerCore(config(), 4, 2)
+    due = feed(core, 50)
+    assert [i for i, d in enumerate(due) if d] == [19, 39]
+    assert len(core.replay) == 50 + 48  # a loop after every non-terminal step
+    assert core.graph.num_real == 50 and len(core.graph) == 98
+    result = core.train_cycle()
+    assert result['actor_version'] == 1
+    assert result['directly_connected'] == 2 and result['total'] == 98
+    assert result['loose_end'] == 0
+    assert 0.0 <= result['frac_raised_lower'] <= 1.0
+
+
+def test_vanilla_without_graph_and_validation():
+    core = LearnerCore(config(ddpg={'bounds': 'none'}, use_qgraph=False, zero_action=None), 4, 2)
+    feed(core, 20)
+    assert len(core.replay) == 20 and core.graph is None
+    assert 'connected' not in core.train_cycle()
+    with pytest.raises(ValueError):
+        config(use_qgraph=False)
+    with pytest.raises(ValueError):
+        LearnerCore(config(zero_action=[0.0]), 4, 2)
+
+
+def test_save_load_gives_identical_next_cycle(tmp_path):
+    core = LearnerCore(config(replay_capacity=30), 4, 2)
+    feed(core, 40)
+    core.train_cycle()
+    core.save(tmp_path / 'learner.pt')
+    restored = LearnerCore.load(tmp_path / 'learner.pt')
+    for c in (core, restored):
+        feed(c, 20, seed=7)
+    assert restored.train_cycle() == core.train_cycle()
+    x = np.random.default_rng(2).uniform(-1, 1, (5, 4))
+    np.testing.assert_array_equal(restored.agent.act(x), core.agent.act(x))
+    assert isinstance(restored.config.ddpg, DDPGConfig)
