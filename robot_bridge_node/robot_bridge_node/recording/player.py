@@ -1,0 +1,112 @@
+"""Republishing a bag with its original timing, like `ros2 bag play` (node side: uses rclpy).
+
+Messages are published as the recorded CDR bytes (rclpy publishes serialized messages as they
+are), on publishers of the recorded types with the recorded reliability, each at
+`first_publish + (t - t_first) / rate` on the monotonic clock. Sleeping happens between messages
+only; a publisher that falls behind (slow machine, high rate) catches up without sleeping rather
+than drifting.
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from .bag_reader import bag_info, read_raw
+
+__all__ = ["PlayResult", "message_class", "play"]
+
+
+@dataclass(frozen=True)
+class PlayResult:
+    messages: int
+    bag_duration_s: float  # between the first and the last played message
+    wall_s: float  # from the first to the last publish
+
+
+def message_class(type_name: str) -> type:
+    """The rclpy message class of `pkg/msg/Type`.
+
+    :raises ValueError: if the name is malformed; ImportError/AttributeError if not installed.
+    """
+    parts = type_name.split("/")
+    if len(parts) != 3 or parts[1] != "msg":
+        raise ValueError(f"not a message type name: {type_name!r} (expected pkg/msg/Type)")
+    return getattr(importlib.import_module(f"{parts[0]}.msg"), parts[2])
+
+
+def _qos(offered_yaml: str) -> QoSProfile:
+    """A subscriber-compatible publisher QoS from the recorded offered profile."""
+    try:
+        profile = (yaml.safe_load(offered_yaml) or [{}])[0]
+    except yaml.YAMLError:
+        profile = {}
+    best_effort = profile.get("reliability") in ("best_effort", 2)  # name (v9+) or rmw enum value
+    reliability = ReliabilityPolicy.BEST_EFFORT if best_effort else ReliabilityPolicy.RELIABLE
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=max(10, int(profile.get("depth", 10))),
+                      reliability=reliability)
+
+
+def play(
+    path: Path,
+    rate: float = 1.0,
+    topics: Iterable[str] | None = None,
+    node: Node | None = None,
+    start_delay_s: float = 0.0,
+    wait_for_subscribers_s: float = 0.0,
+) -> PlayResult:
+    """Publish the bag's messages with their recorded spacing divided by `rate`.
+
+    :param node: node to publish from; a `qgl_replay` node is created (rclpy must be
+        initialised) and destroyed if None.
+    :param topics: only these topics (all if None).
+    :param start_delay_s: wait after creating the publishers (and after the subscribers were
+        seen), so subscribers can match them; messages published before are lost to them.
+    :param wait_for_subscribers_s: first wait up to this long until every publisher has a
+        subscriber.
+    :raises ValueError: for a non-positive rate.
+    """
+    if rate <= 0.0:
+        raise ValueError(f"rate must be positive, got {rate}")
+    wanted = None if topics is None else set(topics)
+    info = bag_info(path)
+    own_node = node is None
+    if node is None:
+        node = Node("qgl_replay")
+    try:
+        publishers: dict[str, Any] = {}
+        for topic in info.topics:
+            if (wanted is None or topic.name in wanted) and topic.name not in publishers and topic.message_count:
+                publishers[topic.name] = node.create_publisher(
+                    message_class(topic.type_name), topic.name, _qos(topic.qos))
+        deadline = time.monotonic() + wait_for_subscribers_s
+        while time.monotonic() < deadline and any(p.get_subscription_count() == 0 for p in publishers.values()):
+            time.sleep(0.02)
+        if start_delay_s > 0.0:
+            time.sleep(start_delay_s)
+        count, first_t, last_t = 0, None, 0
+        start = last = time.monotonic()
+        for message in read_raw(path, publishers.keys()):
+            if first_t is None:
+                first_t = message.t_ns
+                start = time.monotonic()
+            due = start + (message.t_ns - first_t) * 1e-9 / rate
+            wait = due - time.monotonic()
+            if wait > 0.0:
+                time.sleep(wait)
+            publishers[message.topic].publish(message.data)
+            last, last_t = time.monotonic(), message.t_ns
+            count += 1
+        return PlayResult(count, 0.0 if first_t is None else (last_t - first_t) * 1e-9,
+                          0.0 if first_t is None else last - start)
+    finally:
+        if own_node:
+            node.destroy_node()
