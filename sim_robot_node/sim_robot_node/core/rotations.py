@@ -16,10 +16,10 @@ def axis_angle_matrix(axis: np.ndarray, angle: float) -> np.ndarray:
 
 def rotation_log(rotation: np.ndarray) -> np.ndarray:
     """Angle-axis vector of a rotation matrix (for angles up to pi)."""
-    cos = max(-1.0, min(1.0, (float(np.trace(rotation)) - 1.0) / 2.0))
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation.tolist()
+    cos = max(-1.0, min(1.0, (r00 + r11 + r22 - 1.0) / 2.0))
     angle = math.acos(cos)
-    w = np.array([rotation[2, 1] - rotation[1, 2], rotation[0, 2] - rotation[2, 0],
-                  rotation[1, 0] - rotation[0, 1]])
+    w = np.array([r21 - r12, r02 - r20, r10 - r01])
     if angle < 1e-9:
         return w / 2.0
     if angle > math.pi - 1e-6:  # the skew part vanishes at 180 deg: axis from the diagonal

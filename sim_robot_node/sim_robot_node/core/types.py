@@ -32,7 +32,7 @@ class GroundTruth:
     plunger_travel: float         # [m] how far the bearing inner ring has been pushed
     success: bool                 # plunger within tolerance of full travel
     position_error: float         # [m] tool position error to the fully inserted pose
-    orientation_error: np.ndarray  # (2,) x/y angle-axis error to the inserted pose, tool frame [rad]
+    orientation_error: np.ndarray  # (2,) x/y angle-axis error to the inserted pose [rad], tool
     lateral_offset: float         # [m] tip distance from the hole axis
     tilt: float                   # [rad] angle between the shaft axis and the vertical
 

@@ -1,0 +1,194 @@
+"""The 1 kHz loop: read the robot, estimate the contact wrench, control, limit, apply, step.
+
+One plain Python method per millisecond (``tick``) composes the simulated hardware, the wrench
+estimator, the hybrid controller and the safety filter; ``execute`` runs ticks for one RL step
+until the rest detector ends it. The ROS nodes only publish what the loop produced, so the same
+loop runs in tests, benchmarks, lockstep training and realtime mode.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+from sim_robot_node.core.panda_scene import PandaSceneConfig, PandaShaftScene
+from sim_robot_node.core.params import config_from_dict
+from sim_robot_node.core.types import GroundTruth, JointState
+
+from robot_bridge_node.core.impedance import HybridImpedanceController, ImpedanceConfig
+from robot_bridge_node.core.panda_model import PandaModel
+from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
+from robot_bridge_node.core.safety import SafetyFilter, SafetyLimits
+from robot_bridge_node.core.types import StepResult, WrenchSetpoint
+
+__all__ = ["WrenchEstimator", "GroundTruthWrench", "LoopConfig", "RobotLoop", "build_panda_loop"]
+
+
+class Scene(Protocol):
+    """The torque-controlled robot as the loop sees it (simulated here, a driver on hardware)."""
+    time: float
+
+    def reset(self, initial_pose: int, housing_yaw: float = 0.0) -> None: ...
+    def joint_state(self) -> JointState: ...
+    def apply_torques(self, tau: np.ndarray) -> None: ...
+    def step(self) -> None: ...
+    def ground_truth(self) -> GroundTruth: ...
+
+
+class WrenchEstimator(Protocol):
+    """Plug-in contact-wrench estimator (the EKF in ``wrench_ekf``)."""
+
+    def reset(self, q: np.ndarray) -> None: ...
+
+    def update(self, q: np.ndarray, dq: np.ndarray, tau_cmd: np.ndarray,
+               dt: float) -> np.ndarray:
+        """(6,) contact wrench ``(Fx, Fy, Fz, Tx, Ty, Tz)`` on the tool, tool frame."""
+        ...
+
+
+class GroundTruthWrench:
+    """Stand-in estimator that reads the simulator's true contact wrench: a perfect sensor.
+
+    For tests and for comparing against the EKF; it only exists in simulation.
+    """
+
+    def __init__(self, scene: PandaShaftScene) -> None:
+        self.scene = scene
+
+    def reset(self, q: np.ndarray) -> None:
+        del q
+
+    def update(self, q: np.ndarray, dq: np.ndarray, tau_cmd: np.ndarray,
+               dt: float) -> np.ndarray:
+        del q, dq, tau_cmd, dt
+        return self.scene.contact_wrench()
+
+
+@dataclass(frozen=True)
+class LoopConfig:
+    """Loop timing."""
+    dt: float = 0.001              # [s] tick period (= the simulator step)
+    settle_time: float = 0.1       # [s] holding the start pose after a reset
+    realtime: bool = False         # watchdog on: hold the pose when setpoints stop coming
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.dt <= 0.01:
+            raise ValueError(f"dt must be in (0, 0.01] s, got {self.dt}")
+        if self.settle_time < 0.0:
+            raise ValueError(f"settle_time must be >= 0, got {self.settle_time}")
+
+    @classmethod
+    def from_dict(cls, params: dict[str, Any]) -> LoopConfig:
+        """From the ``loop`` section of ``config/bridge.yaml``."""
+        return config_from_dict(cls, params)
+
+
+_HOLD = WrenchSetpoint(np.zeros(6))
+
+
+class RobotLoop:
+    """Owns one episode's 1 kHz control of the robot.
+
+    :param estimator: contact-wrench estimator updated every tick; ``None`` runs without one.
+    """
+
+    def __init__(self, scene: Scene, controller: HybridImpedanceController, safety: SafetyFilter,
+                 rest_detector: RestDetector, estimator: WrenchEstimator | None = None,
+                 config: LoopConfig | None = None) -> None:
+        self.scene = scene
+        self.controller = controller
+        self.safety = safety
+        self.rest = rest_detector
+        self.estimator = estimator
+        self.config = config or LoopConfig()
+        self.setpoint = _HOLD
+        self.wrench_estimate: np.ndarray | None = None
+        self.holding = False
+
+    def reset(self, initial_pose: int, housing_yaw: float = 0.0) -> None:
+        """New episode: scene at start ``initial_pose``, then settle holding that pose."""
+        self.scene.reset(initial_pose, housing_yaw)
+        state = self.scene.joint_state()
+        self.controller.reset(state.q)
+        self.safety.reset(self.controller.model.gravity(state.q))
+        if self.estimator is not None:
+            self.estimator.reset(state.q)
+        self.setpoint = _HOLD
+        self.holding = False
+        for _ in range(round(self.config.settle_time / self.config.dt)):
+            self.tick()
+        self.controller.set_reference_to_current(self.scene.joint_state().q)
+
+    def command(self, setpoint: WrenchSetpoint) -> None:
+        """Start executing ``setpoint`` (the residual policy's reference is the current pose).
+
+        :raises SetpointRejected: if the safety filter refuses it; the previous command stays.
+        """
+        checked = self.safety.check_setpoint(setpoint)
+        if checked.reference is None:
+            self.controller.set_reference_to_current(self.scene.joint_state().q)
+        self.setpoint = checked
+        self.holding = False
+        self.safety.feed_watchdog(self.scene.time)
+        self.rest.reset()
+
+    def tick(self) -> bool:
+        """One millisecond. True when the current step has come to rest or timed out."""
+        dt = self.config.dt
+        state = self.scene.joint_state()
+        if self.estimator is not None:
+            self.wrench_estimate = self.estimator.update(state.q, state.dq, state.tau, dt)
+        if (self.config.realtime and not self.holding
+                and self.safety.watchdog_expired(self.scene.time)):
+            self.controller.set_reference_to_current(state.q)
+            self.setpoint = _HOLD
+            self.holding = True
+        setpoint = self.setpoint
+        tool = self.controller.tool
+        if tool is not None:
+            setpoint = WrenchSetpoint(self.safety.limit_tilt(setpoint.wrench, tool.rotation),
+                                      setpoint.reference)
+        tau = self.safety.limit_torques(self.controller.step(state.q, state.dq, setpoint, dt), dt)
+        self.scene.apply_torques(tau)
+        self.scene.step()
+        tool = self.controller.tool
+        return self.rest.update(tool.linear_speed, tool.angular_speed, dt)
+
+    def execute(self, setpoint: WrenchSetpoint) -> StepResult:
+        """Run one RL step: command ``setpoint`` and tick until at rest or the step times out."""
+        start = self.scene.time
+        self.command(setpoint)
+        while not self.tick():
+            pass
+        tool = self.controller.tool
+        return StepResult(duration=self.scene.time - start, timed_out=self.rest.timed_out,
+                          linear_speed=tool.linear_speed, angular_speed=tool.angular_speed,
+                          ground_truth=self.scene.ground_truth(),
+                          wrench_estimate=None if self.wrench_estimate is None
+                          else self.wrench_estimate.copy())
+
+
+def build_panda_loop(scene_config: PandaSceneConfig | None = None,
+                     bridge_params: dict[str, Any] | None = None,
+                     estimator: Callable[[PandaShaftScene, PandaModel], WrenchEstimator] | None
+                     = None) -> RobotLoop:
+    """The simulated Panda task with controller, safety and rest detector from the parameters.
+
+    :param bridge_params: the ``ros__parameters`` of ``config/bridge.yaml`` (sections
+        ``impedance``, ``safety``, ``rest``, ``loop``); missing sections keep the defaults.
+    :param estimator: builds the wrench estimator from the scene and the controller's model,
+        e.g. ``lambda scene, model: GroundTruthWrench(scene)``; ``None`` runs without one.
+    """
+    params = bridge_params or {}
+    scene = PandaShaftScene(scene_config or PandaSceneConfig())
+    c = scene.config
+    model = PandaModel(tool_offset=scene.tool_offset, payload_mass=c.shaft_mass,
+                       payload_com=scene.tool_offset + c.shaft_com)
+    controller = HybridImpedanceController(ImpedanceConfig.from_dict(params.get("impedance", {})),
+                                           model)
+    safety = SafetyFilter(SafetyLimits.from_dict(params.get("safety", {})))
+    return RobotLoop(scene, controller, safety,
+                     RestDetector(RestConfig.from_dict(params.get("rest", {}))),
+                     None if estimator is None else estimator(scene, model),
+                     LoopConfig.from_dict(params.get("loop", {})))

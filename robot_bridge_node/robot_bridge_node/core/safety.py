@@ -1,0 +1,134 @@
+"""Safety limits between the learner and the motors; always on.
+
+A learning agent explores, so nothing it sends may reach the joints unchecked: setpoints with
+NaN/inf are rejected (the caller logs the reason), forces and residual torques are clamped, the
+tool is kept inside a tilt cone around the vertical, joint torques respect the Panda's magnitude
+and rate limits, and in realtime mode a silent commander makes the robot hold its pose. The limits
+can be tightened by configuration but never loosened past the hard ceilings below.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from sim_robot_node.core.params import config_from_dict
+from sim_robot_node.core.rotations import tilt_from_down
+
+from robot_bridge_node.core.panda_model import DTAU_MAX, TAU_MAX
+from robot_bridge_node.core.types import WrenchSetpoint
+
+__all__ = ["SafetyLimits", "SafetyFilter", "SetpointRejected", "HARD_LIMITS"]
+
+#: Ceilings no configuration may exceed (SPEC section 1 and the Franka datasheet).
+HARD_LIMITS = {"tilt_max": math.pi / 4, "force_max": 20.0, "torque_max": 3.0,
+               "watchdog_timeout": 0.01}
+
+
+class SetpointRejected(ValueError):
+    """A setpoint that must not reach the controller; the message says why."""
+
+
+@dataclass(frozen=True)
+class SafetyLimits:
+    """Limits of the safety filter; each at most its entry in ``HARD_LIMITS``."""
+    tilt_max: float = math.pi / 4        # [rad] tool z from the vertical
+    tilt_margin: float = 0.05            # [rad] the restoring wall starts this far inside
+    tilt_stiffness: float = 20.0         # [Nm/rad] restoring torque per rad inside the margin
+    force_max: float = 20.0              # [N] norm of the feed-forward force
+    torque_max: float = 3.0              # [Nm] each feed-forward torque component
+    watchdog_timeout: float = 0.01       # [s] realtime: hold pose if no setpoint for this long
+
+    def __post_init__(self) -> None:
+        for name, ceiling in HARD_LIMITS.items():
+            value = getattr(self, name)
+            if not 0.0 < value <= ceiling:
+                raise ValueError(f"{name} must be in (0, {ceiling}], got {value}")
+        if not 0.0 <= self.tilt_margin < self.tilt_max:
+            raise ValueError(f"tilt_margin must be in [0, tilt_max), got {self.tilt_margin}")
+        if self.tilt_stiffness <= 0.0:
+            raise ValueError(f"tilt_stiffness must be > 0, got {self.tilt_stiffness}")
+
+    @classmethod
+    def from_dict(cls, params: dict[str, Any]) -> SafetyLimits:
+        """From the ``safety`` section of ``config/bridge.yaml``."""
+        return config_from_dict(cls, params)
+
+
+class SafetyFilter:
+    """Checks setpoints, bounds tilt and joint torques, and watches for a silent commander.
+
+    State: the last torque command (for the rate limit) and the time of the last setpoint (for
+    the watchdog); ``reset(tau)`` at every episode start.
+    """
+
+    def __init__(self, limits: SafetyLimits | None = None) -> None:
+        self.limits = limits or SafetyLimits()
+        self._last_tau: np.ndarray | None = None
+        self._last_setpoint_time: float | None = None
+
+    def reset(self, tau: np.ndarray | None = None) -> None:
+        """Forget the command history; ``tau`` is the torque currently applied (rate limit)."""
+        self._last_tau = None if tau is None else np.asarray(tau, float).copy()
+        self._last_setpoint_time = None
+
+    # --- setpoints ----------------------------------------------------------------------
+    def check_setpoint(self, setpoint: WrenchSetpoint) -> WrenchSetpoint:
+        """The setpoint with force and torques clamped to the limits.
+
+        :raises SetpointRejected: on a wrong shape or a non-finite value anywhere.
+        """
+        wrench = np.asarray(setpoint.wrench, dtype=float)
+        if wrench.shape != (6,):
+            raise SetpointRejected(f"wrench must have 6 entries, got shape {wrench.shape}")
+        if not np.all(np.isfinite(wrench)):
+            raise SetpointRejected(f"wrench contains NaN/inf: {wrench.tolist()}")
+        ref = setpoint.reference
+        if ref is not None and not (np.all(np.isfinite(ref.position))
+                                    and np.all(np.isfinite(ref.rotation))):
+            raise SetpointRejected("pose reference contains NaN/inf")
+        force = wrench[:3]
+        norm = float(np.linalg.norm(force))
+        if norm > self.limits.force_max:
+            force = force * (self.limits.force_max / norm)
+        torque = np.clip(wrench[3:], -self.limits.torque_max, self.limits.torque_max)
+        return WrenchSetpoint(np.concatenate([force, torque]), ref)
+
+    def limit_tilt(self, wrench: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+        """Feed-forward (EEF frame, contact convention) that keeps the tool inside the cone.
+
+        Past ``tilt_max - tilt_margin`` the torque component tilting further is dropped and a
+        restoring torque proportional to the excess is added; inside, ``wrench`` is unchanged.
+        """
+        angle, back = tilt_from_down(rotation)
+        start = self.limits.tilt_max - self.limits.tilt_margin
+        if angle <= start:
+            return wrench
+        # The robot applies minus the contact torque: work with what the robot applies.
+        applied = -(rotation @ wrench[3:])
+        outward = float(applied @ back)
+        if outward < 0.0:
+            applied = applied - outward * back
+        applied = applied + self.limits.tilt_stiffness * (angle - start) * back
+        return np.concatenate([wrench[:3], -(rotation.T @ applied)])
+
+    # --- joint torques ------------------------------------------------------------------
+    def limit_torques(self, tau: np.ndarray, dt: float) -> np.ndarray:
+        """``tau`` clipped to the joint torque limits and to the rate limit since the last call."""
+        tau = np.minimum(np.maximum(np.asarray(tau, float), -TAU_MAX), TAU_MAX)
+        if self._last_tau is not None:
+            step = DTAU_MAX * dt
+            tau = np.minimum(np.maximum(tau, self._last_tau - step), self._last_tau + step)
+        self._last_tau = tau.copy()
+        return tau
+
+    # --- watchdog -----------------------------------------------------------------------
+    def feed_watchdog(self, now: float) -> None:
+        """A setpoint arrived at ``now`` [s]."""
+        self._last_setpoint_time = now
+
+    def watchdog_expired(self, now: float) -> bool:
+        """No setpoint for longer than the timeout (never true before the first setpoint)."""
+        return (self._last_setpoint_time is not None
+                and now - self._last_setpoint_time > self.limits.watchdog_timeout)

@@ -1,0 +1,421 @@
+"""The simulated Panda pressing a shaft into a tight bearing, torque-controlled at 1 kHz.
+
+A rigid-body engine cannot simulate an interference fit, so the fit is modelled by its effect:
+the shaft slides with 0.1 mm radial clearance through a bore (a ring of boxes) and then pushes a
+heavy "inner ring" plunger whose prismatic joint is resisted by Coulomb friction (a velocity motor
+at target 0 with a force limit of ~11 N). The tight clearance makes a tilted shaft wedge, so the
+constant base push jams while torques that straighten the shaft let it slide in; the last
+millimetres need a sustained push above the friction. Above the bore a counterbore keeps random
+torques from levering the shaft out of the hole.
+
+The arm is the example-robot-data Panda (the URDF Pinocchio reads for the controller), fingers
+fixed, with the shaft welded to ``panda_hand_tcp`` as an extra fixed link: a fixed joint in the
+multibody is exact, unlike a soft pybullet constraint. Only the shaft collides. Frames: the
+tool frame is at the grasp point on the shaft axis with the orientation of ``panda_hand_tcp``
+(z along the shaft towards its tip, i.e. into the bore).
+"""
+from __future__ import annotations
+
+import math
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+from xml.etree import ElementTree
+
+import numpy as np
+import pybullet as p
+# The one Panda description (URDF path, ready pose) lives with the controller's model.
+from robot_bridge_node.core.panda_model import Q_READY, panda_urdf_path
+
+from sim_robot_node.core.params import config_from_dict
+from sim_robot_node.core.rotations import axis_angle_matrix, rotation_log, tilt_from_down
+from sim_robot_node.core.types import GroundTruth, JointState
+
+__all__ = ["PandaSceneConfig", "PandaShaftScene", "N_START_POSES"]
+
+#: The initial poses: shaft tilt directions k * 45 deg.
+N_START_POSES = 8
+ARM_JOINTS = tuple(f"panda_joint{i}" for i in range(1, 8))
+
+
+@dataclass(frozen=True)
+class PandaSceneConfig:
+    """Geometry and physics of the shaft/bearing task (SPEC section 1). Lengths in m."""
+    time_step: float = 0.001                    # [s] one physics step = one control tick
+    solver_iterations: int = 50
+    contact_breaking_threshold: float = 0.001   # [m] (default 0.02: idle contacts, 5x slower)
+    gravity: float = 9.81                       # [m/s^2]
+    hole_position: tuple[float, ...] = (0.45, 0.0, 0.25)  # bearing face centre, base frame [m]
+    hole_radius: float = 0.006
+    bore_depth: float = 0.012                   # free slide before the inner ring
+    bore_segments: int = 48
+    counterbore_depth: float = 0.006
+    counterbore_extra_radius: float = 0.004
+    plunger_mass: float = 2.0                   # [kg] heavy, so the friction motor stays Coulomb
+    plunger_travel: float = 0.004
+    plunger_friction: float = 11.0              # [N] friction force of the fit
+    success_tolerance: float = 0.0002           # success: plunger this close to full travel
+    shaft_radius: float = 0.0059
+    shaft_length: float = 0.1
+    shaft_mass: float = 0.086                   # [kg] steel, 11.8 mm x 100 mm
+    grasp_height: float = 0.06                  # grasp point above the shaft tip
+    friction: float = 0.5                       # combined lateral friction shaft/housing
+    start_tilt: float = math.radians(15.0)      # [rad]
+    start_clearance: float = 0.0005             # lowest rim point above the bearing face
+    max_lateral_offset: float = 0.015           # episode ends if the tip leaves the axis by more
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.time_step <= 0.01:
+            raise ValueError(f"time_step must be in (0, 0.01] s, got {self.time_step}")
+        if len(self.hole_position) != 3:
+            raise ValueError(f"hole_position needs 3 entries, got {len(self.hole_position)}")
+        if not 0.0 < self.shaft_radius < self.hole_radius:
+            raise ValueError(f"shaft_radius {self.shaft_radius} must be in (0, hole_radius "
+                             f"{self.hole_radius})")
+        if not 0.0 < self.grasp_height < self.shaft_length:
+            raise ValueError(f"grasp_height {self.grasp_height} must be in (0, shaft_length)")
+        positive = ("solver_iterations", "contact_breaking_threshold", "bore_depth",
+                    "bore_segments", "counterbore_depth", "counterbore_extra_radius",
+                    "plunger_mass", "plunger_travel", "plunger_friction", "success_tolerance",
+                    "shaft_mass", "friction")
+        for name in positive:
+            if getattr(self, name) <= 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        if not 0.0 <= self.start_tilt < math.pi / 4:
+            raise ValueError(f"start_tilt must be in [0, pi/4) rad, got {self.start_tilt}")
+
+    @classmethod
+    def from_dict(cls, params: dict[str, Any]) -> PandaSceneConfig:
+        """From the ``ros__parameters`` of ``config/panda_scene.yaml``."""
+        return config_from_dict(cls, params)
+
+    @property
+    def full_depth(self) -> float:
+        """Tip depth below the bearing face when fully inserted [m]."""
+        return self.bore_depth + self.plunger_travel
+
+    @property
+    def tool_offset(self) -> np.ndarray:
+        """Grasp point relative to ``panda_hand_tcp`` in that frame: the shaft is held there."""
+        return np.zeros(3)
+
+    @property
+    def shaft_com(self) -> np.ndarray:
+        """Shaft centre of mass in the tool frame (z towards the tip)."""
+        return np.array([0.0, 0.0, self.shaft_length / 2 - (self.shaft_length - self.grasp_height)])
+
+
+def _rotation_z(angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _fmt(values: Any) -> str:
+    return " ".join(f"{float(v):.9f}" for v in values)
+
+
+class PandaShaftScene:
+    """pybullet world: torque-controlled Panda holding a shaft above a bearing in a housing.
+
+    Usage per episode: ``reset(k)``, then every millisecond ``joint_state()``,
+    ``apply_torques(tau)``, ``step()``; ``ground_truth()`` when evaluation needs it.
+    """
+
+    def __init__(self, config: PandaSceneConfig | None = None) -> None:
+        self.config = config or PandaSceneConfig()
+        self._tmp = Path(tempfile.mkdtemp(prefix="panda_scene_"))
+        self.cid: int | None = p.connect(p.DIRECT)
+        c = self.config
+        p.setGravity(0.0, 0.0, -c.gravity, physicsClientId=self.cid)
+        p.setPhysicsEngineParameter(
+            fixedTimeStep=c.time_step, numSolverIterations=c.solver_iterations,
+            contactBreakingThreshold=c.contact_breaking_threshold, physicsClientId=self.cid)
+        flags = p.URDF_USE_IMPLICIT_CYLINDER | p.URDF_USE_INERTIA_FROM_FILE
+        self.robot = p.loadURDF(str(self._write_robot_urdf()), useFixedBase=True, flags=flags,
+                                physicsClientId=self.cid)
+        self.housing = p.loadURDF(str(self._write_housing_urdf()), useFixedBase=True,
+                                  basePosition=c.hole_position, flags=flags,
+                                  physicsClientId=self.cid)
+        names = {p.getJointInfo(self.robot, j, physicsClientId=self.cid)[1].decode(): j
+                 for j in range(p.getNumJoints(self.robot, physicsClientId=self.cid))}
+        self.arm = [names[n] for n in ARM_JOINTS]
+        self.shaft_link = names["shaft_joint"]
+        self._setup_dynamics()
+        self._tau = np.zeros(7)
+        self._steps = 0
+        self._hole_axis_xy = np.asarray(c.hole_position[:2], float)
+        self.housing_yaw = 0.0
+        self.reset(0)
+
+    # --- construction -------------------------------------------------------------------
+    def _write_robot_urdf(self) -> Path:
+        """The Panda URDF with fixed fingers, no arm collisions and the shaft as a fixed link."""
+        c = self.config
+        src = panda_urdf_path()
+        tree = ElementTree.parse(src)
+        root = tree.getroot()
+        robots_dir = src.parents[2]
+        for mesh in root.iter("mesh"):
+            name = mesh.get("filename", "")
+            if name.startswith("package://example-robot-data/robots/"):
+                mesh.set("filename", str(robots_dir / name.split("/robots/", 1)[1]))
+        for link in root.findall("link"):
+            for element in link.findall("collision") + link.findall("visual"):
+                link.remove(element)
+        for joint in root.findall("joint"):
+            if joint.get("type") == "prismatic":  # the fingers: locked at 0 as in the model
+                joint.set("type", "fixed")
+        com_z = c.shaft_com[2]
+        ixx = c.shaft_mass * (3 * c.shaft_radius ** 2 + c.shaft_length ** 2) / 12
+        izz = c.shaft_mass * c.shaft_radius ** 2 / 2
+        shaft = f"""
+  <link name="shaft">
+    <inertial><origin xyz="0 0 {com_z:.9f}"/><mass value="{c.shaft_mass:.9f}"/>
+      <inertia ixx="{ixx:.9f}" iyy="{ixx:.9f}" izz="{izz:.9f}" ixy="0" ixz="0" iyz="0"/>
+    </inertial>
+    <collision><origin xyz="0 0 {com_z:.9f}"/>
+      <geometry><cylinder radius="{c.shaft_radius:.9f}" length="{c.shaft_length:.9f}"/></geometry>
+    </collision>
+  </link>
+  <joint name="shaft_joint" type="fixed"><parent link="panda_hand_tcp"/><child link="shaft"/>
+    <origin xyz="{_fmt(c.tool_offset)}"/></joint>"""
+        for element in ElementTree.fromstring(f"<r>{shaft}</r>"):
+            root.append(element)
+        path = self._tmp / "panda_shaft.urdf"
+        tree.write(path)
+        return path
+
+    def _write_housing_urdf(self) -> Path:
+        """Housing: bore (ring of boxes), counterbore above it, plunger on a prismatic joint below.
+
+        Origin at the bearing face centre; the plunger joint axis points down, so its position is
+        the travel already pushed.
+        """
+        c = self.config
+        boxes: list[str] = []
+
+        def ring(radius: float, thickness: float, z_low: float, height: float, n: int) -> None:
+            width = 2.0 * radius * math.tan(math.pi / n) * 1.05  # slight overlap: no gaps
+            for i in range(n):
+                a = 2.0 * math.pi * i / n
+                r = radius + thickness / 2
+                centre = _fmt([r * math.cos(a), r * math.sin(a), z_low + height / 2])
+                size = _fmt([thickness, width, height])
+                boxes.append(f'<collision><origin xyz="{centre}" rpy="0 0 {a:.9f}"/>'
+                             f'<geometry><box size="{size}"/></geometry></collision>')
+
+        bore_thickness = c.counterbore_extra_radius + 0.002  # reaches under the counterbore wall
+        ring(c.hole_radius, bore_thickness, -c.bore_depth, c.bore_depth, c.bore_segments)
+        ring(c.hole_radius + c.counterbore_extra_radius, 0.003, 0.0, c.counterbore_depth, 32)
+        plunger = _fmt([2 * c.hole_radius + 0.004, 2 * c.hole_radius + 0.004, 0.01])
+        # One element per line: pybullet's URDF parser fails on very long lines.
+        urdf = f"""<?xml version="1.0"?>
+<robot name="housing">
+  <link name="housing">
+    <inertial><mass value="0"/><inertia ixx="0" iyy="0" izz="0" ixy="0" ixz="0" iyz="0"/></inertial>
+    {chr(10).join(boxes)}
+  </link>
+  <link name="plunger">
+    <inertial><origin xyz="0 0 -0.005"/><mass value="{c.plunger_mass:.9f}"/>
+      <inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0 0 -0.005"/>
+      <geometry><box size="{plunger}"/></geometry></collision>
+  </link>
+  <joint name="plunger_joint" type="prismatic">
+    <parent link="housing"/><child link="plunger"/>
+    <origin xyz="0 0 {-c.bore_depth:.9f}"/><axis xyz="0 0 -1"/>
+    <limit lower="0" upper="{c.plunger_travel:.9f}" effort="1000" velocity="1"/>
+  </joint>
+</robot>"""
+        path = self._tmp / "housing.urdf"
+        path.write_text(urdf)
+        return path
+
+    def _setup_dynamics(self) -> None:
+        c = self.config
+        for j in range(-1, p.getNumJoints(self.robot, physicsClientId=self.cid)):
+            p.changeDynamics(self.robot, j, linearDamping=0.0, angularDamping=0.0,
+                             jointDamping=0.0, physicsClientId=self.cid)
+        p.setJointMotorControlArray(self.robot, self.arm, p.VELOCITY_CONTROL, forces=[0.0] * 7,
+                                    physicsClientId=self.cid)
+        # pybullet multiplies the two bodies' coefficients: the housing carries the combined one.
+        p.changeDynamics(self.robot, self.shaft_link, lateralFriction=1.0, physicsClientId=self.cid)
+        for j in (-1, 0):
+            p.changeDynamics(self.housing, j, lateralFriction=c.friction, linearDamping=0.0,
+                             angularDamping=0.0, jointDamping=0.0, physicsClientId=self.cid)
+        p.setJointMotorControl2(self.housing, 0, p.VELOCITY_CONTROL, targetVelocity=0.0,
+                                force=c.plunger_friction, physicsClientId=self.cid)
+        p.enableJointForceTorqueSensor(self.robot, self.shaft_link, True, physicsClientId=self.cid)
+        for j in range(-1, p.getNumJoints(self.robot, physicsClientId=self.cid)):
+            if j != self.shaft_link:  # only the shaft touches the world
+                p.setCollisionFilterGroupMask(self.robot, j, 0, 0, physicsClientId=self.cid)
+
+    # --- episode ------------------------------------------------------------------------
+    def start_tool_pose(self, initial_pose: int, housing_yaw: float = 0.0
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        """Tool position and rotation (base frame) of start ``initial_pose`` (0..7).
+
+        The shaft is tilted by ``start_tilt`` towards direction k * 45 deg (in the housing frame),
+        its tip on the hole axis, its lowest rim point ``start_clearance`` above the bearing face.
+        """
+        if not 0 <= initial_pose < N_START_POSES:
+            raise ValueError(f"initial_pose must be in 0..{N_START_POSES - 1}, got {initial_pose}")
+        c = self.config
+        phi = initial_pose * 2.0 * math.pi / N_START_POSES + housing_yaw
+        axis_up = np.array([math.sin(c.start_tilt) * math.cos(phi),
+                            math.sin(c.start_tilt) * math.sin(phi), math.cos(c.start_tilt)])
+        tip = np.asarray(c.hole_position, float) + np.array(
+            [0.0, 0.0, c.start_clearance + c.shaft_radius * math.sin(c.start_tilt)])
+        down = np.diag([1.0, -1.0, -1.0])  # tool z pointing down, hand x along base x
+        tilt = axis_angle_matrix(np.array([-math.sin(phi), math.cos(phi), 0.0]), c.start_tilt)
+        rotation = tilt @ _rotation_z(housing_yaw) @ down
+        return tip + c.grasp_height * axis_up, rotation
+
+    def reset(self, initial_pose: int, housing_yaw: float = 0.0) -> None:
+        """Start an episode: housing rotated by ``housing_yaw``, arm at start ``initial_pose``.
+
+        The arm is placed by inverse kinematics at rest; the caller settles it under its
+        controller. The plunger goes back to the top of its travel.
+        """
+        position, rotation = self.start_tool_pose(initial_pose, housing_yaw)
+        p.resetBasePositionAndOrientation(self.housing, self.config.hole_position,
+                                          p.getQuaternionFromEuler([0.0, 0.0, housing_yaw]),
+                                          physicsClientId=self.cid)
+        p.resetJointState(self.housing, 0, 0.0, 0.0, physicsClientId=self.cid)
+        self.housing_yaw = housing_yaw
+        q = self._inverse_kinematics(position, rotation)
+        for j, qj in zip(self.arm, q):
+            p.resetJointState(self.robot, j, qj, 0.0, physicsClientId=self.cid)
+        self._tau = np.zeros(7)
+        self._steps = 0
+
+    def _inverse_kinematics(self, position: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+        """Joint angles putting the tool exactly at the pose (damped least squares from ready).
+
+        :raises RuntimeError: if the pose is out of reach.
+        """
+        q = Q_READY.copy()
+        q[6] += self.housing_yaw
+        zeros = [0.0] * 7
+        for _ in range(200):
+            for j, qj in zip(self.arm, q):
+                p.resetJointState(self.robot, j, qj, 0.0, physicsClientId=self.cid)
+            pos, rot = self.tool_pose()
+            error = np.concatenate([position - pos, rotation_log(rotation @ rot.T)])
+            if np.linalg.norm(error) < 1e-7:
+                return q
+            lin, ang = p.calculateJacobian(self.robot, self.shaft_link, [0.0, 0.0, 0.0],
+                                           q.tolist(), zeros, zeros, physicsClientId=self.cid)
+            jac = np.vstack([np.array(lin), np.array(ang)])
+            q = q + jac.T @ np.linalg.solve(jac @ jac.T + 1e-6 * np.eye(6), error)
+        raise RuntimeError(
+            f"inverse kinematics did not converge (error {np.linalg.norm(error):.2e})")
+
+    # --- 1 kHz interface ----------------------------------------------------------------
+    @property
+    def tool_offset(self) -> np.ndarray:
+        """Grasp point relative to ``panda_hand_tcp`` (the controller's model uses the same)."""
+        return self.config.tool_offset
+
+    @property
+    def time(self) -> float:
+        """Simulated time since the last reset [s]."""
+        return self._steps * self.config.time_step
+
+    def joint_state(self) -> JointState:
+        """Joint positions, velocities and measured torques (= the last applied command)."""
+        states = p.getJointStates(self.robot, self.arm, physicsClientId=self.cid)
+        return JointState(q=np.array([s[0] for s in states]), dq=np.array([s[1] for s in states]),
+                          tau=self._tau.copy())
+
+    def apply_torques(self, tau: np.ndarray) -> None:
+        """Joint torques for the next step [Nm]; the caller enforces limits."""
+        tau = np.asarray(tau, float)
+        if tau.shape != (7,) or not np.all(np.isfinite(tau)):
+            raise ValueError(f"tau must be 7 finite torques, got {tau}")
+        self._tau = tau.copy()
+        p.setJointMotorControlArray(self.robot, self.arm, p.TORQUE_CONTROL, forces=tau.tolist(),
+                                    physicsClientId=self.cid)
+
+    def step(self) -> None:
+        """One physics step. The plunger's weight is carried (only the fit friction holds it)."""
+        c = self.config
+        p.applyExternalForce(self.housing, 0, (0.0, 0.0, c.plunger_mass * c.gravity),
+                             (0.0, 0.0, 0.0), p.LINK_FRAME, physicsClientId=self.cid)
+        p.stepSimulation(physicsClientId=self.cid)
+        self._steps += 1
+
+    # --- ground truth -------------------------------------------------------------------
+    def tool_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """Tool position and rotation matrix in the base frame."""
+        state = p.getLinkState(self.robot, self.shaft_link, computeForwardKinematics=True,
+                               physicsClientId=self.cid)
+        rotation = np.array(p.getMatrixFromQuaternion(state[5])).reshape(3, 3)
+        return np.array(state[4]), rotation
+
+    def plunger_travel(self) -> float:
+        """How far the inner ring has been pushed down [m]."""
+        return float(p.getJointState(self.housing, 0, physicsClientId=self.cid)[0])
+
+    def contact_wrench(self) -> np.ndarray:
+        """Wrench the housing exerts on the shaft, about the tool origin, in the tool frame.
+
+        Measured like a wrist force/torque sensor between hand and shaft: the reaction of the
+        shaft's fixed joint minus the shaft's weight (its inertial forces, under 0.1 N at the
+        accelerations of the task, are neglected). Summing ``getContactPoints`` instead fails
+        where the shaft is pinched in the bore: the reported lateral forces there violate the
+        arm's static balance by tens of newtons.
+        """
+        c = self.config
+        # pybullet reports the hand's force on the shaft and its moment about the shaft's centre
+        # of mass, in the tool frame.
+        hand = p.getJointState(self.robot, self.shaft_link, physicsClientId=self.cid)[2]
+        _, rotation = self.tool_pose()
+        weight = rotation.T @ np.array([0.0, 0.0, -c.shaft_mass * c.gravity])
+        force = -(np.asarray(hand[:3]) + weight)
+        lever = c.shaft_com[2]  # the centre of mass is on the tool z axis
+        torque = [-hand[3] - lever * force[1], -hand[4] + lever * force[0], -hand[5]]
+        return np.concatenate([force, torque])
+
+    def target_tool_position(self) -> np.ndarray:
+        """Tool position with the shaft vertical and fully inserted [m]."""
+        c = self.config
+        return np.asarray(c.hole_position, float) + np.array(
+            [0.0, 0.0, c.grasp_height - c.full_depth])
+
+    def ground_truth(self) -> GroundTruth:
+        """Contact wrench, insertion state and the errors the dense reward uses."""
+        c = self.config
+        position, rotation = self.tool_pose()
+        z_tool = rotation[:, 2]
+        tip = position + c.grasp_height * z_tool
+        # The rotation turning the shaft upright, as angle-axis in the tool frame: its z part is
+        # zero, the insertion does not care about the rotation about the shaft.
+        tilt, axis = tilt_from_down(rotation)
+        error = rotation.T @ (axis * tilt)
+        travel = self.plunger_travel()
+        return GroundTruth(
+            wrench=self.contact_wrench(),
+            insertion_depth=float(c.hole_position[2] - tip[2]),
+            plunger_travel=travel,
+            success=bool(travel >= c.plunger_travel - c.success_tolerance),
+            position_error=float(np.linalg.norm(position - self.target_tool_position())),
+            orientation_error=error[:2].copy(),
+            lateral_offset=float(np.linalg.norm(tip[:2] - self._hole_axis_xy)),
+            tilt=tilt)
+
+    def close(self) -> None:
+        """Disconnect pybullet and delete the generated URDFs."""
+        if self.cid is not None:
+            p.disconnect(physicsClientId=self.cid)
+            self.cid = None
+        shutil.rmtree(self._tmp, ignore_errors=True)
+
+    def __del__(self) -> None:
+        try:
+            self.close()
+        except Exception:  # interpreter shutdown: nothing left to clean reliably
+            pass
+

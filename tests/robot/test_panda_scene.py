@@ -1,0 +1,80 @@
+"""The simulated shaft/bearing scene: start poses, ground truth, the torque interface."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from robot_bridge_node.core.robot_loop import RobotLoop, build_panda_loop
+from robot_bridge_node.core.types import WrenchSetpoint
+from sim_robot_node.core.panda_scene import N_START_POSES
+
+
+@pytest.fixture(scope="module")
+def loop() -> RobotLoop:
+    loop = build_panda_loop()
+    yield loop
+    loop.scene.close()
+
+
+@pytest.mark.parametrize("yaw", [0.0, 0.3])
+def test_start_poses_are_tilted_on_the_axis_just_above_the_bearing(loop: RobotLoop,
+                                                                   yaw: float) -> None:
+    scene = loop.scene
+    c = scene.config
+    for k in range(N_START_POSES):
+        loop.reset(k, yaw)  # placed by IK, then settled for 0.1 s under the controller
+        gt = scene.ground_truth()
+        assert gt.tilt == pytest.approx(math.radians(15.0), abs=1e-4)
+        assert gt.lateral_offset < 1e-5
+        rim_height = -gt.insertion_depth - c.shaft_radius * math.sin(gt.tilt)
+        assert rim_height == pytest.approx(0.0005, abs=1e-5)
+        position, rotation = scene.tool_pose()
+        direction = -rotation[:2, 2]  # shaft axis from tip to grasp, horizontal part
+        assert math.atan2(direction[1], direction[0]) == pytest.approx(
+            math.remainder(k * math.pi / 4 + yaw, 2 * math.pi), abs=1e-3)
+        assert not gt.success and gt.plunger_travel == 0.0
+        np.testing.assert_allclose(gt.wrench, np.zeros(6), atol=1e-3)  # not touching yet
+        assert scene.time == pytest.approx(loop.config.settle_time)
+
+
+def test_measured_torque_is_the_last_command_and_bad_torques_are_refused(loop: RobotLoop) -> None:
+    scene = loop.scene
+    scene.reset(0)
+    tau = np.linspace(-1.0, 1.0, 7)
+    scene.apply_torques(tau)
+    np.testing.assert_array_equal(scene.joint_state().tau, tau)
+    with pytest.raises(ValueError, match="7 finite"):
+        scene.apply_torques(np.array([0.0] * 6 + [math.nan]))
+    scene.step()
+    assert scene.time == pytest.approx(0.001)
+
+
+@pytest.mark.parametrize("pose,residual", [(0, (0.0, 0.0)), (3, (0.0, 0.0)), (2, (-1.5, 0.0))])
+def test_contact_wrench_matches_the_balance_of_the_arm(loop: RobotLoop, pose: int,
+                                                       residual: tuple[float, float]) -> None:
+    """J^T F = M ddq + C dq + g - tau over one step: the simulator's wrench must agree, also
+    with friction and the shaft pinched in the bore (where summing pybullet's contact points
+    came out tens of newtons off)."""
+    loop.reset(pose)
+    for _ in range(2):
+        loop.execute(WrenchSetpoint.residual(-15.0, *residual))
+    for _ in range(10):  # then the base push alone until the arm rests
+        if not loop.execute(WrenchSetpoint.residual(-15.0, 0.0, 0.0)).timed_out:
+            break
+    else:
+        pytest.fail("the arm did not come to rest")
+    before = loop.scene.joint_state()
+    loop.tick()  # one step of known torque: J^T F = M ddq + C dq + g - tau over that step
+    after = loop.scene.joint_state()
+    model = loop.controller.model
+    kin = model.kinematics(before.q)
+    ddq = (after.dq - before.dq) / loop.config.dt
+    generalised = (model.mass_matrix(before.q) @ ddq
+                   + model.nonlinear_effects(before.q, before.dq) - after.tau)
+    world = np.linalg.pinv(kin.jacobian.T) @ generalised
+    balance = np.concatenate([kin.rotation.T @ world[:3], kin.rotation.T @ world[3:]])
+    truth = loop.scene.ground_truth().wrench
+    np.testing.assert_allclose(truth[:3], balance[:3], atol=0.2)
+    np.testing.assert_allclose(truth[3:], balance[3:], atol=0.02)
+    assert truth[2] == pytest.approx(-15.0, abs=0.5)  # the base push, in the contact convention
