@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import threading
+import time
 from pathlib import Path
 
 from qg_interfaces.msg import ActorParameters, EpisodeStatus, LearnerDiagnostics, Transition
@@ -24,6 +25,8 @@ from qg_learning_node.executor_node import LATCHED, RELIABLE_DEEP
 from qg_learning_node.learner_core import LearnerCore
 
 CHECKPOINT_NAME = "learner.pt"
+#: [s] how long to wait for the last transitions of an ended episode before checkpointing.
+CHECKPOINT_GRACE = 3.0
 
 
 def runs_dir() -> Path:
@@ -48,7 +51,7 @@ class LearnerNode(Node):
             self.core = LearnerCore(config, STATE_DIM, ACTION_DIM)
         self.lock = threading.Lock()
         self.received: dict[str, int] = {}        # transitions per episode id
-        self.pending_checkpoint: dict[str, int] = {}  # episode id -> its final step count
+        self.pending_checkpoint: dict[str, tuple[int, float]] = {}  # id -> (final steps, ended at)
         self.checkpointed: set[str] = set()
         self.last_diagnostics: dict = {}
 
@@ -60,7 +63,7 @@ class LearnerNode(Node):
         self.create_subscription(EpisodeStatus, "/episode_status", self._on_status, LATCHED,
                                  callback_group=group)
         # A heartbeat, so the executor knows the learner is alive between training cycles.
-        self.create_timer(0.5, self._publish_diagnostics)
+        self.create_timer(0.5, self._heartbeat, callback_group=group)
         self._publish_actor()
 
     def _on_transition(self, msg: Transition) -> None:
@@ -79,14 +82,30 @@ class LearnerNode(Node):
     def _on_status(self, msg: EpisodeStatus) -> None:
         if msg.state in ("done", "aborted") and msg.episode_id and msg.mode == "train" \
                 and msg.episode_id not in self.checkpointed:
-            self.pending_checkpoint[msg.episode_id] = int(msg.step)
+            self.pending_checkpoint.setdefault(msg.episode_id, (int(msg.step), time.monotonic()))
             self._maybe_checkpoint(msg.episode_id)
 
+    def _heartbeat(self) -> None:
+        self._publish_diagnostics()
+        for episode_id in list(self.pending_checkpoint):
+            self._maybe_checkpoint(episode_id)
+
     def _maybe_checkpoint(self, episode_id: str) -> None:
-        """Checkpoint once every transition of the ended episode has arrived."""
-        final = self.pending_checkpoint.get(episode_id)
-        if final is None or self.received.get(episode_id, 0) < final:
+        """Checkpoint once every transition of the ended episode has arrived.
+
+        Transitions published while this learner was down never arrive; after
+        ``CHECKPOINT_GRACE`` seconds the checkpoint is written without them.
+        """
+        pending = self.pending_checkpoint.get(episode_id)
+        if pending is None:
             return
+        final, ended_at = pending
+        got = self.received.get(episode_id, 0)
+        if got < final:
+            if time.monotonic() - ended_at < CHECKPOINT_GRACE:
+                return
+            self.get_logger().warning(f"{episode_id}: {final - got} of {final} transitions never "
+                                      "arrived (learner was down?); checkpointing without them")
         del self.pending_checkpoint[episode_id]
         self.checkpointed.add(episode_id)
         self.checkpoint.parent.mkdir(parents=True, exist_ok=True)

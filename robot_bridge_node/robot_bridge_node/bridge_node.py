@@ -1,41 +1,406 @@
-"""The ``bridge`` node: the robot-agnostic command interface in front of the (simulated) robot."""
+"""The ``bridge`` node: the robot-agnostic command interface in front of the (simulated) robot.
+
+The bridge owns the 1 kHz loop (``core/robot_loop.py``), like a robot's controller process:
+``LoopRunner`` drives it on a dedicated thread (not an rclpy timer, whose jitter is several ms),
+takes ``/wrench_setpoint`` in, and publishes the tool pose and twist and the ``/ee_at_rest``
+event that ends an RL step. In the composed ``robot`` process the loop steps the simulator
+itself; run on its own (``ros2 run robot_bridge_node bridge``) the loop's robot is
+``RemoteRobot``, which reads ``/joint_states`` from the separate sim and writes
+``/joint_commands``, one tick per received state.
+"""
 from __future__ import annotations
 
-from geometry_msgs.msg import PoseStamped, TwistStamped
-from qg_interfaces.msg import AtRest, WrenchSetpoint
-from rclpy.node import Node
-from sensor_msgs.msg import JointState
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 
-from sim_robot_node.node_runtime import node_params, run_nodes
-from sim_robot_node.sim_node import SENSOR_QOS
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from qg_interfaces.msg import AtRest, GroundTruth as GroundTruthMsg
+from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
+from rclpy.node import Node
+from sensor_msgs.msg import JointState as JointStateMsg
+from sim_robot_node.core.panda_scene import PandaSceneConfig
+from sim_robot_node.conversions import (at_rest_msg, ground_truth_from_msg, joint_state_from_msg,
+                                        pose_stamped, time_msg, time_ns, twist_stamped,
+                                        wrench_from_msg)
+from sim_robot_node.core.types import GroundTruth, JointState
+from sim_robot_node.node_runtime import LoopThread, node_params, run_nodes
+from sim_robot_node.sim_node import RESTARTED_QOS, RESTARTED_TOPIC, SENSOR_QOS
+from std_msgs.msg import Header
+
+from robot_bridge_node.conversions import setpoint_from_msg
+from robot_bridge_node.core.impedance import HybridImpedanceController, ImpedanceConfig, ToolState
+from robot_bridge_node.core.panda_model import PandaModel
+from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
+from robot_bridge_node.core.robot_loop import LoopConfig, RobotLoop
+from robot_bridge_node.core.safety import SafetyFilter, SafetyLimits, SetpointRejected
+from robot_bridge_node.core.types import StepResult
+
+__all__ = ["COMMAND_QOS", "BridgeNode", "LoopRunner", "LoopObserver", "RemoteRobot",
+           "LatestWrench", "task_model", "main"]
 
 COMMAND_QOS = 10
 
+#: Called after every tick with the simulated time [ns] (e.g. an MCAP recorder).
+LoopObserver = Callable[[int, RobotLoop], None]
+
+
+def task_model(scene: PandaSceneConfig) -> PandaModel:
+    """The Panda model of the shaft task: tool frame at the grasp point, shaft as payload."""
+    return PandaModel(tool_offset=scene.tool_offset, payload_mass=scene.shaft_mass,
+                      payload_com=scene.tool_offset + scene.shaft_com)
+
 
 class BridgeNode(Node):
-    """Takes wrench setpoints, drives the joints at 1 kHz, reports the EEF state and rest."""
+    """Takes wrench setpoints (``setpoint_handler``), reports the EEF state and rest."""
 
     def __init__(self) -> None:
         super().__init__("bridge", automatically_declare_parameters_from_overrides=True)
         self.params = node_params(self)
-        self.joint_commands = self.create_publisher(JointState, "/joint_commands", SENSOR_QOS)
         self.ee_pose = self.create_publisher(PoseStamped, "/ee_pose", SENSOR_QOS)
         self.ee_twist = self.create_publisher(TwistStamped, "/ee_twist", SENSOR_QOS)
         self.ee_at_rest = self.create_publisher(AtRest, "/ee_at_rest", COMMAND_QOS)
-        self.create_subscription(JointState, "/joint_states", self._on_joint_state, SENSOR_QOS)
-        self.create_subscription(WrenchSetpoint, "/wrench_setpoint", self._on_setpoint, COMMAND_QOS)
+        self.setpoint_handler: Callable[[WrenchSetpointMsg], None] | None = None
+        self.create_subscription(WrenchSetpointMsg, "/wrench_setpoint", self._on_setpoint,
+                                 COMMAND_QOS)
 
-    def _on_joint_state(self, msg: JointState) -> None:
-        pass
+    def _on_setpoint(self, msg: WrenchSetpointMsg) -> None:
+        if self.setpoint_handler is None:
+            self.get_logger().warn(f"setpoint {msg.seq} ignored: the loop is not running yet")
+            return
+        self.setpoint_handler(msg)
 
-    def _on_setpoint(self, msg: WrenchSetpoint) -> None:
-        event = AtRest(seq=msg.seq)
-        event.header.stamp = self.get_clock().now().to_msg()
-        self.ee_at_rest.publish(event)
+    def publish_tool(self, stamp: Time, tool: ToolState) -> None:
+        """``/ee_pose`` and ``/ee_twist`` (base frame)."""
+        self.ee_pose.publish(pose_stamped(tool.position, tool.rotation, stamp))
+        self.ee_twist.publish(twist_stamped(tool.twist, stamp))
+
+
+@dataclass
+class _ResetJob:
+    """A reset handed to the loop thread; ``done`` is set with the observation or the error."""
+    initial_pose: int
+    housing_yaw: float
+    done: threading.Event
+    observation: AtRest | None = None
+    error: Exception | None = None
+
+
+class LoopRunner:
+    """Drives one ``RobotLoop`` on its own thread: setpoints and resets in, ticks, events out.
+
+    Everything that touches the loop runs on that thread; the ROS callbacks only leave work in
+    a mailbox (the latest setpoint, a pending reset). A setpoint with a new ``seq`` starts a
+    step; one with the ``seq`` of the last accepted command only feeds the watchdog (the
+    executor repeats the current setpoint every few ms in realtime mode). A rejected setpoint
+    (NaN/inf) is logged and the previous command stays.
+
+    :param loop: the loop; its ``config.realtime`` turns the watchdog on.
+    :param bridge: publishes the tool state and ``/ee_at_rest``.
+    :param lockstep: tick only while a step runs, as fast as possible, stamped with simulated
+        time; otherwise tick continuously, stamped with the wall clock.
+    :param pace: not lockstep: called before every tick, returns once the tick is due; False
+        skips the tick (nothing to do yet).
+    :param publish_every: publish the 1 kHz topics every this many ticks.
+    :param publish: extra outputs of a published tick, given its stamp (the composed process
+        publishes the sim's and the estimator's topics and ``/clock`` there).
+    """
+
+    def __init__(self, loop: RobotLoop, bridge: BridgeNode, *, lockstep: bool,
+                 pace: Callable[[], bool] | None = None, publish_every: int = 1,
+                 publish: Callable[[Time], None] | None = None) -> None:
+        if not lockstep and pace is None:
+            raise ValueError("a free-running (realtime) loop needs a pace")
+        self.loop = loop
+        self.bridge = bridge
+        self.lockstep = lockstep
+        self.pace = pace
+        self.publish_every = max(1, publish_every)
+        self.publish = publish
+        #: The per-tick hook: each is called after every tick with the simulated time [ns].
+        self.loop_observers: list[LoopObserver] = []
+        self._dt_ns = round(loop.config.dt * 1e9)
+        self._settle_ticks = round(loop.config.settle_time / loop.config.dt)
+        self.clock_ns = 0          # simulated time: ticks run since start, resets included
+        self.ticks = 0
+        self._mail = threading.Condition()
+        self._setpoint: WrenchSetpointMsg | None = None
+        self._reset: _ResetJob | None = None
+        self._seq: int | None = None        # last accepted setpoint
+        self._step_start: float | None = None   # scene time of the running step's start
+
+    # --- called from ROS callbacks -----------------------------------------------------------
+    def submit_setpoint(self, msg: WrenchSetpointMsg) -> None:
+        """Hand a setpoint to the loop (the latest one wins)."""
+        with self._mail:
+            self._setpoint = msg
+            self._mail.notify()
+
+    def request_reset(self, initial_pose: int, housing_yaw: float = 0.0) -> _ResetJob:
+        """Ask the loop thread to reset and settle; returns at once."""
+        job = _ResetJob(initial_pose, housing_yaw, threading.Event())
+        with self._mail:
+            self._reset = job
+            self._mail.notify()
+        return job
+
+    def reset(self, initial_pose: int, housing_yaw: float = 0.0, timeout: float = 30.0) -> AtRest:
+        """Reset and settle on the loop thread; the settled observation (also on /ee_at_rest).
+
+        :raises TimeoutError: if the loop thread does not finish in ``timeout`` seconds.
+        :raises RuntimeError, ValueError: what the scene raised (e.g. IK out of reach).
+        :raises TimeoutError: also when a remote robot sends no state after its restart.
+        """
+        job = self.request_reset(initial_pose, housing_yaw)
+        if not job.done.wait(timeout):
+            raise TimeoutError(f"the loop did not reset within {timeout:.0f} s")
+        if job.error is not None:
+            raise job.error
+        assert job.observation is not None
+        return job.observation
+
+    # --- the loop thread ---------------------------------------------------------------------
+    def run(self, stop: threading.Event) -> None:
+        """Body of the loop thread (see ``LoopThread``)."""
+        while not stop.is_set():
+            if self.lockstep:
+                if not self._wait_for_work(stop):
+                    continue
+            elif not self.pace():
+                continue
+            self._take_mail()
+            if self.lockstep and self._step_start is None:
+                continue
+            at_rest = self.loop.tick()
+            self._after_tick(at_rest)
+
+    def _wait_for_work(self, stop: threading.Event) -> bool:
+        """Lockstep: a step runs or mail is waiting (else wait a little and say no)."""
+        if self._step_start is not None:
+            return True
+        with self._mail:
+            if self._setpoint is None and self._reset is None:
+                self._mail.wait(timeout=0.05)
+            return self._setpoint is not None or self._reset is not None
+
+    def _take_mail(self) -> None:
+        with self._mail:
+            setpoint, self._setpoint = self._setpoint, None
+            job, self._reset = self._reset, None
+        if job is not None:
+            self._do_reset(job)
+        if setpoint is not None:
+            self._take_setpoint(setpoint)
+
+    def _take_setpoint(self, msg: WrenchSetpointMsg) -> None:
+        loop = self.loop
+        if msg.seq == self._seq:
+            loop.safety.feed_watchdog(loop.scene.time)
+            return
+        try:
+            loop.command(setpoint_from_msg(msg))
+        except SetpointRejected as exc:
+            self.bridge.get_logger().error(
+                f"setpoint {msg.seq} rejected: {exc}; keeping the previous command",
+                throttle_duration_sec=1.0)
+            return
+        self._seq = msg.seq
+        self._step_start = loop.scene.time
+
+    def _do_reset(self, job: _ResetJob) -> None:
+        try:
+            self.loop.reset(job.initial_pose, job.housing_yaw)
+        except (RuntimeError, ValueError, TimeoutError) as exc:
+            self.bridge.get_logger().error(f"reset failed: {exc}")
+            job.error = exc
+            job.done.set()
+            return
+        self._seq = None
+        self._step_start = None
+        self.clock_ns += self._settle_ticks * self._dt_ns
+        stamp = self._stamp()
+        job.observation = self._event(0, self.loop.scene.time - self.loop.config.settle_time, stamp)
+        self.publish_sample(stamp)
+        self.bridge.ee_at_rest.publish(job.observation)
+        job.done.set()
+
+    def _after_tick(self, at_rest: bool) -> None:
+        self.ticks += 1
+        self.clock_ns += self._dt_ns
+        for observer in self.loop_observers:
+            observer(self.clock_ns, self.loop)
+        stamp: Time | None = None
+        if self.ticks % self.publish_every == 0:
+            stamp = self._stamp()
+            self.publish_sample(stamp)
+        if at_rest and self._step_start is not None:
+            event = self._event(self._seq or 0, self._step_start, stamp or self._stamp())
+            self._step_start = None
+            self.bridge.ee_at_rest.publish(event)
+
+    def _stamp(self) -> Time:
+        return time_msg(self.clock_ns) if self.lockstep else self.bridge.get_clock().now().to_msg()
+
+    def publish_sample(self, stamp: Time) -> None:
+        """Publish the loop's current state on the 1 kHz topics."""
+        tool = self.loop.controller.tool
+        if tool is not None:
+            self.bridge.publish_tool(stamp, tool)
+        if self.publish is not None:
+            self.publish(stamp)
+
+    def _event(self, seq: int, start: float, stamp: Time) -> AtRest:
+        """The ``AtRest`` of the step that started at scene time ``start``."""
+        loop = self.loop
+        tool = loop.controller.tool
+        estimate = loop.wrench_estimate
+        result = StepResult(duration=loop.scene.time - start, timed_out=loop.rest.timed_out,
+                            linear_speed=tool.linear_speed, angular_speed=tool.angular_speed,
+                            ground_truth=loop.scene.ground_truth(),
+                            wrench_estimate=None if estimate is None else estimate.copy())
+        return at_rest_msg(seq, result, tool.position, tool.rotation, stamp)
+
+
+# --- separate-process mode ------------------------------------------------------------------
+_NO_TRUTH = GroundTruth(wrench=np.zeros(6), insertion_depth=0.0, plunger_travel=0.0,
+                        success=False, position_error=0.0, orientation_error=np.zeros(2),
+                        lateral_offset=0.0, tilt=0.0)
+
+
+class RemoteRobot:
+    """The loop's ``Scene`` over topics: the arm is the separate sim process.
+
+    ``joint_state`` is the latest ``/joint_states``, ``apply_torques`` publishes
+    ``/joint_commands`` and ``step`` waits (up to ``timeout``) for the next state, so the loop
+    ticks once per state the sim publishes. ``time`` is the state's stamp. The first state and
+    every ``/sim/restarted`` call ``on_restart``; ``reset`` then waits for a state from after
+    the restart, so the loop settles from the new pose.
+    """
+
+    def __init__(self, node: Node, on_restart: Callable[[], None], timeout: float = 0.05) -> None:
+        self.node = node
+        self.on_restart = on_restart
+        self.timeout = timeout
+        self.time = 0.0
+        self._state: JointState | None = None
+        self._truth: GroundTruthMsg | None = None
+        self._restart_time = 0.0
+        self._fresh = threading.Condition()
+        self._received = 0
+        self._used = 0
+        self.commands = node.create_publisher(JointStateMsg, "/joint_commands", SENSOR_QOS)
+        node.create_subscription(JointStateMsg, "/joint_states", self._on_state, SENSOR_QOS)
+        node.create_subscription(GroundTruthMsg, "/sim/ground_truth", self._on_truth, SENSOR_QOS)
+        node.create_subscription(Header, RESTARTED_TOPIC, self._on_restarted, RESTARTED_QOS)
+
+    def _on_state(self, msg: JointStateMsg) -> None:
+        try:
+            state = joint_state_from_msg(msg)
+        except ValueError as exc:
+            self.node.get_logger().error(f"bad /joint_states: {exc}", throttle_duration_sec=1.0)
+            return
+        first = self._state is None
+        with self._fresh:
+            self._state = state
+            self.time = time_ns(msg.header.stamp) * 1e-9
+            self._received += 1
+            self._fresh.notify()
+        if first:
+            self.on_restart()
+
+    def _on_restarted(self, msg: Header) -> None:
+        self.node.get_logger().info("the sim restarted: settling under control")
+        self._restart_time = time_ns(msg.stamp) * 1e-9
+        self.on_restart()
+
+    def _on_truth(self, msg: GroundTruthMsg) -> None:
+        self._truth = msg
+
+    def wait_ready(self) -> bool:
+        """True once the sim has published a state (waits up to ``timeout`` for one)."""
+        with self._fresh:
+            if self._state is None:
+                self._fresh.wait(self.timeout)
+            return self._state is not None
+
+    # --- Scene protocol ------------------------------------------------------------------------
+    def reset(self, initial_pose: int, housing_yaw: float = 0.0) -> None:
+        """The sim resets itself (``/sim/reset``): wait for its first state after that.
+
+        :raises TimeoutError: if the sim publishes none within a second.
+        """
+        del initial_pose, housing_yaw
+        with self._fresh:
+            if not self._fresh.wait_for(lambda: self.time >= self._restart_time, timeout=1.0):
+                raise TimeoutError("no /joint_states after the sim restarted")
+
+    def joint_state(self) -> JointState:
+        assert self._state is not None, "no /joint_states yet (wait_ready first)"
+        return self._state
+
+    def apply_torques(self, tau: np.ndarray) -> None:
+        msg = JointStateMsg(effort=np.asarray(tau, float).tolist())
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        self.commands.publish(msg)
+
+    def step(self) -> None:
+        with self._fresh:
+            if self._received == self._used:
+                self._fresh.wait(self.timeout)
+            self._used = self._received
+
+    def ground_truth(self) -> GroundTruth:
+        return _NO_TRUTH if self._truth is None else ground_truth_from_msg(self._truth)
+
+
+class LatestWrench:
+    """The loop's estimator in separate-process mode: the last ``/wrench_estimate`` received."""
+
+    def __init__(self, node: Node) -> None:
+        self._wrench = np.zeros(6)
+        node.create_subscription(WrenchStamped, "/wrench_estimate", self._on_wrench, SENSOR_QOS)
+
+    def _on_wrench(self, msg: WrenchStamped) -> None:
+        self._wrench = wrench_from_msg(msg.wrench)
+
+    def reset(self, q: np.ndarray) -> None:
+        del q
+
+    def update(self, q: np.ndarray, dq: np.ndarray, tau_cmd: np.ndarray,
+               dt: float) -> np.ndarray:
+        del q, dq, tau_cmd, dt
+        return self._wrench.copy()
+
+
+def _start_separate_bridge(nodes: list[Node]) -> Callable[[], None]:
+    bridge = nodes[0]
+    assert isinstance(bridge, BridgeNode)
+    p = bridge.params
+    runner: LoopRunner | None = None
+
+    def restart() -> None:
+        if runner is not None:
+            runner.request_reset(0)
+
+    remote = RemoteRobot(bridge, restart)
+    model = task_model(PandaSceneConfig.from_dict(p.get("panda_scene", {})))
+    loop = RobotLoop(remote,
+                     HybridImpedanceController(ImpedanceConfig.from_dict(p.get("impedance", {})),
+                                               model),
+                     SafetyFilter(SafetyLimits.from_dict(p.get("safety", {}))),
+                     RestDetector(RestConfig.from_dict(p.get("rest", {}))),
+                     LatestWrench(bridge),
+                     replace(LoopConfig.from_dict(p.get("loop", {})), realtime=True))
+    runner = LoopRunner(loop, bridge, lockstep=False, pace=remote.wait_ready)
+    bridge.setpoint_handler = runner.submit_setpoint
+    return LoopThread("bridge loop", runner.run, bridge).start().stop
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_nodes([BridgeNode], ["bridge.yaml"], args)
+    return run_nodes([BridgeNode], ["panda_scene.yaml", "bridge.yaml"], args,
+                     background=_start_separate_bridge)
 
 
 if __name__ == "__main__":

@@ -1,29 +1,94 @@
-"""The ``wrench_estimator`` node: the EKF estimate of the contact wrench in the tool frame."""
+"""The ``wrench_estimator`` node: the EKF estimate of the contact wrench in the tool frame.
+
+In the composed ``robot`` process the EKF is the loop's estimator and this node only publishes
+its output. Run on its own (``ros2 run robot_bridge_node wrench_estimator``), ``SeparateEstimator``
+runs the EKF on every ``/joint_states`` message (position, velocity and the applied torque in
+``effort``), one simulator step per message.
+"""
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from builtin_interfaces.msg import Time
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
-from sensor_msgs.msg import JointState
-
+from sensor_msgs.msg import JointState as JointStateMsg
+from sim_robot_node.core.panda_scene import PandaSceneConfig
 from sim_robot_node.node_runtime import node_params, run_nodes
-from sim_robot_node.sim_node import SENSOR_QOS
+from sim_robot_node.sim_node import RESTARTED_QOS, RESTARTED_TOPIC, SENSOR_QOS
+from std_msgs.msg import Header
+
+from robot_bridge_node.bridge_node import task_model
+from sim_robot_node.conversions import joint_state_from_msg, time_ns, wrench_stamped
+from robot_bridge_node.core.panda_model import PandaModel
+from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
+
+__all__ = ["WrenchEstimatorNode", "SeparateEstimator", "build_ekf", "main"]
+
+
+def build_ekf(params: dict[str, Any], model: PandaModel) -> WrenchEKF:
+    """The EKF from the node parameters (``ekf`` section of ``config/wrench_estimator.yaml``)."""
+    return WrenchEKF(WrenchEKFConfig.from_dict(params.get("ekf", {})), model)
 
 
 class WrenchEstimatorNode(Node):
-    """Estimates the external wrench from joint states and commanded torques."""
+    """Publishes the contact wrench estimate (``/wrench_estimate``, tool frame)."""
 
     def __init__(self) -> None:
         super().__init__("wrench_estimator", automatically_declare_parameters_from_overrides=True)
         self.params = node_params(self)
         self.wrench = self.create_publisher(WrenchStamped, "/wrench_estimate", SENSOR_QOS)
-        self.create_subscription(JointState, "/joint_states", self._on_joint_state, SENSOR_QOS)
 
-    def _on_joint_state(self, msg: JointState) -> None:
-        pass
+    def publish(self, stamp: Time, wrench: np.ndarray) -> None:
+        self.wrench.publish(wrench_stamped(wrench, stamp))
+
+
+class SeparateEstimator:
+    """The EKF fed by ``/joint_states`` of the separate sim process.
+
+    Each message is one simulator step (``dt`` = the scene's time step): wall-clock stamp
+    differences would only add jitter the physics does not have. The filter restarts at the
+    first state and at the first state after each ``/sim/restarted``.
+    """
+
+    def __init__(self, node: WrenchEstimatorNode) -> None:
+        self.node = node
+        scene = PandaSceneConfig.from_dict(node.params.get("panda_scene", {}))
+        self.dt = scene.time_step
+        self.ekf = build_ekf(node.params, task_model(scene))
+        self._restart_time: float | None = 0.0     # restart at the first state from then on
+        node.create_subscription(JointStateMsg, "/joint_states", self._on_state, SENSOR_QOS)
+        node.create_subscription(Header, RESTARTED_TOPIC, self._on_restarted, RESTARTED_QOS)
+
+    def _on_restarted(self, msg: Header) -> None:
+        self._restart_time = time_ns(msg.stamp) * 1e-9
+
+    def _on_state(self, msg: JointStateMsg) -> None:
+        try:
+            state = joint_state_from_msg(msg)
+            restart = self._restart_time
+            if restart is not None and time_ns(msg.header.stamp) * 1e-9 >= restart:
+                self.ekf.reset(state.q)
+                self._restart_time = None
+            wrench = self.ekf.update(state.q, state.dq, state.tau, self.dt)
+        except ValueError as exc:
+            self.node.get_logger().error(f"bad /joint_states: {exc}", throttle_duration_sec=1.0)
+            return
+        self.node.publish(msg.header.stamp, wrench)
+
+
+def _start_separate_estimator(nodes: list[Node]) -> Callable[[], None]:
+    node = nodes[0]
+    assert isinstance(node, WrenchEstimatorNode)
+    SeparateEstimator(node)
+    return lambda: None
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_nodes([WrenchEstimatorNode], ["wrench_estimator.yaml"], args)
+    return run_nodes([WrenchEstimatorNode], ["panda_scene.yaml", "wrench_estimator.yaml"], args,
+                     background=_start_separate_estimator)
 
 
 if __name__ == "__main__":

@@ -1,16 +1,107 @@
-"""The ``robot`` process: sim, bridge and estimator nodes composed around one 1 kHz loop."""
+"""The ``robot`` process: sim, bridge, estimator and recorder nodes around one 1 kHz loop.
+
+Sending joint states between processes at 1 kHz costs more than the loop itself, so the
+simulator, the controller and the EKF run as one ``RobotLoop`` on one thread
+(``bridge_node.LoopRunner``), and the three nodes only publish what it produced and serve its
+services, under their own names, parameters and topics. Clock modes (``sim.clock_mode``):
+
+- ``lockstep``: the loop ticks as fast as it can while a setpoint executes and pauses once the
+  step is at rest until the next setpoint or reset; messages carry simulated time and ``/clock``
+  is published, so a run is reproducible.
+- ``realtime``: the loop ticks at wall-clock 1 kHz, holds the last command like hardware, and
+  the safety watchdog holds the pose when setpoints stop coming for 10 ms.
+"""
 from __future__ import annotations
 
-from sim_robot_node.node_runtime import run_nodes
+import sys
+from collections.abc import Callable
+
+from builtin_interfaces.msg import Time
+from rclpy.node import Node
+from sim_robot_node.node_runtime import LoopThread, RealtimePacer, run_nodes
 from sim_robot_node.sim_node import SimNode
 
-from robot_bridge_node.bridge_node import BridgeNode
-from robot_bridge_node.estimator_node import WrenchEstimatorNode
+from robot_bridge_node.bridge_node import BridgeNode, LoopRunner
+from robot_bridge_node.core.robot_loop import RobotLoop, build_panda_loop
+from robot_bridge_node.estimator_node import WrenchEstimatorNode, build_ekf
+from robot_bridge_node.recorder_node import RecorderNode
+
+__all__ = ["CONFIG_FILES", "REALTIME_SWITCH_INTERVAL", "RobotProcess", "main"]
+
+CONFIG_FILES = ("panda_scene.yaml", "sim.yaml", "bridge.yaml", "wrench_estimator.yaml",
+                "recorder.yaml")
+
+#: [s] Python's GIL hand-over interval in realtime mode. The default 5 ms lets a ROS callback
+#: thread hold the GIL for five ticks before the loop thread gets it back.
+REALTIME_SWITCH_INTERVAL = 1e-4
+
+
+class RobotProcess:
+    """One ``RobotLoop`` (Panda scene, controller, safety, rest detector, EKF) and its nodes.
+
+    The loop is built from the nodes' parameters; ``runner.loop_observers`` is where a per-tick
+    recorder attaches. The start pose (``sim.initial_pose``) is taken before the loop thread
+    starts, so every run has the same history (lockstep runs repeat exactly).
+    """
+
+    def __init__(self, sim: SimNode, bridge: BridgeNode, estimator: WrenchEstimatorNode) -> None:
+        self.sim = sim
+        self.bridge = bridge
+        self.estimator = estimator
+        config = sim.config
+        bridge_params = {**bridge.params,
+                         "loop": {**bridge.params.get("loop", {}), "realtime": config.realtime}}
+        self.loop: RobotLoop = build_panda_loop(
+            sim.scene_config, bridge_params,
+            estimator=lambda scene, model: build_ekf(estimator.params, model))
+        #: Realtime: holds the wall-clock tick period (``missed`` counts dropped ticks).
+        self.pacer = RealtimePacer(self.loop.config.dt) if config.realtime else None
+        pace = None
+        if self.pacer is not None:
+            pacer = self.pacer
+
+            def pace() -> bool:
+                pacer.wait()
+                return True
+        self.runner = LoopRunner(self.loop, bridge, lockstep=not config.realtime, pace=pace,
+                                 publish_every=config.publish_every(self.loop.config.dt),
+                                 publish=self._publish)
+        self.truth_every = config.ground_truth_every(self.loop.config.dt)
+        bridge.setpoint_handler = self.runner.submit_setpoint
+        sim.reset_handler = self.runner.reset
+        self.loop.reset(config.initial_pose)     # before the loop thread exists
+
+    def _publish(self, stamp: Time) -> None:
+        """The sim's and the estimator's share of a published tick (and ``/clock``)."""
+        scene = self.loop.scene
+        self.sim.publish_state(stamp, scene.joint_state(),
+                               scene.ground_truth() if self.runner.ticks % self.truth_every == 0
+                               else None)
+        if self.loop.wrench_estimate is not None:
+            self.estimator.publish(stamp, self.loop.wrench_estimate)
+        if self.runner.lockstep:
+            self.sim.publish_clock(stamp)
+
+    def start(self) -> Callable[[], None]:
+        """Start the loop thread; returns the function that stops it."""
+        if not self.runner.lockstep:
+            sys.setswitchinterval(REALTIME_SWITCH_INTERVAL)
+        priority = 0 if self.runner.lockstep else self.sim.config.realtime_priority
+        return LoopThread("robot loop", self.runner.run, self.bridge, priority).start().stop
+
+
+def _start(nodes: list[Node]) -> Callable[[], None]:
+    sim, bridge, estimator, recorder = nodes
+    assert isinstance(sim, SimNode) and isinstance(bridge, BridgeNode) \
+        and isinstance(estimator, WrenchEstimatorNode) and isinstance(recorder, RecorderNode)
+    process = RobotProcess(sim, bridge, estimator)
+    process.runner.loop_observers.append(recorder.observe)
+    return process.start()
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_nodes([SimNode, BridgeNode, WrenchEstimatorNode],
-                     ["sim.yaml", "bridge.yaml", "wrench_estimator.yaml"], args)
+    return run_nodes([SimNode, BridgeNode, WrenchEstimatorNode, RecorderNode], CONFIG_FILES, args,
+                     background=_start)
 
 
 if __name__ == "__main__":

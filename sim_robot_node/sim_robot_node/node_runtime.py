@@ -7,7 +7,11 @@ process with exit code 0 after the nodes are destroyed (rclpy turns both into a 
 """
 from __future__ import annotations
 
+import os
 import sys
+import threading
+import time
+import traceback
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -17,7 +21,7 @@ from rclpy.node import Node
 
 from sim_robot_node.core.params import ConfigError, config_dir, unflatten
 
-__all__ = ["node_args", "node_params", "run_nodes"]
+__all__ = ["LoopThread", "RealtimePacer", "node_args", "node_params", "run_nodes"]
 
 
 def node_args(config_files: Sequence[str], argv: Sequence[str] | None = None) -> list[str]:
@@ -52,8 +56,9 @@ def run_nodes(factories: Sequence[Callable[[], Node]], config_files: Sequence[st
     :param factories: callables returning the nodes to run in this process (composition).
     :param config_files: YAML files under ``config/`` read when no ``--params-file`` is given.
     :param background: optional; given the nodes, starts extra work (e.g. the 1 kHz loop
-        thread) and returns a function that stops it.
-    :returns: the process exit code.
+        thread) and returns a function that stops it; that function raises ``RuntimeError``
+        if the work failed, which makes the exit code 1.
+    :returns: never: the process exits with the code (0 on SIGINT/SIGTERM).
     """
     try:
         args = node_args(config_files, argv)
@@ -75,12 +80,112 @@ def run_nodes(factories: Sequence[Callable[[], Node]], config_files: Sequence[st
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ConfigError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        code = 2
+        if rclpy.ok():
+            print(f"error: {exc}", file=sys.stderr)
+            code = 2
+    except Exception:
+        # SIGINT/SIGTERM while a node is still being built invalidates the context under it:
+        # that is a requested shutdown, not a failure.
+        if rclpy.ok():
+            raise
     finally:
         if stop_background is not None:
-            stop_background()
+            try:
+                stop_background()
+            except RuntimeError as exc:  # the background work died: not a clean exit
+                print(f"error: {exc}", file=sys.stderr)
+                code = 1
         for node in nodes:
             node.destroy_node()
         rclpy.try_shutdown()
-    return code
+    # Nodes are destroyed and ROS is shut down; the interpreter's own teardown (torch, DDS
+    # threads) would take seconds more, so end the process here to stop within the promised 5 s.
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
+
+
+class RealtimePacer:
+    """Holds a fixed wall-clock period: sleeps most of the wait, busy-waits the last bit.
+
+    ``time.sleep`` on Linux wakes 50-100 us late, so the pacer sleeps until ``spin`` before the
+    deadline and spins the rest. Deadlines are absolute (``start + k * period``), so short
+    delays are made up on the next ticks; a loop more than one period behind re-anchors instead
+    of bursting through the missed ticks (hardware would have dropped them), and counts them.
+
+    :param period: [s] tick period.
+    :param spin: [s] busy-wait before each deadline.
+    """
+
+    def __init__(self, period: float, spin: float = 2e-4) -> None:
+        if period <= 0.0 or spin < 0.0:
+            raise ValueError(f"period must be > 0 and spin >= 0, got {period}, {spin}")
+        self.period = period
+        self.spin = spin
+        self.missed = 0
+        self._next: float | None = None
+
+    def wait(self) -> None:
+        """Return at the next deadline (at once on the first call)."""
+        now = time.perf_counter()
+        if self._next is None:
+            self._next = now
+            return
+        self._next += self.period
+        if now - self._next > self.period:
+            self.missed += int((now - self._next) / self.period)
+            self._next = now
+            return
+        remaining = self._next - now
+        if remaining > self.spin:
+            time.sleep(remaining - self.spin)
+        while time.perf_counter() < self._next:
+            pass
+
+
+class LoopThread:
+    """A node's dedicated work thread (e.g. the 1 kHz loop), outside the rclpy executor.
+
+    ``body(stop)`` runs until ``stop`` is set, with ``SCHED_FIFO`` priority ``priority`` if
+    that is > 0 and the system allows it (a 1 kHz loop on a busy machine needs its core on
+    time, as on a real-time kernel). If it raises, the traceback is logged and rclpy
+    is shut down so the process ends; ``stop()`` then raises ``RuntimeError`` (exit code 1).
+    An exception after rclpy was shut down (SIGINT arriving mid-publish) is a normal stop.
+    """
+
+    def __init__(self, name: str, body: Callable[[threading.Event], None], node: Node,
+                 priority: int = 0) -> None:
+        self._body = body
+        self._node = node
+        self._priority = priority
+        self._stop = threading.Event()
+        self.error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+
+    def start(self) -> LoopThread:
+        self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        if self._priority > 0:
+            try:   # this thread only (Linux: pid 0 is the calling thread)
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self._priority))
+            except (OSError, AttributeError) as exc:
+                self._node.get_logger().warn(f"{self._thread.name}: no realtime priority "
+                                             f"{self._priority} ({exc}); running unprioritised")
+        try:
+            self._body(self._stop)
+        except BaseException as exc:  # noqa: BLE001 - reported, then the process ends
+            if not rclpy.ok():   # SIGINT shut rclpy down under a publish: a normal stop
+                return
+            self.error = exc
+            self._node.get_logger().fatal(
+                f"{self._thread.name} thread failed:\n{traceback.format_exc()}")
+            rclpy.try_shutdown()
+
+    def stop(self) -> None:
+        """Stop and join the thread; raises ``RuntimeError`` if it had failed."""
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+        if self.error is not None:
+            raise RuntimeError(f"{self._thread.name} thread failed: {self.error!r}")

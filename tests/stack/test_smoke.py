@@ -14,7 +14,7 @@ EXECUTABLES = [
     ("sim", "sim_robot_node", "sim", {"/sim"}),
     ("bridge", "robot_bridge_node", "bridge", {"/bridge"}),
     ("wrench_estimator", "robot_bridge_node", "wrench_estimator", {"/wrench_estimator"}),
-    ("robot", "robot_bridge_node", "robot", {"/sim", "/bridge", "/wrench_estimator"}),
+    ("robot", "robot_bridge_node", "robot", {"/sim", "/bridge", "/wrench_estimator", "/recorder"}),
     ("executor", "qg_learning_node", "executor", {"/executor"}),
     ("learner", "qg_learning_node", "learner", {"/learner"}),
 ]

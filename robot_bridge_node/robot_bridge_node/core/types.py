@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from sim_robot_node.core.types import GroundTruth
+from sim_robot_node.core.types import GroundTruth, StepResult  # noqa: F401 (re-export)
 
 __all__ = ["WrenchSetpoint", "PoseReference", "StepResult"]
 
@@ -39,14 +39,3 @@ class WrenchSetpoint:
     def residual(cls, force_z: float, torque_x: float, torque_y: float) -> WrenchSetpoint:
         """The residual-policy command ``[0, 0, Fz, tx, ty, 0]`` from the current pose."""
         return cls(np.array([0.0, 0.0, force_z, torque_x, torque_y, 0.0]))
-
-
-@dataclass(frozen=True)
-class StepResult:
-    """How one setpoint ended (the RL step)."""
-    duration: float                     # [s] simulated time from the setpoint to rest/timeout
-    timed_out: bool                     # rest was not reached within the maximum step time
-    linear_speed: float                 # [m/s] tool speed at the end
-    angular_speed: float                # [rad/s]
-    ground_truth: GroundTruth
-    wrench_estimate: np.ndarray | None  # (6,) estimator output at the end, None without one

@@ -27,7 +27,7 @@ from xml.etree import ElementTree
 import numpy as np
 import pybullet as p
 # The one Panda description (URDF path, ready pose) lives with the controller's model.
-from robot_bridge_node.core.panda_model import Q_READY, panda_urdf_path
+from sim_robot_node.core.panda_description import Q_READY, panda_urdf_path
 
 from sim_robot_node.core.params import config_from_dict
 from sim_robot_node.core.rotations import axis_angle_matrix, rotation_log, tilt_from_down

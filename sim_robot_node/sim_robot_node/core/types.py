@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["JointState", "GroundTruth"]
+__all__ = ["JointState", "GroundTruth", "StepResult"]
 
 
 @dataclass(frozen=True)
@@ -40,3 +40,14 @@ class GroundTruth:
     def orientation_error_norm(self) -> float:
         """dR of the dense reward [rad]."""
         return float(np.linalg.norm(self.orientation_error))
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """How one setpoint ended (the RL step)."""
+    duration: float                     # [s] simulated time from the setpoint to rest/timeout
+    timed_out: bool                     # rest was not reached within the maximum step time
+    linear_speed: float                 # [m/s] tool speed at the end
+    angular_speed: float                # [rad/s]
+    ground_truth: GroundTruth
+    wrench_estimate: np.ndarray | None  # (6,) estimator output at the end, None without one

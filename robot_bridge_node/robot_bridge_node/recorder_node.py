@@ -1,0 +1,152 @@
+"""The ``recorder`` node: one MCAP bag (rosbag2 layout) per episode, written in the robot process.
+
+The 1 kHz data (joint states, wrench estimate, EEF pose/twist, ground truth) is taken straight
+from the loop after each tick, so it never crosses a process boundary and no sample is dropped;
+the RL-rate topics (setpoints, at-rest events, transitions, episode status) arrive by
+subscription. Episode boundaries come from ``/episode_status``: a bag opens when an episode starts
+resetting and closes once the episode has ended and all of its transitions have arrived.
+"""
+from __future__ import annotations
+
+import os
+import threading
+import time
+from pathlib import Path
+
+from qg_interfaces.msg import AtRest, EpisodeStatus, Transition, WrenchSetpoint
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sim_robot_node.conversions import quaternion_from_matrix
+from sim_robot_node.node_runtime import node_params
+
+from robot_bridge_node.core.panda_model import JOINT_NAMES
+from robot_bridge_node.core.robot_loop import RobotLoop
+from robot_bridge_node.recording.episode_recorder import EpisodeRecorder
+
+__all__ = ["RecorderNode", "default_episodes_dir"]
+
+_RELIABLE_DEEP = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+_LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+_FINAL = ("done", "aborted")
+
+
+def default_episodes_dir() -> Path:
+    """``$QG_RUNS_DIR/episodes`` if set, else ``<repo>/runs/episodes``."""
+    env = os.environ.get("QG_RUNS_DIR")
+    return (Path(env) if env else Path(__file__).resolve().parents[2] / "runs") / "episodes"
+
+
+class RecorderNode(Node):
+    """Per-episode recording. ``observe`` is the loop hook, called after every tick.
+
+    Parameters: ``record`` (bool), ``episodes_dir`` ("" = default), ``ground_truth_every``
+    (ticks between ground-truth samples; computing contact truth costs more than the rest),
+    ``close_timeout`` [s] to wait for late transitions after the episode ended.
+    """
+
+    def __init__(self) -> None:
+        super().__init__("recorder", automatically_declare_parameters_from_overrides=True)
+        p = node_params(self)
+        self.enabled = bool(p.get("record", True))
+        self.ground_truth_every = max(1, int(p.get("ground_truth_every", 10)))
+        self.close_timeout = float(p.get("close_timeout", 2.0))
+        self.recorder = EpisodeRecorder(Path(p.get("episodes_dir") or default_episodes_dir()))
+        self.lock = threading.Lock()
+        self.episode_id = ""
+        self.transitions = 0
+        self.final_steps: int | None = None
+        self.ended_at = 0.0
+        self.ticks = 0
+        group = MutuallyExclusiveCallbackGroup()
+        self.create_subscription(EpisodeStatus, "/episode_status", self._on_status, _LATCHED,
+                                 callback_group=group)
+        self.create_subscription(Transition, "/transitions", self._on_transition, _RELIABLE_DEEP,
+                                 callback_group=group)
+        self.create_subscription(WrenchSetpoint, "/wrench_setpoint", self._on_setpoint, 10,
+                                 callback_group=group)
+        self.create_subscription(AtRest, "/ee_at_rest", self._on_at_rest, 10, callback_group=group)
+        self.create_timer(0.2, self._close_if_complete, callback_group=group)
+        self.last_t_ns = 0
+
+    # --- the 1 kHz hook -------------------------------------------------------------------
+    def observe(self, t_ns: int, loop: RobotLoop) -> None:
+        """Record one tick of the loop (does nothing between episodes)."""
+        if not self.episode_id:
+            return
+        self.last_t_ns = t_ns
+        rec = self.recorder
+        state = loop.scene.joint_state()
+        rec.record_joint_state(t_ns, JOINT_NAMES, state.q, state.dq, state.tau)
+        if loop.wrench_estimate is not None:
+            w = loop.wrench_estimate
+            rec.record_wrench(t_ns, w[:3], w[3:])
+        tool = loop.controller.tool
+        if tool is not None:
+            rec.record_pose(t_ns, tool.position, quaternion_from_matrix(tool.rotation))
+            rec.record_twist(t_ns, tool.twist[:3], tool.twist[3:])
+        self.ticks += 1
+        if self.ticks % self.ground_truth_every == 0:
+            gt = loop.scene.ground_truth()
+            rec.record_ground_truth(t_ns, gt.wrench, gt.insertion_depth, gt.plunger_travel,
+                                    gt.success, gt.position_error, gt.orientation_error,
+                                    gt.lateral_offset, gt.tilt)
+            rec.record_wrench(t_ns, gt.wrench[:3], gt.wrench[3:],
+                              topic="/sim/ground_truth_wrench")
+
+    # --- RL-rate topics -------------------------------------------------------------------
+    def _stamp(self) -> int:
+        return self.last_t_ns or time.time_ns()
+
+    def _on_status(self, msg: EpisodeStatus) -> None:
+        if not self.enabled or not msg.episode_id:
+            return
+        if msg.episode_id != self.episode_id and msg.state not in _FINAL:
+            self._close()
+            with self.lock:
+                self.recorder.start(msg.episode_id, {"mode": msg.mode,
+                                                     "initial_pose": int(msg.initial_pose),
+                                                     "reward": msg.reward_type})
+                self.episode_id, self.transitions, self.final_steps = msg.episode_id, 0, None
+        if msg.episode_id == self.episode_id:
+            self.recorder.record_message("/episode_status", self._stamp(), msg)
+            if msg.state in _FINAL and self.final_steps is None:
+                self.final_steps, self.ended_at = int(msg.step), time.monotonic()
+                self._close_if_complete()
+
+    def _on_transition(self, msg: Transition) -> None:
+        if msg.episode_id == self.episode_id:
+            self.recorder.record_message("/transitions", self._stamp(), msg)
+            self.transitions += 1
+            self._close_if_complete()
+
+    def _on_setpoint(self, msg: WrenchSetpoint) -> None:
+        if self.episode_id:
+            self.recorder.record_message("/wrench_setpoint", self._stamp(), msg)
+
+    def _on_at_rest(self, msg: AtRest) -> None:
+        if self.episode_id:
+            self.recorder.record_message("/ee_at_rest", self._stamp(), msg)
+
+    def _close_if_complete(self) -> None:
+        if self.final_steps is None:
+            return
+        late = time.monotonic() - self.ended_at > self.close_timeout
+        if self.transitions >= self.final_steps or late:
+            if late:
+                self.get_logger().warning(
+                    f"closing bag of {self.episode_id} with {self.transitions} of "
+                    f"{self.final_steps} transitions")
+            self._close()
+
+    def _close(self) -> None:
+        with self.lock:
+            if self.episode_id:
+                path = self.recorder.stop()
+                self.get_logger().info(f"recorded {self.episode_id} -> {path}")
+            self.episode_id, self.final_steps = "", None
+
+    def destroy_node(self) -> None:
+        self._close()
+        super().destroy_node()

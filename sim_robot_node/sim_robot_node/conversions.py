@@ -1,0 +1,190 @@
+"""ROS messages <-> the numpy arrays and dataclasses of the pure cores, in one place.
+
+Message types stay at the edge: the loop, controller and estimator only see numpy and the core
+dataclasses, and every node converts through these functions, so a frame or a field order is
+decided once. Frames: poses and twists are in the robot base frame (``panda_link0``), wrenches in
+the tool frame (``tool``, see ``robot_bridge_node/core/types.py`` for the sign convention).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Pose, PoseStamped, TwistStamped, Wrench, WrenchStamped
+from qg_interfaces.msg import AtRest
+from qg_interfaces.msg import GroundTruth as GroundTruthMsg
+from sensor_msgs.msg import JointState as JointStateMsg
+
+from sim_robot_node.core.panda_description import JOINT_NAMES
+from sim_robot_node.core.types import GroundTruth, JointState, StepResult
+
+__all__ = ["BASE_FRAME", "TOOL_FRAME", "time_msg", "time_ns", "joint_state_msg",
+           "joint_state_from_msg", "wrench_msg", "wrench_from_msg", "wrench_stamped",
+           "ground_truth_msg", "ground_truth_from_msg", "quaternion_from_matrix",
+           "matrix_from_quaternion", "pose_msg", "pose_stamped", "twist_stamped", "at_rest_msg"]
+
+BASE_FRAME = "panda_link0"
+TOOL_FRAME = "tool"
+
+
+# --- time ---------------------------------------------------------------------------------------
+def time_msg(ns: int) -> Time:
+    """``builtin_interfaces/Time`` from integer nanoseconds."""
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def time_ns(stamp: Time) -> int:
+    """Integer nanoseconds of a ``builtin_interfaces/Time``."""
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+# --- joints -------------------------------------------------------------------------------------
+def joint_state_msg(state: JointState, stamp: Time) -> JointStateMsg:
+    """``sensor_msgs/JointState`` of the 7 arm joints; effort is the measured (applied) torque."""
+    msg = JointStateMsg(name=list(JOINT_NAMES), position=state.q.tolist(),
+                        velocity=state.dq.tolist(), effort=state.tau.tolist())
+    msg.header.stamp = stamp
+    return msg
+
+
+def joint_state_from_msg(msg: JointStateMsg) -> JointState:
+    """The core ``JointState``; a missing effort reads as zero torque.
+
+    :raises ValueError: if position or velocity do not have 7 entries.
+    """
+    n = len(JOINT_NAMES)
+    if len(msg.position) != n or len(msg.velocity) != n:
+        raise ValueError(f"joint state needs {n} positions and velocities, got "
+                         f"{len(msg.position)} and {len(msg.velocity)}")
+    tau = np.asarray(msg.effort, float) if len(msg.effort) == n else np.zeros(n)
+    return JointState(q=np.asarray(msg.position, float), dq=np.asarray(msg.velocity, float),
+                      tau=tau)
+
+
+# --- wrenches -----------------------------------------------------------------------------------
+def wrench_msg(wrench: np.ndarray) -> Wrench:
+    """``geometry_msgs/Wrench`` from ``[Fx, Fy, Fz, Tx, Ty, Tz]``."""
+    w = [float(v) for v in wrench]
+    msg = Wrench()
+    msg.force.x, msg.force.y, msg.force.z = w[0], w[1], w[2]
+    msg.torque.x, msg.torque.y, msg.torque.z = w[3], w[4], w[5]
+    return msg
+
+
+def wrench_from_msg(msg: Wrench) -> np.ndarray:
+    """``[Fx, Fy, Fz, Tx, Ty, Tz]`` of a ``geometry_msgs/Wrench``."""
+    f, t = msg.force, msg.torque
+    return np.array([f.x, f.y, f.z, t.x, t.y, t.z])
+
+
+def wrench_stamped(wrench: np.ndarray, stamp: Time, frame: str = TOOL_FRAME) -> WrenchStamped:
+    """A tool-frame wrench with its header."""
+    msg = WrenchStamped(wrench=wrench_msg(wrench))
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame
+    return msg
+
+
+# --- ground truth -------------------------------------------------------------------------------
+def ground_truth_msg(truth: GroundTruth, stamp: Time) -> GroundTruthMsg:
+    """``qg_interfaces/GroundTruth`` from the simulator's ``GroundTruth``."""
+    msg = GroundTruthMsg(contact_wrench=wrench_msg(truth.wrench),
+                         insertion_depth=float(truth.insertion_depth),
+                         plunger_travel=float(truth.plunger_travel), success=bool(truth.success),
+                         position_error=float(truth.position_error),
+                         orientation_error=np.asarray(truth.orientation_error, float),
+                         lateral_offset=float(truth.lateral_offset), tilt=float(truth.tilt))
+    msg.header.stamp = stamp
+    msg.header.frame_id = TOOL_FRAME
+    return msg
+
+
+def ground_truth_from_msg(msg: GroundTruthMsg) -> GroundTruth:
+    """The simulator's ``GroundTruth`` back from its message."""
+    return GroundTruth(wrench=wrench_from_msg(msg.contact_wrench),
+                       insertion_depth=msg.insertion_depth, plunger_travel=msg.plunger_travel,
+                       success=msg.success, position_error=msg.position_error,
+                       orientation_error=np.array(msg.orientation_error, float),
+                       lateral_offset=msg.lateral_offset, tilt=msg.tilt)
+
+
+# --- poses --------------------------------------------------------------------------------------
+def quaternion_from_matrix(rotation: np.ndarray) -> tuple[float, float, float, float]:
+    """Unit quaternion ``(x, y, z, w)`` with ``w >= 0`` of a rotation matrix (Shepperd)."""
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = np.asarray(rotation, float).tolist()
+    trace = r00 + r11 + r22
+    if trace > max(r00, r11, r22):
+        s = 2.0 * math.sqrt(1.0 + trace)
+        q = ((r21 - r12) / s, (r02 - r20) / s, (r10 - r01) / s, 0.25 * s)
+    elif r00 >= r11 and r00 >= r22:
+        s = 2.0 * math.sqrt(1.0 + r00 - r11 - r22)
+        q = (0.25 * s, (r01 + r10) / s, (r02 + r20) / s, (r21 - r12) / s)
+    elif r11 >= r22:
+        s = 2.0 * math.sqrt(1.0 + r11 - r00 - r22)
+        q = ((r01 + r10) / s, 0.25 * s, (r12 + r21) / s, (r02 - r20) / s)
+    else:
+        s = 2.0 * math.sqrt(1.0 + r22 - r00 - r11)
+        q = ((r02 + r20) / s, (r12 + r21) / s, 0.25 * s, (r10 - r01) / s)
+    return q if q[3] >= 0.0 else (-q[0], -q[1], -q[2], -q[3])
+
+
+def matrix_from_quaternion(x: float, y: float, z: float, w: float) -> np.ndarray:
+    """Rotation matrix of the quaternion ``(x, y, z, w)``, normalised first.
+
+    A zero or non-finite quaternion gives a NaN matrix, which the safety filter rejects.
+    """
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if not (math.isfinite(norm) and norm > 0.0):
+        return np.full((3, 3), math.nan)
+    x, y, z, w = x / norm, y / norm, z / norm, w / norm
+    return np.array([
+        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
+        [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
+        [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)]])
+
+
+def pose_msg(position: np.ndarray, rotation: np.ndarray) -> Pose:
+    """``geometry_msgs/Pose`` from a position and a rotation matrix."""
+    msg = Pose()
+    msg.position.x, msg.position.y, msg.position.z = (float(v) for v in position)
+    o = msg.orientation
+    o.x, o.y, o.z, o.w = quaternion_from_matrix(rotation)
+    return msg
+
+
+def pose_stamped(position: np.ndarray, rotation: np.ndarray, stamp: Time) -> PoseStamped:
+    """The tool pose in the base frame, with its header."""
+    msg = PoseStamped(pose=pose_msg(position, rotation))
+    msg.header.stamp = stamp
+    msg.header.frame_id = BASE_FRAME
+    return msg
+
+
+def twist_stamped(twist: np.ndarray, stamp: Time) -> TwistStamped:
+    """The tool twist ``[v; w]`` in the base frame, with its header."""
+    msg = TwistStamped()
+    v = [float(x) for x in twist]
+    msg.twist.linear.x, msg.twist.linear.y, msg.twist.linear.z = v[0], v[1], v[2]
+    msg.twist.angular.x, msg.twist.angular.y, msg.twist.angular.z = v[3], v[4], v[5]
+    msg.header.stamp = stamp
+    msg.header.frame_id = BASE_FRAME
+    return msg
+
+
+# --- RL step ------------------------------------------------------------------------------------
+def at_rest_msg(seq: int, result: StepResult, position: np.ndarray, rotation: np.ndarray,
+                stamp: Time) -> AtRest:
+    """The ``AtRest`` event completing setpoint ``seq`` (0 after a reset).
+
+    A run without an estimator reports a zero wrench estimate.
+    """
+    wrench = np.zeros(6) if result.wrench_estimate is None else result.wrench_estimate
+    msg = AtRest(seq=int(seq), duration=float(result.duration),
+                 linear_speed=float(result.linear_speed),
+                 angular_speed=float(result.angular_speed), timed_out=bool(result.timed_out),
+                 wrench_estimate=wrench_msg(wrench), ee_pose=pose_msg(position, rotation),
+                 ground_truth=ground_truth_msg(result.ground_truth, stamp))
+    msg.header.stamp = stamp
+    msg.header.frame_id = BASE_FRAME
+    return msg

@@ -1,0 +1,60 @@
+"""A test client for the robot-side nodes: resets, setpoints and at-rest events, like the executor."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import rclpy.qos
+from qg_interfaces.msg import AtRest, WrenchSetpoint
+from qg_interfaces.srv import ResetSim
+from qg_learning_node.cli.ros_client import CliNode, call_service
+from robot_bridge_node import conversions
+from robot_bridge_node.core import types
+from sim_robot_node.conversions import time_msg
+
+#: Best effort like the 1 kHz publishers, deep enough that a slow test process loses nothing.
+DEEP = rclpy.qos.QoSProfile(depth=2000, reliability=rclpy.qos.ReliabilityPolicy.BEST_EFFORT)
+
+
+class RobotClient:
+    """Resets the sim, sends setpoints and collects ``/ee_at_rest`` on one test node."""
+
+    def __init__(self, cli: CliNode) -> None:
+        self.cli = cli
+        self.events: list[AtRest] = []
+        cli.node.create_subscription(AtRest, "/ee_at_rest", self.events.append, 100)
+        self.setpoints = cli.node.create_publisher(WrenchSetpoint, "/wrench_setpoint", 10)
+
+    def reset(self, pose: int, timeout: float = 60.0) -> ResetSim.Response:
+        return call_service(self.cli, ResetSim, "/sim/reset", ResetSim.Request(initial_pose=pose),
+                            timeout)
+
+    def send(self, seq: int, wrench: tuple[float, ...]) -> None:
+        assert self.cli.spin_until(lambda: self.setpoints.get_subscription_count() > 0, 30.0), \
+            "nobody subscribes /wrench_setpoint"
+        setpoint = types.WrenchSetpoint(np.array(wrench, float))
+        self.setpoints.publish(conversions.setpoint_msg(seq, setpoint, time_msg(0)))
+
+    def event(self, seq: int) -> AtRest | None:
+        return next((e for e in self.events if e.seq == seq), None)
+
+    def step(self, seq: int, wrench: tuple[float, ...], timeout: float = 20.0,
+             resend: float | None = None) -> AtRest | None:
+        """Send setpoint ``seq`` and wait for its ``AtRest`` (None on timeout).
+
+        :param resend: [s] repeat the setpoint this often while waiting (the realtime watchdog
+            holds the pose after 10 ms without one).
+        """
+        self.send(seq, wrench)
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.cli.spin_until(lambda: self.event(seq) is not None,
+                                   min(resend or timeout, deadline - time.monotonic())):
+                break
+            self.send(seq, wrench)
+        return self.event(seq)
+
+
+def wrench(msg) -> np.ndarray:
+    """The 6 numbers of a ``geometry_msgs/Wrench``."""
+    return conversions.wrench_from_msg(msg)

@@ -1,0 +1,84 @@
+"""The composed ``robot`` process in lockstep: resets, RL steps, bad input, clean exit."""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+from robot_client import DEEP, RobotClient, wrench
+
+pytestmark = pytest.mark.ros
+
+ROBOT = ("robot", "robot_bridge_node", "robot")
+
+
+def test_reset_and_setpoints_complete_with_their_seq_and_a_rerun_repeats_them_exactly(stack):
+    stack.start(ROBOT)
+    rng = np.random.default_rng(3)
+    plan = [(-10.0, *rng.uniform(-1.0, 1.0, 2)) for _ in range(10)]
+    with stack.client() as cli:
+        from rosgraph_msgs.msg import Clock
+        clock: list[int] = []
+        cli.node.create_subscription(
+            Clock, "/clock", lambda m: clock.append(m.clock.sec * 10**9 + m.clock.nanosec), DEEP)
+        robot = RobotClient(cli)
+        reply = robot.reset(3)
+        assert reply.success, reply.message + stack.logs()
+        obs = reply.observation
+        assert obs.seq == 0
+        assert obs.duration == pytest.approx(0.1, abs=1e-9)          # the settle time
+        assert obs.ground_truth.tilt == pytest.approx(math.radians(15.0), abs=0.02)
+        assert np.all(np.isfinite(wrench(obs.wrench_estimate)))
+        assert obs.ee_pose.position.z == pytest.approx(0.25 + 0.06, abs=0.02)
+
+        first = []
+        for seq, (fz, tx, ty) in enumerate(plan, start=1):
+            event = robot.step(seq, (0.0, 0.0, fz, tx, ty, 0.0))
+            assert event is not None, f"no AtRest for seq {seq}\n{stack.logs()}"
+            assert 0.02 - 1e-9 <= event.duration <= 0.5 + 1e-9
+            assert np.all(np.isfinite(wrench(event.wrench_estimate)))
+            first.append(event)
+        # Simulated time on /clock: monotonic, and at least as long as the steps took.
+        cli.spin_for(0.2)
+        assert clock and np.all(np.diff(clock) > 0)
+        assert (clock[-1] - clock[0]) * 1e-9 >= sum(e.duration for e in first[1:]) - 0.011
+        # Pressing down: the bearing face pushes back up the shaft (contact Fz < 0, tool frame).
+        assert wrench(first[-1].ground_truth.contact_wrench)[2] < -1.0
+        assert wrench(first[-1].wrench_estimate)[2] < -1.0
+
+    # Lockstep is deterministic: a new process given the same reset and setpoints repeats them.
+    assert stack.stop() == {"robot": 0}
+    stack.start(("robot_again", *ROBOT[1:]))
+    with stack.client() as cli:
+        robot = RobotClient(cli)
+        assert robot.reset(3).success
+        for seq, (fz, tx, ty) in enumerate(plan[:3], start=1):
+            again = robot.step(seq, (0.0, 0.0, fz, tx, ty, 0.0))
+            assert again is not None
+            assert again.duration == first[seq - 1].duration
+            np.testing.assert_array_equal(wrench(again.wrench_estimate),
+                                          wrench(first[seq - 1].wrench_estimate))
+            assert again.ee_pose == first[seq - 1].ee_pose
+
+
+def test_bad_reset_and_nan_setpoint_are_rejected_and_the_process_stays_up(stack):
+    stack.start(ROBOT)
+    with stack.client() as cli:
+        robot = RobotClient(cli)
+        bad = robot.reset(9)
+        assert not bad.success
+        assert "initial_pose" in bad.message and "0..7" in bad.message
+
+        assert robot.step(1, (0.0, 0.0, math.nan, 0.0, 0.0, 0.0), timeout=1.0) is None
+        logs = stack.logs()
+        assert "setpoint 1 rejected" in logs and "NaN" in logs, logs
+
+        event = robot.step(2, (0.0, 0.0, -5.0, 0.2, 0.0, 0.0))
+        assert event is not None, stack.logs()
+        assert np.all(np.isfinite(wrench(event.wrench_estimate)))
+    assert stack.launcher.poll() == []
+    t0 = time.monotonic()
+    codes = stack.stop(grace=5.0)
+    assert codes == {"robot": 0}, stack.logs()
+    assert time.monotonic() - t0 < 5.0
