@@ -23,19 +23,9 @@ from robot_bridge_node.core.position_control import (  # noqa: E402
     PositionControlConfig, TaskSpacePositionController)
 from sim_robot_node.core.nextage_scene import nextage_urdf_path  # noqa: E402
 from sim_robot_node.core.params import config_dir, load_ros_params  # noqa: E402
-from sim_robot_node.core.peg_env import PegEnv, PegEnvConfig  # noqa: E402
+from sim_robot_node.core.peg_env import PegEnv, PegEnvConfig, toward_goal  # noqa: E402
 
 
-def toward_goal(env: PegEnv) -> np.ndarray:
-    """Rise above the block, centre over the hole, then go straight down."""
-    g = env.geometry
-    tip = env.tip()
-    offset = g.goal - tip
-    if np.linalg.norm(offset[:2]) > 0.002:
-        if tip[2] < g.block_height + 0.01:
-            return np.array([0.0, 0.0, 1.0])
-        return np.clip(np.r_[offset[:2], 0.0] / g.hole_radius, -1.0, 1.0)
-    return np.clip(offset / g.hole_radius, -1.0, 1.0)
 
 
 def measure(env: PegEnv, episodes: int, steps: int, policy: str) -> dict:

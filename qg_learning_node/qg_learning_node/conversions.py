@@ -7,7 +7,7 @@ from qg_interfaces.msg import ActorParameters, AtRest, Transition
 from qg_learning_node.core.episode import TransitionRecord
 from qg_learning_node.core.residual_task import Observation
 
-__all__ = ["observation_from_msg", "transition_to_msg", "transition_from_msg",
+__all__ = ["observation_from_msg", "transition_to_msg",
            "actor_to_msg", "actor_tensors_from_msg"]
 
 
@@ -24,13 +24,6 @@ def transition_to_msg(t: TransitionRecord) -> Transition:
     return Transition(episode_id=t.episode_id, step=t.step, state=t.state.tolist(),
                       action=t.action.tolist(), reward=t.reward, next_state=t.next_state.tolist(),
                       terminal=t.terminal, timeout=t.timeout, zero_action=t.zero_action)
-
-
-def transition_from_msg(msg: Transition) -> TransitionRecord:
-    return TransitionRecord(msg.episode_id, int(msg.step), np.asarray(msg.state, np.float64),
-                            np.asarray(msg.action, np.float64), float(msg.reward),
-                            np.asarray(msg.next_state, np.float64), bool(msg.terminal),
-                            bool(msg.timeout), bool(msg.zero_action))
 
 
 def actor_to_msg(version: int, tensors: list[tuple[str, np.ndarray]]) -> ActorParameters:

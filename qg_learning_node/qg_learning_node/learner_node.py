@@ -18,7 +18,8 @@ from rclpy.node import Node
 
 from sim_robot_node.node_runtime import node_params, run_nodes
 
-from qg_learning_node.conversions import actor_to_msg, transition_from_msg
+from qg_learning_node.conversions import actor_to_msg
+from qg_learning_node.core.episode import TransitionRecord
 from qg_learning_node.core.learner_params import learner_config_from_params
 from qg_learning_node.core.residual_task import ACTION_DIM, STATE_DIM
 from qg_learning_node.executor_node import LATCHED, RELIABLE_DEEP
@@ -67,7 +68,7 @@ class LearnerNode(Node):
         self._publish_actor()
 
     def _on_transition(self, msg: Transition) -> None:
-        t = transition_from_msg(msg)
+        t = TransitionRecord.from_message(msg)
         with self.lock:
             cycle_due = self.core.add_transition(t.state, t.action, t.reward, t.next_state,
                                                  t.terminal)

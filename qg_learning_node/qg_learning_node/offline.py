@@ -14,25 +14,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from robot_bridge_node.recording.bag_reader import read_bag
 
-__all__ = ["OfflineResult", "RecordedTransition", "iter_transitions", "rebuild_from_bags"]
+from qg_learning_node.core.episode import TransitionRecord
+
+__all__ = ["OfflineResult", "iter_transitions", "rebuild_from_bags"]
 
 TRANSITIONS_TOPIC = "/transitions"
-
-
-@dataclass(frozen=True)
-class RecordedTransition:
-    episode_id: str
-    step: int
-    state: np.ndarray
-    action: np.ndarray
-    reward: float
-    next_state: np.ndarray
-    terminal: bool
-    timeout: bool
 
 
 @dataclass(frozen=True)
@@ -47,16 +35,11 @@ class OfflineResult:
     learner_core: Any = None  # the core that was fed (to checkpoint or keep training)
 
 
-def iter_transitions(paths: Iterable[Path]) -> Iterator[RecordedTransition]:
+def iter_transitions(paths: Iterable[Path]) -> Iterator[TransitionRecord]:
     """The recorded transitions of the given bags, bag after bag, in recording order."""
     for path in paths:
         for _, _, _, msg in read_bag(path, topics=[TRANSITIONS_TOPIC]):
-            yield RecordedTransition(
-                episode_id=msg.episode_id, step=int(msg.step),
-                state=np.asarray(msg.state, dtype=np.float64),
-                action=np.asarray(msg.action, dtype=np.float64), reward=float(msg.reward),
-                next_state=np.asarray(msg.next_state, dtype=np.float64),
-                terminal=bool(msg.terminal), timeout=bool(msg.timeout))
+            yield TransitionRecord.from_message(msg)
 
 
 def rebuild_from_bags(

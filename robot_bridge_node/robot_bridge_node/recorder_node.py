@@ -3,7 +3,7 @@
 The 1 kHz data (joint states, wrench estimate, EEF pose/twist, ground truth) is taken straight
 from the loop after each tick, so it never crosses a process boundary and no sample is dropped;
 the RL-rate topics (setpoints, at-rest events, transitions, episode status) arrive by
-subscription. Episode boundaries come from ``/episode_status``: a bag opens when an episode starts
+subscription and are stamped with the loop's clock (simulated time in lockstep). Episode boundaries come from ``/episode_status``: a bag opens when an episode starts
 resetting and closes once the episode has ended and all of its transitions have arrived.
 """
 from __future__ import annotations
@@ -69,6 +69,7 @@ class RecorderNode(Node):
         self.create_subscription(AtRest, "/ee_at_rest", self._on_at_rest, 10, callback_group=group)
         self.create_timer(0.2, self._close_if_complete, callback_group=group)
         self.last_t_ns = 0
+        self.last_setpoint_seq = -1
 
     # --- the 1 kHz hook -------------------------------------------------------------------
     def observe(self, t_ns: int, loop: RobotLoop) -> None:
@@ -97,7 +98,8 @@ class RecorderNode(Node):
 
     # --- RL-rate topics -------------------------------------------------------------------
     def _stamp(self) -> int:
-        return self.last_t_ns or time.time_ns()
+        """RL-rate messages are stamped on the loop's clock too, so a bag has one time base."""
+        return self.last_t_ns
 
     def _on_status(self, msg: EpisodeStatus) -> None:
         if not self.enabled or not msg.episode_id:
@@ -122,7 +124,10 @@ class RecorderNode(Node):
             self._close_if_complete()
 
     def _on_setpoint(self, msg: WrenchSetpoint) -> None:
-        if self.episode_id:
+        # The executor re-sends the running setpoint every few ms as a watchdog keep-alive;
+        # the bag keeps the first message of each seq, the command itself.
+        if self.episode_id and msg.seq != self.last_setpoint_seq:
+            self.last_setpoint_seq = msg.seq
             self.recorder.record_message("/wrench_setpoint", self._stamp(), msg)
 
     def _on_at_rest(self, msg: AtRest) -> None:

@@ -8,7 +8,7 @@ from robot_bridge_node.core.position_control import (PositionControlConfig,
                                                      TaskSpacePositionController)
 from sim_robot_node.core.nextage_scene import NextageSceneConfig, nextage_urdf_path
 from sim_robot_node.core.params import config_dir, load_ros_params
-from sim_robot_node.core.peg_env import PegEnv, PegEnvConfig
+from sim_robot_node.core.peg_env import PegEnv, PegEnvConfig, toward_goal
 
 
 @pytest.fixture(scope="module")
@@ -23,16 +23,6 @@ def env(config: PegEnvConfig):
     e.close()
 
 
-def toward_goal(env: PegEnv) -> np.ndarray:
-    """Scripted policy: rise above the block, centre over the hole, then go straight down."""
-    g = env.geometry
-    tip = env.tip()
-    offset = g.goal - tip
-    if np.linalg.norm(offset[:2]) > 0.002:
-        if tip[2] < g.block_height + 0.01:
-            return np.array([0.0, 0.0, 1.0])
-        return np.clip(np.r_[offset[:2], 0.0] / g.hole_radius, -1.0, 1.0)
-    return np.clip(offset / g.hole_radius, -1.0, 1.0)
 
 
 def run(env: PegEnv, policy, seed: int) -> tuple[bool, int, list[np.ndarray], list[float]]:

@@ -68,9 +68,13 @@ def _plot(outcomes: list[EpisodeOutcome], path: Path) -> None:
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(7, 3.5))
     for mode, colour in (("train", "tab:blue"), ("test", "tab:green")):
-        xs = [o.index for o in outcomes if o.mode == mode]
-        ys = [o.steps for o in outcomes if o.mode == mode]
-        ax.plot(xs, ys, "o-", color=colour, label=f"{mode} episodes")
+        runs = [o for o in outcomes if o.mode == mode]
+        ax.plot([o.index for o in runs], [o.steps for o in runs], "-", color=colour, alpha=0.5)
+        for success, marker in ((True, "o"), (False, "x")):
+            sel = [o for o in runs if o.success == success]
+            ax.plot([o.index for o in sel], [o.steps for o in sel], marker, color=colour,
+                    label=f"{mode}, {'inserted' if success else 'not inserted'}")
+    ax.axhline(32, color="grey", ls="--", lw=1, label="uniform random, real robot (32)")
     ax.set_xlabel("episode")
     ax.set_ylabel("steps to insert (cap = not inserted)")
     ax.set_title("QG-DDPG on the simulated Panda, through the ROS stack")
@@ -88,7 +92,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     run_dir = Path(args.runs_dir) / time.strftime("demo_%Y%m%d_%H%M%S")
     run_dir.mkdir(parents=True, exist_ok=True)
     env = stack_env(log_dir=run_dir / "ros_log")
-    env["QG_RUNS_DIR"] = str(run_dir / "episodes")
+    env["QG_RUNS_DIR"] = str(run_dir)     # episodes/ (MCAP) and checkpoints/ go here
     launcher = Launcher(env=env, out=None, log_dir=run_dir / "logs")
     launcher.start(load_stack_config(Path(args.config)))
     schedule = [("train", -1)] * args.train_episodes + [("test", p) for p in range(args.test_poses)]

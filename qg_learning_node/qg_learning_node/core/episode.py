@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -31,6 +32,14 @@ class TransitionRecord:
     terminal: bool
     timeout: bool
     zero_action: bool
+
+    @classmethod
+    def from_message(cls, msg: Any) -> "TransitionRecord":
+        """From a ``qg_interfaces/Transition`` message, live or decoded from a bag (duck-typed)."""
+        return cls(msg.episode_id, int(msg.step), np.asarray(msg.state, np.float64),
+                   np.asarray(msg.action, np.float64), float(msg.reward),
+                   np.asarray(msg.next_state, np.float64), bool(msg.terminal), bool(msg.timeout),
+                   bool(msg.zero_action))
 
 
 class Episode:

@@ -29,7 +29,7 @@ from sim_robot_node.core.nextage_scene import (NextagePegScene, NextageSceneConf
                                                sample_start)
 from sim_robot_node.core.params import config_from_dict
 
-__all__ = ["PegEnvConfig", "PegEnv", "JointTargetController"]
+__all__ = ["PegEnvConfig", "PegEnv", "JointTargetController", "toward_goal"]
 
 
 class JointTargetController(Protocol):
@@ -255,3 +255,19 @@ class PegEnv:
         q = self._scene.joint_state().q
         self._scene.set_joint_targets(self.controller.step(q, self._pose_reference))
         self._scene.step()
+
+
+def toward_goal(env: "PegEnv") -> np.ndarray:
+    """A scripted baseline policy: rise above the block, centre over the hole, go straight down.
+
+    It reads the true tip position, so it is a reference for what a learner can approach, not
+    a policy on the state alone.
+    """
+    g = env.geometry
+    tip = env.tip()
+    offset = g.goal - tip
+    if np.linalg.norm(offset[:2]) > 0.002:
+        if tip[2] < g.block_height + 0.01:
+            return np.array([0.0, 0.0, 1.0])
+        return np.clip(np.r_[offset[:2], 0.0] / g.hole_radius, -1.0, 1.0)
+    return np.clip(offset / g.hole_radius, -1.0, 1.0)
