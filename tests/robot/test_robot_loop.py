@@ -47,12 +47,15 @@ def test_zero_residual_jams_from_most_starts_and_comes_to_rest(loop: RobotLoop) 
     assert 0.0 < depth < 0.005  # wedged at the bore entrance
 
 
-def test_uniform_random_residuals_insert(loop: RobotLoop) -> None:
-    """Two of the starts for the CI budget; benchmarks/force_depth.py measures all eight
-    (16/16 over two seeds, mean 41 steps, median 27; the real robot's random baseline: 32)."""
+def test_uniform_random_residuals_insert_from_at_least_six_of_eight_starts(
+        loop: RobotLoop) -> None:
+    """The issue's bar: uniform random residuals insert within 1000 steps from >= 6 of the 8
+    starts (benchmarks/force_depth.py: 16/16 over two seeds, mean 41 steps; real robot: 32)."""
     rng = np.random.default_rng(0)
-    outcomes = [run_episode(loop, k, 150, rng) for k in (0, 6)]
-    assert all(success for success, _, _ in outcomes), outcomes
+    outcomes = [run_episode(loop, k, 1000, rng) for k in range(8)]
+    inserted = [steps for success, steps, _ in outcomes if success]
+    print(f"random residual: {len(inserted)}/8 inserted, mean {np.mean(inserted):.1f} steps")
+    assert len(inserted) >= 6, outcomes
 
 
 def press_upright(loop: RobotLoop, force: float, seconds: float) -> None:
