@@ -32,8 +32,10 @@ mkdir -p "$STAMPS"
 deps_hash="$(hash_of "$ROOT/scripts/requirements.txt" "$ROOT/scripts/constraints.txt")"
 if [[ "$(cat "$STAMPS/deps" 2>/dev/null)" != "$deps_hash" ]]; then
   log "installing pinned dependencies (a few minutes on a bare machine)"
+  # (The local index mirrors print a warning per missing package; they are noise here.)
   "$VENV/bin/pip" install --quiet --disable-pip-version-check \
-    -r "$ROOT/scripts/requirements.txt" -c "$ROOT/scripts/constraints.txt"
+    -r "$ROOT/scripts/requirements.txt" -c "$ROOT/scripts/constraints.txt" 2>&1 \
+    | { grep -v '^WARNING: Location' || true; }
   echo "$deps_hash" > "$STAMPS/deps"
 fi
 
@@ -67,6 +69,7 @@ src_hash="$(cd "$ROOT" && find ros_ws/src/qg_interfaces sim_robot_node robot_bri
   -o -name 'setup.py' -o -name 'setup.cfg' \) -print0 | sort -z | xargs -0 cat | sha256sum | cut -c1-16)"
 if [[ "$(cat "$STAMPS/colcon" 2>/dev/null)" != "$src_hash" || ! -f "$ROOT/ros_ws/install/setup.bash" ]]; then
   log "colcon build"
+  mkdir -p "$ROOT/ros_ws/log"
   ( cd "$ROOT/ros_ws"
     export AMENT_PREFIX_PATH="$VENV" PATH="$VENV/bin:$PATH"
     unset CMAKE_PREFIX_PATH
