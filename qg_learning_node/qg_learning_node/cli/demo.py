@@ -9,10 +9,10 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-from qg_learning_node.cli.launcher import Launcher, load_stack_config
+from qg_learning_node.cli.launcher import Launcher, ProcessSpec, load_stack_config
 from qg_learning_node.cli.ros_env import repo_root, stack_env
 
 __all__ = ["add_parser", "EpisodeOutcome"]
@@ -62,6 +62,28 @@ def _run_episode(cli, index: int, mode: str, pose: int, seed: int, timeout: floa
                           float(msg.episode_return), bool(msg.success), time.monotonic() - t0)
 
 
+def _wait_for_stack(cli, timeout: float) -> None:
+    """Until the robot answers resets, the executor takes episodes and the learner is alive."""
+    from qg_interfaces.msg import LearnerDiagnostics
+    from qg_interfaces.srv import ResetSim, StartEpisode
+    heartbeats: list = []
+    sub = cli.node.create_subscription(LearnerDiagnostics, "/learner/diagnostics",
+                                       heartbeats.append, 10)
+    clients = {name: cli.node.create_client(srv, name) for name, srv in
+               (("/sim/reset", ResetSim), ("/executor/start_episode", StartEpisode))}
+    try:
+        ready = cli.spin_until(lambda: all(c.service_is_ready() for c in clients.values())
+                               and bool(heartbeats), timeout)
+        if not ready:
+            missing = [n for n, c in clients.items() if not c.service_is_ready()]
+            raise TimeoutError(f"the stack did not come up within {timeout:.0f} s: "
+                               f"{', '.join(missing) or 'no learner heartbeat'} missing")
+    finally:
+        for c in clients.values():
+            cli.node.destroy_client(c)
+        cli.node.destroy_subscription(sub)
+
+
 def _plot(outcomes: list[EpisodeOutcome], path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -85,6 +107,15 @@ def _plot(outcomes: list[EpisodeOutcome], path: Path) -> None:
     plt.close(fig)
 
 
+def _with_step_cap(spec: ProcessSpec, train_max_steps: int) -> ProcessSpec:
+    """The executor's spec with training episodes capped (a demo should end in minutes)."""
+    if (spec.package, spec.executable) != ("qg_learning_node", "executor"):
+        return spec
+    ros_args = () if "--ros-args" in spec.args else ("--ros-args",)
+    return replace(spec, args=spec.args + ros_args
+                   + ("-p", f"task.train_max_steps:={train_max_steps}"))
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
@@ -94,7 +125,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     env = stack_env(log_dir=run_dir / "ros_log")
     env["QG_RUNS_DIR"] = str(run_dir)     # episodes/ (MCAP) and checkpoints/ go here
     launcher = Launcher(env=env, out=None, log_dir=run_dir / "logs")
-    launcher.start(load_stack_config(Path(args.config)))
+    launcher.start([_with_step_cap(spec, args.train_max_steps)
+                    for spec in load_stack_config(Path(args.config))])
     schedule = [("train", -1)] * args.train_episodes + [("test", p) for p in range(args.test_poses)]
     outcomes: list[EpisodeOutcome] = []
     print(f"[qgl demo] stack up (logs: {run_dir / 'logs'}); {args.train_episodes} training "
@@ -102,6 +134,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     try:
         with CliNode("qgl_demo", domain_id=int(env["ROS_DOMAIN_ID"])) as cli, \
                 tqdm(total=len(schedule), unit="episode", dynamic_ncols=True) as bar:
+            _wait_for_stack(cli, timeout=180.0)
             for i, (mode, pose) in enumerate(schedule):
                 died = launcher.poll()
                 if died:
@@ -129,6 +162,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     demo.add_argument("--runs-dir", default=str(repo_root() / "runs"))
     demo.add_argument("--train-episodes", type=int, default=8)
     demo.add_argument("--test-poses", type=int, default=8)
+    demo.add_argument("--train-max-steps", type=int, default=200,
+                      help="step cap of the demo's training episodes (the executor's default "
+                           "is 1000; a jammed 1000-step episode takes ~15 min here)")
     demo.add_argument("--seed", type=int, default=1)
     demo.add_argument("--episode-timeout", type=float, default=900.0, help="[s]")
     demo.set_defaults(func=_cmd_demo)
