@@ -1,0 +1,48 @@
+"""Command line: ``python -m qg_learning_node.experiments [--profile small] [--only ...]``."""
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+from qg_learning_node.experiments.profile import load_profile
+from qg_learning_node.experiments.suite import EXPERIMENTS, run_suite
+from qg_learning_node.experiments.tasks import MAX_WORKERS
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m qg_learning_node.experiments",
+                                     description=__doc__)
+    parser.add_argument("--profile", default="small", help="full | small | tiny "
+                        "(config/experiments.yaml)")
+    parser.add_argument("--only", default=",".join(EXPERIMENTS),
+                        help=f"comma-separated subset of {','.join(EXPERIMENTS)}")
+    parser.add_argument("--workers", type=int, default=MAX_WORKERS, help="processes (max 2)")
+    parser.add_argument("--out", type=Path, default=Path("runs/experiments"),
+                        help="results folder (a subfolder per profile)")
+    parser.add_argument("--docs", type=Path, default=Path("docs"),
+                        help="where results.md and figures/ go")
+    parser.add_argument("--estimator", choices=("ekf", "ground_truth"), default=None,
+                        help="override the profile file's wrench estimator")
+    parser.add_argument("--profiles-file", type=Path, default=None)
+    parser.add_argument("--config-dir", default=None,
+                        help="stack config files to use (default: the repo's config/); a copy "
+                        "keeps a long sweep on one set of numbers while config/ is edited")
+    parser.add_argument("--report-only", action="store_true",
+                        help="only regenerate results.md from saved results")
+    args = parser.parse_args(argv)
+    only = tuple(o for o in args.only.split(",") if o)
+    unknown = set(only) - set(EXPERIMENTS)
+    if unknown:
+        parser.error(f"unknown experiments {sorted(unknown)}")
+    profile = load_profile(args.profile, args.profiles_file, args.estimator)
+    command = "python -m qg_learning_node.experiments " + shlex.join(
+        sys.argv[1:] if argv is None else argv)
+    path = run_suite(profile, args.out, args.docs, () if args.report_only else only,
+                     args.workers, command, args.config_dir)
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,155 @@
+"""Experiment 5: the clearance-fit peg (free peg, SPEC 4), DDPG vs QG-DDPG over learning rates.
+
+Thesis ch. 8.3.2 settings: actor and critic of 3 hidden layers x 200, no target networks, a block
+of minibatch updates after every episode (thesis: 50 epochs of up to 15 minibatches; here
+``train_iterations`` updates of ``learner.yaml``'s batch size), the same learning rate for actor
+and critic. Exploration is ``executor.yaml``'s noise. At the end each network's Q is evaluated on
+a regular grid of 27 states with 11 fixed actions and with the actor's action; the spread of
+those predictions across seeds measures soft divergence (thesis Fig. 8.3).
+"""
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from sim_robot_node.core.params import config_dir as default_config_dir
+from sim_robot_node.core.params import load_ros_params
+from sim_robot_node.core.peg_env import PegEnv, PegEnvConfig
+
+from qg_learning_node.core.learner_params import learner_config_from_params
+from qg_learning_node.core.noise import ActionNoise, NoiseConfig
+from qg_learning_node.experiments.profile import PegBudget
+from qg_learning_node.experiments.runner import (ALGORITHMS, algorithm_config, config_digest,
+                                                 episode_noise_seed)
+from qg_learning_node.learner_core import LearnerCore
+
+__all__ = ["PegRunSpec", "peg_specs", "run_peg", "GRID_STATES", "GRID_ACTIONS",
+           "learning_curves", "q_spread"]
+
+#: 27 states: the centres of a 3 x 3 x 3 partition of the scaled workspace [-1, 1]^3.
+GRID_STATES = np.array(list(itertools.product((-2 / 3, 0.0, 2 / 3), repeat=3)))
+#: 11 actions: the zero action, the six unit moves along the axes, four diagonal moves down.
+GRID_ACTIONS = np.array([[0, 0, 0], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1],
+                         [0, 0, -1], [.5, .5, -.5], [.5, -.5, -.5], [-.5, .5, -.5],
+                         [-.5, -.5, -.5]], dtype=float)
+
+
+@dataclass(frozen=True)
+class PegRunSpec:
+    """One peg learning run.
+
+    :param lr: learning rate of actor and critic.
+    :param train_iterations: minibatch updates after each episode.
+    """
+    algorithm: str
+    lr: float
+    seed: int
+    episodes: int = 100
+    train_iterations: int = 750
+    episode_steps: int = 200
+    config_dir: str | None = None
+    experiment: str = "peg"
+
+    def __post_init__(self) -> None:
+        if self.algorithm not in ALGORITHMS:
+            raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {self.algorithm!r}")
+        if not self.lr > 0 or self.episodes < 1 or self.train_iterations < 1 \
+                or self.episode_steps < 1:
+            raise ValueError("lr must be > 0; episodes, train_iterations, episode_steps >= 1")
+
+    @property
+    def name(self) -> str:
+        return f"{self.algorithm}_lr{self.lr:g}_s{self.seed}"
+
+    def run(self) -> dict[str, Any]:
+        return run_peg(self)
+
+
+def peg_specs(budget: PegBudget, config_dir: str | None = None) -> list[PegRunSpec]:
+    return [PegRunSpec(algorithm=a, lr=float(lr), seed=s, episodes=budget.episodes,
+                       train_iterations=budget.train_iterations,
+                       episode_steps=budget.episode_steps, config_dir=config_dir)
+            for lr in budget.lrs for a in budget.algorithms for s in budget.seeds]
+
+
+def run_peg(spec: PegRunSpec) -> dict[str, Any]:
+    """Train for ``spec.episodes`` episodes; per-episode records and the final Q on the grid."""
+    torch.set_num_threads(1)
+    start = time.perf_counter()
+    d = Path(spec.config_dir) if spec.config_dir else default_config_dir()
+    env_config = dataclasses.replace(PegEnvConfig.from_dict(load_ros_params(d / "peg_env.yaml")),
+                                     episode_steps=spec.episode_steps)
+    base = learner_config_from_params(load_ros_params(d / "learner.yaml")["learner"])
+    config = algorithm_config(base, spec.algorithm, PegEnv.action_dim)
+    config = dataclasses.replace(
+        config, seed=spec.seed, iterations_per_cycle=spec.train_iterations,
+        cycle_steps=spec.episode_steps,
+        ddpg=dataclasses.replace(config.ddpg, actor_hidden=(200, 200, 200),
+                                 critic_hidden=(200, 200, 200), critic_lr=spec.lr,
+                                 actor_lr=spec.lr, seed=spec.seed))
+    noise_config = NoiseConfig.from_dict(load_ros_params(d / "executor.yaml").get("noise", {}))
+    env = PegEnv(env_config)
+    learner = LearnerCore(config, PegEnv.state_dim, PegEnv.action_dim)
+    episodes = []
+    try:
+        for index in range(spec.episodes):
+            noise = ActionNoise(noise_config, PegEnv.action_dim,
+                                episode_noise_seed(spec.seed, index))
+            state = env.reset(seed=episode_noise_seed(spec.seed, index))
+            total, success = 0.0, False
+            while not env.truncated:
+                action = noise.perturb(learner.agent.act(state))
+                next_state, reward, terminal = env.step(action)
+                learner.add_transition(state, action, reward, next_state, terminal)
+                total += reward
+                state = next_state
+                if terminal:
+                    success = True
+                    break
+            diagnostics = learner.train_cycle()
+            episodes.append({"episode": index, "steps": env.steps, "success": success,
+                             "return": total, "mean_q": float(diagnostics["mean_q"])})
+    finally:
+        env.close()
+    agent = learner.agent
+    states = np.repeat(GRID_STATES, len(GRID_ACTIONS), axis=0)
+    actions = np.tile(GRID_ACTIONS, (len(GRID_STATES), 1))
+    return {"experiment": spec.experiment, "name": spec.name, "spec": dataclasses.asdict(spec),
+            "config_digest": config_digest(spec.config_dir), "episodes": episodes,
+            "q_given": agent.q_values(states, actions).reshape(len(GRID_STATES), -1).tolist(),
+            "q_pi": agent.q_values(GRID_STATES, agent.act(GRID_STATES)).tolist(),
+            "rl_steps": int(sum(e["steps"] for e in episodes)),
+            "wall_time": time.perf_counter() - start}
+
+
+def _groups(results: list[dict[str, Any]]) -> dict[tuple[str, float], list[dict[str, Any]]]:
+    groups: dict[tuple[str, float], list[dict[str, Any]]] = {}
+    for r in results:
+        groups.setdefault((r["spec"]["algorithm"], r["spec"]["lr"]), []).append(r)
+    return dict(sorted(groups.items()))
+
+
+def learning_curves(results: list[dict[str, Any]]) -> dict[tuple[str, float], dict[str, Any]]:
+    """Per (algorithm, lr): mean and standard error over seeds of return and steps per episode."""
+    curves = {}
+    for key, group in _groups(results).items():
+        n = min(len(r["episodes"]) for r in group)
+        returns = np.array([[e["return"] for e in r["episodes"][:n]] for r in group])
+        steps = np.array([[e["steps"] for e in r["episodes"][:n]] for r in group], dtype=float)
+        success = np.array([[e["success"] for e in r["episodes"][:n]] for r in group], dtype=float)
+        curves[key] = {"seeds": len(group), "return_mean": returns.mean(0),
+                       "return_sem": returns.std(0) / np.sqrt(len(group)),
+                       "steps_mean": steps.mean(0), "success_mean": success.mean(0)}
+    return curves
+
+
+def q_spread(results: list[dict[str, Any]]) -> dict[tuple[str, float], np.ndarray]:
+    """Per (algorithm, lr): std across seeds of Q for each of the 27 x 11 state-action pairs."""
+    return {key: np.array([r["q_given"] for r in group]).std(axis=0).ravel()
+            for key, group in _groups(results).items() if len(group) >= 2}

@@ -1,0 +1,274 @@
+"""One training-and-test run of the residual shaft insertion, in one process, without DDS.
+
+The ROS stack runs the simulator, the bridge with its 1 kHz loop, the EKF, the executor and the
+learner as separate nodes. Here the same cores are called directly: ``RobotLoop`` (sim + bridge +
+estimator) executes each wrench, ``Episode`` / ``ResidualTask`` / ``ActionNoise`` decide actions,
+rewards and episode ends exactly as the executor node does, and ``LearnerCore`` trains after every
+cycle of 20 steps exactly as the learner node does. Everything is read from the same ``config/``
+files; a run is a pure function of its :class:`RunSpec`, so the same seed gives the same steps.
+
+Difference to the ROS stack, by construction: the learner trains synchronously at the end of a
+cycle (the node trains while the robot keeps moving), and the executor's actor is refreshed right
+after each cycle instead of when the parameters message arrives.
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from robot_bridge_node.core.robot_loop import GroundTruthWrench, RobotLoop, build_panda_loop
+from robot_bridge_node.core.types import StepResult, WrenchSetpoint
+from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
+from sim_robot_node.core.panda_scene import N_START_POSES, PandaSceneConfig
+from sim_robot_node.core.params import config_dir, load_ros_params
+
+from qg_learning_node.core.episode import Actor, Episode, TransitionRecord
+from qg_learning_node.core.learner_params import learner_config_from_params
+from qg_learning_node.core.noise import ActionNoise, NoiseConfig
+from qg_learning_node.core.observation import observation_from_step
+from qg_learning_node.core.residual_task import (ACTION_DIM, STATE_DIM, Observation,
+                                                 ResidualTask, TaskConfig)
+from qg_learning_node.ddpg import ActorMLP, DDPG
+from qg_learning_node.learner_core import LearnerConfig, LearnerCore
+
+__all__ = ["ALGORITHMS", "ESTIMATORS", "StackSettings", "PandaTask", "LivePolicy", "RunSpec",
+           "algorithm_config", "run_episode", "run_training", "episode_noise_seed", "zero_policy",
+           "config_digest", "STACK_CONFIG_FILES"]
+
+#: Learner variants compared by the experiments. Vanilla DDPG as in the thesis: no bounds and no
+#: zero-action loops (its replay holds executed steps only); QG-DDPG: graph + a-priori bounds with
+#: the zero residual as zero action.
+ALGORITHMS = ("ddpg", "qgddpg")
+ESTIMATORS = ("ekf", "ground_truth")
+
+
+def algorithm_config(base: LearnerConfig, algorithm: str, action_dim: int) -> LearnerConfig:
+    """``base`` with the bounds, zero action and graph of ``algorithm`` (see :data:`ALGORITHMS`)."""
+    if algorithm == "ddpg":
+        return dataclasses.replace(base, use_qgraph=False, zero_action=None,
+                                   ddpg=dataclasses.replace(base.ddpg, bounds="none"))
+    if algorithm == "qgddpg":
+        return dataclasses.replace(base, use_qgraph=True, zero_action=(0.0,) * action_dim,
+                                   ddpg=dataclasses.replace(base.ddpg, bounds="qgraph+apriori"))
+    raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
+
+
+#: The files of ``config/`` whose numbers the runs use.
+STACK_CONFIG_FILES = ("panda_scene.yaml", "bridge.yaml", "wrench_estimator.yaml", "executor.yaml",
+                      "learner.yaml", "peg_env.yaml")
+
+
+def config_digest(directory: str | Path | None = None) -> str:
+    """Short hash of the stack's config files: a saved run is reused only under the same one."""
+    d = Path(directory) if directory else config_dir()
+    digest = hashlib.sha256()
+    for name in STACK_CONFIG_FILES:
+        digest.update(name.encode() + b"\0" + (d / name).read_bytes())
+    return digest.hexdigest()[:12]
+
+
+def episode_noise_seed(run_seed: int, index: int) -> int:
+    """Exploration-noise seed of episode ``index`` of a run (distinct across runs and episodes)."""
+    return 1_000_003 * run_seed + 1000 + index
+
+
+@dataclass(frozen=True)
+class StackSettings:
+    """What the ROS nodes read from ``config/``, read once: one source of numbers for both paths.
+
+    :param bridge: ``ros__parameters`` of ``bridge.yaml``; :param ekf: the ``ekf`` section of
+        ``wrench_estimator.yaml``; the rest are the executor's and learner's parsed sections.
+    """
+    scene: PandaSceneConfig
+    bridge: dict[str, Any]
+    ekf: dict[str, Any]
+    task: TaskConfig
+    noise: NoiseConfig
+    learner: LearnerConfig
+
+    @classmethod
+    def load(cls, directory: Path | None = None) -> StackSettings:
+        d = Path(directory) if directory else config_dir()
+        executor = load_ros_params(d / "executor.yaml")
+        return cls(scene=PandaSceneConfig.from_dict(
+                       load_ros_params(d / "panda_scene.yaml")["panda_scene"]),
+                   bridge=load_ros_params(d / "bridge.yaml"),
+                   ekf=load_ros_params(d / "wrench_estimator.yaml")["ekf"],
+                   task=TaskConfig.from_dict(executor["task"]),
+                   noise=NoiseConfig.from_dict(executor.get("noise", {})),
+                   learner=learner_config_from_params(
+                       load_ros_params(d / "learner.yaml")["learner"]))
+
+
+class PandaTask:
+    """The robot side of the stack in-process: simulator, bridge loop and wrench estimator.
+
+    It answers what the executor asks over DDS: a reset to a start pose, and one wrench executed
+    until rest, each as an :class:`Observation`.
+    :param estimator: ``ekf`` (what the ROS stack runs) or ``ground_truth`` (a perfect sensor).
+    """
+
+    def __init__(self, settings: StackSettings, estimator: str = "ekf") -> None:
+        if estimator not in ESTIMATORS:
+            raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
+        ekf = WrenchEKFConfig.from_dict(settings.ekf)
+        self.loop: RobotLoop = build_panda_loop(
+            settings.scene, settings.bridge,
+            (lambda scene, model: WrenchEKF(ekf, model)) if estimator == "ekf"
+            else (lambda scene, model: GroundTruthWrench(scene)))
+        self.residual = ResidualTask(settings.task)
+        self.sim_time = 0.0
+        self.steps = 0
+        self.step_timeouts = 0
+
+    def reset(self, initial_pose: int) -> Observation:
+        """Start pose ``initial_pose`` settled, observed like the end of a step."""
+        self.loop.reset(initial_pose)
+        tool = self.loop.controller.tool
+        return observation_from_step(StepResult(
+            duration=0.0, timed_out=False, linear_speed=tool.linear_speed,
+            angular_speed=tool.angular_speed, ground_truth=self.loop.scene.ground_truth(),
+            wrench_estimate=self.loop.wrench_estimate))
+
+    def step(self, action: np.ndarray) -> Observation:
+        """Execute the residual ``action`` (actor units) until the tool is at rest."""
+        result = self.loop.execute(WrenchSetpoint(self.residual.wrench(action)))
+        self.sim_time += result.duration
+        self.steps += 1
+        self.step_timeouts += int(result.timed_out)
+        return observation_from_step(result)
+
+
+class LivePolicy:
+    """The executor's copy of the actor, replaced after every training cycle."""
+
+    def __init__(self, agent: DDPG) -> None:
+        self.update(agent)
+
+    def update(self, agent: DDPG) -> None:
+        self.actor = ActorMLP.from_tensors(agent.actor_tensors())
+
+    def __call__(self, state: np.ndarray) -> np.ndarray:
+        return self.actor(state)
+
+
+def zero_policy(state: np.ndarray) -> np.ndarray:
+    """The base policy alone; with exploration noise on top it is a random residual policy."""
+    del state
+    return np.zeros(ACTION_DIM)
+
+
+def run_episode(env: PandaTask, episode: Episode, actor: Actor,
+                on_transition: Callable[[TransitionRecord], None] | None = None
+                ) -> dict[str, Any]:
+    """Drive ``episode`` to its end on ``env``; ``on_transition(record)`` after every step."""
+    episode.begin(env.reset(episode.initial_pose))
+    while not episode.done:
+        action = episode.choose_action(actor)
+        record: TransitionRecord = episode.observe(action, env.step(action))
+        if on_transition is not None:
+            on_transition(record)
+    return {"episode": episode.episode_id, "mode": episode.mode, "pose": episode.initial_pose,
+            "steps": episode.step, "success": episode.success, "end_reason": episode.end_reason,
+            "return": episode.episode_return}
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One learning run: a grid cell (or variant) of one algorithm with one seed.
+
+    :param critic_lr: the actor's is one tenth (``learner.yaml``'s ``actor_lr: 0``).
+    :param iterations: training iterations per cycle of ``cycle_steps`` RL steps.
+    :param replay_capacity: ``None`` keeps ``learner.yaml``'s setting; so does ``cycle_steps``.
+    :param reward: ``dense`` | ``sparse``.
+    """
+    algorithm: str
+    critic_lr: float
+    iterations: int
+    seed: int
+    train_episodes: int = 40
+    test_episodes: int = 8
+    train_max_steps: int = 1000
+    test_max_steps: int = 200
+    reward: str = "dense"
+    replay_capacity: int | None = None
+    cycle_steps: int | None = None
+    estimator: str = "ekf"
+    config_dir: str | None = None
+    experiment: str = "grid"
+
+    def __post_init__(self) -> None:
+        if self.algorithm not in ALGORITHMS:
+            raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {self.algorithm!r}")
+        if self.estimator not in ESTIMATORS:
+            raise ValueError(f"estimator must be one of {ESTIMATORS}, got {self.estimator!r}")
+        if self.train_episodes < 0 or self.test_episodes < 0:
+            raise ValueError("episode counts must be >= 0")
+        if not self.critic_lr > 0 or self.iterations < 1:
+            raise ValueError("critic_lr must be > 0 and iterations >= 1")
+
+    @property
+    def name(self) -> str:
+        extra = f"_{self.reward}" if self.reward != "dense" else ""
+        extra += f"_cap{self.replay_capacity}" if self.replay_capacity else ""
+        return f"{self.algorithm}_lr{self.critic_lr:g}_it{self.iterations}{extra}_s{self.seed}"
+
+    def learner_config(self, base: LearnerConfig) -> LearnerConfig:
+        config = algorithm_config(base, self.algorithm, ACTION_DIM)
+        ddpg = dataclasses.replace(config.ddpg, critic_lr=self.critic_lr, actor_lr=None,
+                                   seed=self.seed)
+        return dataclasses.replace(
+            config, ddpg=ddpg, iterations_per_cycle=self.iterations, seed=self.seed,
+            replay_capacity=self.replay_capacity or config.replay_capacity,
+            cycle_steps=self.cycle_steps or config.cycle_steps)
+
+    def run(self) -> dict[str, Any]:
+        return run_training(self)
+
+
+def run_training(spec: RunSpec) -> dict[str, Any]:
+    """Train for ``spec.train_episodes`` episodes, then test; records per episode and cycle.
+
+    :returns: ``spec``, ``episodes`` (train then test), ``cycles`` (diagnostics of every training
+        cycle, including ``mean_q``: the critic's mean prediction on that cycle's minibatches),
+        simulated/wall time and step counts.
+    """
+    torch.set_num_threads(1)
+    start = time.perf_counter()
+    settings = StackSettings.load(spec.config_dir)
+    task_config = dataclasses.replace(settings.task, train_max_steps=spec.train_max_steps,
+                                      test_max_steps=spec.test_max_steps)
+    env = PandaTask(dataclasses.replace(settings, task=task_config), spec.estimator)
+    learner = LearnerCore(spec.learner_config(settings.learner), STATE_DIM, ACTION_DIM)
+    policy = LivePolicy(learner.agent)
+    cycles: list[dict[str, Any]] = []
+
+    def learn(record: TransitionRecord) -> None:
+        if learner.add_transition(record.state, record.action, record.reward,
+                                  record.next_state, record.terminal):
+            diagnostics = learner.train_cycle()
+            cycles.append({k: float(v) for k, v in diagnostics.items()})
+            policy.update(learner.agent)
+
+    episodes = []
+    for index in range(spec.train_episodes):
+        noise = ActionNoise(settings.noise, ACTION_DIM, episode_noise_seed(spec.seed, index))
+        episode = Episode(f"train{index:03d}", "train", index % N_START_POSES, spec.reward,
+                          env.residual, noise)
+        episodes.append(run_episode(env, episode, policy, learn))
+    for index in range(spec.test_episodes):
+        episode = Episode(f"test{index:03d}", "test", index % N_START_POSES, spec.reward,
+                          env.residual)
+        episodes.append(run_episode(env, episode, policy))
+    return {"experiment": spec.experiment, "name": spec.name, "spec": dataclasses.asdict(spec),
+            "config_digest": config_digest(spec.config_dir), "episodes": episodes,
+            "cycles": cycles, "rl_steps": env.steps,
+            "step_timeouts": env.step_timeouts, "sim_time": env.sim_time,
+            "wall_time": time.perf_counter() - start}

@@ -1,0 +1,77 @@
+"""The whole experiment set of one profile: run what is missing, then write the report.
+
+Random baselines, the grid and the peg runs are independent and share one pool of (at most two)
+workers; the variants of experiment 4 need the grid's best cells, so they run after it.
+Results land in ``<out>/<profile>/<experiment>/`` and wall times in ``timing.json`` there.
+"""
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+from qg_learning_node.experiments import grid, peg, random_baselines, report
+from qg_learning_node.experiments.profile import Profile
+from qg_learning_node.experiments.tasks import MAX_WORKERS, load_results, run_specs
+
+__all__ = ["EXPERIMENTS", "run_suite", "all_specs", "planned_runs"]
+
+EXPERIMENTS = ("random", "grid", "variants", "peg")
+
+
+def all_specs(profile: Profile, only: tuple[str, ...] = EXPERIMENTS,
+              config_dir: str | None = None) -> list[Any]:
+    """The independent runs (grid, peg, random) of ``profile`` selected by ``only``."""
+    specs: list[Any] = []
+    if "grid" in only:        # the longest runs first: the two workers finish closer together
+        specs += grid.grid_specs(profile.grid, profile.estimator, config_dir)
+    if "peg" in only:
+        specs += peg.peg_specs(profile.peg, config_dir)
+    if "random" in only:
+        specs += random_baselines.baseline_specs(profile.random, profile.estimator, config_dir)
+    return specs
+
+
+def _record_time(out: Path, key: str, seconds: float, command: str) -> None:
+    path = out / "timing.json"
+    timing = json.loads(path.read_text()) if path.exists() else {}
+    timing[key] = {"wall_time": seconds, "command": command,
+                   "finished": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
+    path.write_text(json.dumps(timing, indent=1))
+
+
+def run_suite(profile: Profile, out: Path, docs: Path, only: tuple[str, ...] = EXPERIMENTS,
+              workers: int = MAX_WORKERS, command: str = "",
+              config_dir: str | None = None) -> Path:
+    """Run the selected experiments of ``profile`` (resuming saved runs) and write the report.
+
+    :returns: the written ``results.md``.
+    """
+    out = Path(out) / profile.name
+    out.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    specs = all_specs(profile, only, config_dir)
+    if specs:
+        step = "+".join(o for o in only if o != "variants")
+        run_specs(specs, out, workers, f"{profile.name}: {step}")
+        _record_time(out, step, time.perf_counter() - start, command)
+    if "variants" in only and (profile.variants.rewards or profile.variants.replay_capacities):
+        start = time.perf_counter()
+        rows = grid.cell_table(load_results(out, "grid"), None)
+        specs = grid.variant_specs(profile.grid, profile.variants, grid.best_cells(rows),
+                                   profile.estimator, config_dir)
+        run_specs(specs, out, workers, f"{profile.name}: variants")
+        _record_time(out, "variants", time.perf_counter() - start, command)
+    return report.write_report(profile, out, Path(docs), config_dir, planned_runs(profile))
+
+
+def planned_runs(profile: Profile) -> dict[str, int]:
+    """How many runs each experiment of ``profile`` has when it is complete."""
+    counts: dict[str, int] = {}
+    for spec in all_specs(profile):
+        counts[spec.experiment] = counts.get(spec.experiment, 0) + 1
+    v = profile.variants
+    counts["variants"] = (len(profile.grid.algorithms) * len(v.seeds)
+                          * (len(v.rewards) + len(v.replay_capacities)))
+    return counts

@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# The experiment suite in one command: setup (idempotent), then every experiment of a profile
+# through the fast in-process runner, then docs/results.md with its figures.
+#
+#   scripts/experiments.sh                  the full profile (planned for 2 hours on 2 cores)
+#   scripts/experiments.sh --profile small  a reduced set (about an hour)
+#   scripts/experiments.sh --profile tiny   every code path in a minute (also a CI test)
+# Further arguments go to `python -m qg_learning_node.experiments` (e.g. --only random,grid,
+# --report-only). Saved runs are reused, so an interrupted suite resumes where it stopped.
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+bash scripts/setup.sh
+args=("$@")
+[[ " ${args[*]-} " == *" --profile "* ]] || args=(--profile full "${args[@]}")
+exec .venv/bin/python -m qg_learning_node.experiments "${args[@]}"

@@ -1,0 +1,74 @@
+"""The fast experiment runner: determinism per seed, and every experiment path end to end.
+
+Uses the ``tiny`` profile of ``config/experiments.yaml`` (a handful of RL steps per run) with the
+real robot loop, EKF, episode logic and learner, so a broken composition fails here in CI.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+from robot_bridge_node.core.types import StepResult
+from sim_robot_node.core.types import GroundTruth
+
+from qg_learning_node.core.observation import observation_from_step
+from qg_learning_node.experiments import grid, peg
+from qg_learning_node.experiments.profile import load_profile
+from qg_learning_node.experiments.runner import RunSpec, run_training
+from qg_learning_node.experiments.suite import run_suite
+
+
+def _truth(success: bool) -> GroundTruth:
+    return GroundTruth(wrench=np.zeros(6), insertion_depth=0.01, plunger_travel=0.0,
+                       success=success, position_error=0.003,
+                       orientation_error=np.array([0.3, 0.4]), lateral_offset=0.002, tilt=0.1)
+
+
+def test_observation_takes_the_estimate_and_the_truth() -> None:
+    estimate = np.array([1.0, 2.0, -15.0, 0.1, 0.2, 0.0])
+    obs = observation_from_step(StepResult(0.1, False, 0.0, 0.0, _truth(True), estimate))
+    np.testing.assert_array_equal(obs.wrench, estimate)
+    assert obs.success and obs.position_error == 0.003 and obs.lateral_offset == 0.002
+    assert obs.orientation_error == pytest.approx(0.5)
+    with pytest.raises(ValueError, match="estimator"):
+        observation_from_step(StepResult(0.1, False, 0.0, 0.0, _truth(False), None))
+
+
+@pytest.mark.slow
+def test_same_seed_gives_identical_steps_and_training() -> None:
+    spec = RunSpec(algorithm="qgddpg", critic_lr=1e-2, iterations=3, seed=4, train_episodes=1,
+                   test_episodes=1, train_max_steps=4, test_max_steps=1, cycle_steps=2)
+    first, second = run_training(spec), run_training(spec)
+    assert first["episodes"] == second["episodes"]
+    assert [c["mean_q"] for c in first["cycles"]] == [c["mean_q"] for c in second["cycles"]]
+    assert len(first["cycles"]) == 2                       # 4 training steps, a cycle every 2
+    assert [e["mode"] for e in first["episodes"]] == ["train", "test"]
+    assert first["rl_steps"] == sum(e["steps"] for e in first["episodes"])
+    other = run_training(dataclasses.replace(spec, seed=5))
+    assert [c["mean_q"] for c in other["cycles"]] != [c["mean_q"] for c in first["cycles"]]
+
+
+@pytest.mark.slow
+def test_tiny_suite_writes_results_figures_and_report(tmp_path) -> None:
+    profile = load_profile("tiny")
+    page = run_suite(profile, tmp_path / "runs", tmp_path / "docs", workers=1,
+                     command="test").read_text()
+    out = tmp_path / "runs" / "tiny"
+    for experiment, count in (("random", 2), ("grid", 2), ("variants", 4), ("peg", 4)):
+        assert len(list((out / experiment).glob("*.json"))) == count, experiment
+    for section in ("## 1. Random baselines", "## 2. The grid", "## 3. Mean predicted Q",
+                    "## 4. Sparse reward", "## 5. Clearance-fit peg", "agree and disagree"):
+        assert section in page
+    for figure in ("exp1_random_steps", "exp3_mean_q", "exp5_peg_learning", "exp5_peg_q_std"):
+        assert (tmp_path / "docs" / "figures" / f"{figure}.png").stat().st_size > 1000
+    rows = grid.cell_table([json.loads(p.read_text()) for p in (out / "grid").glob("*.json")], 0.5)
+    assert {r["algorithm"] for r in rows} == {"ddpg", "qgddpg"}
+    assert all(r["mean_test_steps"] == 1.0 and not r["beats_random"] for r in rows)
+    spread = peg.q_spread([json.loads(p.read_text()) for p in (out / "peg").glob("*.json")])
+    assert all(s.shape == (27 * 11,) and np.all(s > 0) for s in spread.values())
+    # A second call finds every run saved and only rewrites the report.
+    before = {p: p.stat().st_mtime_ns for p in out.glob("*/*.json")}
+    run_suite(profile, tmp_path / "runs", tmp_path / "docs", workers=1, command="test")
+    assert {p: p.stat().st_mtime_ns for p in out.glob("*/*.json")} == before
