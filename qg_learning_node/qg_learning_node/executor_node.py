@@ -35,6 +35,10 @@ LATCHED = rclpy.qos.QoSProfile(depth=1, reliability=rclpy.qos.ReliabilityPolicy.
                                durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
 
 
+#: [s] how long StartEpisode waits for /sim/reset to be discovered before refusing.
+ROBOT_DISCOVERY_GRACE = 3.0
+
+
 class EpisodeAborted(Exception):
     """The episode cannot go on (stop request, robot gone, reset refused)."""
 
@@ -120,7 +124,8 @@ class ExecutorNode(Node):
             response.message = f"episode {self.episode.episode_id if self.episode else ''} " \
                                "is still running: stop it first (/executor/stop_episode)"
             return response
-        if not self.reset_client.service_is_ready():
+        # A robot process that has just come up may not be discovered yet: give it a moment.
+        if not self.reset_client.wait_for_service(timeout_sec=ROBOT_DISCOVERY_GRACE):
             response.success = False
             response.message = "the robot side is not up (/sim/reset unavailable): start " \
                                "`robot_bridge_node robot`"
