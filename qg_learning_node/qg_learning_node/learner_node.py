@@ -7,7 +7,6 @@ every episode it checkpoints networks, optimizers, Q-Graph and replay memory; wi
 """
 from __future__ import annotations
 
-import os
 import threading
 import time
 from pathlib import Path
@@ -16,6 +15,7 @@ from qg_interfaces.msg import ActorParameters, EpisodeStatus, LearnerDiagnostics
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 
+from sim_robot_node.core.params import runs_dir
 from sim_robot_node.node_runtime import node_params, run_nodes
 
 from qg_learning_node.conversions import actor_to_msg
@@ -28,12 +28,6 @@ from qg_learning_node.learner_core import LearnerCore
 CHECKPOINT_NAME = "learner.pt"
 #: [s] how long to wait for the last transitions of an ended episode before checkpointing.
 CHECKPOINT_GRACE = 3.0
-
-
-def runs_dir() -> Path:
-    """Where runs go: ``$QG_RUNS_DIR``, else ``<repo>/runs``."""
-    env = os.environ.get("QG_RUNS_DIR")
-    return Path(env) if env else Path(__file__).resolve().parents[2] / "runs"
 
 
 class LearnerNode(Node):

@@ -8,7 +8,6 @@ resetting and closes once the episode has ended and all of its transitions have 
 """
 from __future__ import annotations
 
-import os
 import threading
 import time
 from pathlib import Path
@@ -18,24 +17,19 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sim_robot_node.conversions import quaternion_from_matrix
+from sim_robot_node.core.params import runs_dir
 from sim_robot_node.node_runtime import node_params
 
 from robot_bridge_node.core.panda_model import JOINT_NAMES
 from robot_bridge_node.core.robot_loop import RobotLoop
 from robot_bridge_node.recording.episode_recorder import EpisodeRecorder
 
-__all__ = ["RecorderNode", "default_episodes_dir"]
+__all__ = ["RecorderNode"]
 
 _RELIABLE_DEEP = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 _LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 _FINAL = ("done", "aborted")
-
-
-def default_episodes_dir() -> Path:
-    """``$QG_RUNS_DIR/episodes`` if set, else ``<repo>/runs/episodes``."""
-    env = os.environ.get("QG_RUNS_DIR")
-    return (Path(env) if env else Path(__file__).resolve().parents[2] / "runs") / "episodes"
 
 
 class RecorderNode(Node):
@@ -52,7 +46,7 @@ class RecorderNode(Node):
         self.enabled = bool(p.get("record", True))
         self.ground_truth_every = max(1, int(p.get("ground_truth_every", 10)))
         self.close_timeout = float(p.get("close_timeout", 2.0))
-        self.recorder = EpisodeRecorder(Path(p.get("episodes_dir") or default_episodes_dir()))
+        self.recorder = EpisodeRecorder(Path(p.get("episodes_dir") or runs_dir() / "episodes"))
         self.lock = threading.Lock()
         self.episode_id = ""
         self.transitions = 0

@@ -16,7 +16,8 @@ T = TypeVar("T")
 
 import yaml
 
-__all__ = ["ConfigError", "config_dir", "config_from_dict", "load_ros_params", "unflatten"]
+__all__ = ["ConfigError", "config_dir", "config_from_dict", "load_ros_params", "runs_dir",
+           "unflatten"]
 
 
 class ConfigError(ValueError):
@@ -29,6 +30,12 @@ def config_dir() -> Path:
     if env:
         return Path(env)
     return Path(__file__).resolve().parents[3] / "config"
+
+
+def runs_dir() -> Path:
+    """Where runs are written (episode bags, checkpoints): ``$QG_RUNS_DIR``, else ``<repo>/runs``."""
+    env = os.environ.get("QG_RUNS_DIR")
+    return Path(env) if env else Path(__file__).resolve().parents[3] / "runs"
 
 
 def _merge(base: dict[str, Any], extra: dict[str, Any]) -> dict[str, Any]:
