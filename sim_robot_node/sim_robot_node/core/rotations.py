@@ -32,7 +32,7 @@ def tilt_from_down(rotation: np.ndarray) -> tuple[float, np.ndarray]:
     """Angle [rad] of the frame's z axis from straight down, and the unit axis (same frame as
     ``rotation``'s columns) about which a positive rotation turns it back; zero axis if aligned.
     """
-    zx, zy, zz = (float(v) for v in rotation[:, 2])
+    zx, zy, zz = rotation[:, 2].tolist()
     sin = math.hypot(zx, zy)                      # |z x (0, 0, -1)| = |(-zy, zx, 0)|
     angle = math.atan2(sin, -zz)
     if sin < 1e-12:
