@@ -23,7 +23,7 @@ from qg_learning_node.experiments.runner import (ESTIMATORS, PandaTask, StackSet
                                                  config_digest, episode_noise_seed, run_episode,
                                                  zero_policy)
 
-__all__ = ["BaselineSpec", "baseline_specs", "run_baseline", "summarize_baselines"]
+__all__ = ["BaselineSpec", "baseline_specs", "run_baseline", "summarize_baselines", "random_bar"]
 
 
 @dataclass(frozen=True)
@@ -101,6 +101,19 @@ def summarize_baselines(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
                      "wall_time": float(sum(r["wall_time"] for r in group)),
                      "sim_time": float(sum(r["sim_time"] for r in group))})
     return sorted(rows, key=lambda row: row["mean_steps"])
+
+
+def random_bar(rows: list[dict[str, Any]], cap: int) -> tuple[float, str] | None:
+    """The best random baseline's mean steps with every episode counted at most ``cap`` steps.
+
+    Learning runs are tested with their own step cap, and a failed test counts as that cap; the
+    random episodes are cut the same way so both means are over the same truncated quantity.
+    :returns: ``(mean, label)`` of the best setting, or ``None`` without baselines.
+    """
+    if not rows:
+        return None
+    capped = [(float(np.minimum(row["steps"], cap).mean()), row["label"]) for row in rows]
+    return min(capped)
 
 
 def baseline_specs(budget: RandomBudget, estimator: str = "ekf",

@@ -21,7 +21,8 @@ import numpy as np  # noqa: E402
 
 from qg_learning_node.experiments import grid, peg  # noqa: E402
 from qg_learning_node.experiments.profile import Profile  # noqa: E402
-from qg_learning_node.experiments.random_baselines import summarize_baselines  # noqa: E402
+from qg_learning_node.experiments.random_baselines import (random_bar,  # noqa: E402
+                                                           summarize_baselines)
 from qg_learning_node.experiments.runner import StackSettings  # noqa: E402
 from qg_learning_node.experiments.tasks import load_results  # noqa: E402
 
@@ -147,6 +148,42 @@ def _q_runs(results: list[dict[str, Any]], rows: list[dict[str, Any]]) -> dict[s
             chosen[f"{_NAMES[a]} {tag} (lr {row['critic_lr']:g}, {row['iterations']} it)"] = \
                 (a, tag, runs)
     return chosen
+
+
+def _learning_curves(results: list[dict[str, Any]], rows: list[dict[str, Any]],
+                     figures: Path, bar: float | None) -> list[str]:
+    """Steps per episode (training, then test) of the best and worst cell of each algorithm:
+    the mean over seeds with the standard deviation of that mean shaded, as in the thesis."""
+    if not rows:
+        return []
+    chosen = _q_runs(results, rows)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True)
+    for ax, tag in zip(axes, ("best", "worst")):
+        for label, (a, run_tag, runs) in chosen.items():
+            if run_tag != tag or not runs:
+                continue
+            steps = np.array([[e["steps"] for e in r["episodes"]] for r in runs], dtype=float)
+            mean = steps.mean(axis=0)
+            sem = steps.std(axis=0) / math.sqrt(len(runs))
+            x = np.arange(1, steps.shape[1] + 1)
+            ax.plot(x, mean, color=_COLORS[a], label=f"{label}, {len(runs)} seeds")
+            ax.fill_between(x, mean - sem, mean + sem, color=_COLORS[a], alpha=0.2)
+        n_train = runs[0]["spec"]["train_episodes"] if chosen else 0
+        ax.axvline(n_train + 0.5, color="k", lw=1)
+        ax.text(n_train + 0.7, ax.get_ylim()[1] * 0.95 if ax.get_ylim()[1] > 0 else 1, "test",
+                fontsize=8, va="top")
+        if bar is not None:
+            ax.axhline(bar, color="gray", ls="--", lw=1, label="best random (cut at test cap)")
+        ax.set_xlabel("episode (training, then test)")
+        ax.set_title(f"{tag} cell of each algorithm")
+        ax.legend(fontsize=7)
+    axes[0].set_ylabel("steps per episode (failures at the cap)")
+    fig.tight_layout()
+    fig.savefig(figures / "exp2_learning_curves.png", dpi=110)
+    plt.close(fig)
+    return ["Learning curves of the best and worst cell of each algorithm (mean over seeds, "
+            "shaded: standard deviation of the mean):", "",
+            "![learning curves](figures/exp2_learning_curves.png)", ""]
 
 
 def _q_section(results: list[dict[str, Any]], rows: list[dict[str, Any]], figures: Path,
@@ -326,8 +363,10 @@ def _comparison(random_rows: list[dict[str, Any]], grid_rows: list[dict[str, Any
                 text += (f"; median Q spread across seeds QG-DDPG {np.median(sq):.3g} vs DDPG "
                          f"{np.median(sd):.3g} (thesis at lr 1e-4: clearly smaller with QG)")
             notes.append(text + ".")
-    notes.append("- Budgets are far below the thesis's (see the budget table), with one seed per "
-                 "grid cell: differences of a few steps between cells are within seed noise.")
+    seeds = sorted({r["spec"]["seed"] for r in grid_results})
+    notes.append(f"- Budgets are far below the thesis's (see the budget table), with "
+                 f"{len(seeds)} seed(s) per grid cell: differences of a few steps between cells "
+                 "are within seed noise.")
     return notes + [""]
 
 
@@ -345,9 +384,12 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
     variant_results = load_results(out, "variants")
     peg_results = load_results(out, "peg")
     random_rows = summarize_baselines(random_results) if random_results else []
-    bar = random_rows[0]["mean_steps"] if random_rows else None
-    bar_label = (f"{random_rows[0]['label']}, {bar:.1f} steps" if random_rows
-                 else "no random baseline run: nothing marked")
+    test_cap = (grid_results[0]["spec"]["test_max_steps"] if grid_results
+                else profile.grid.test_max_steps)
+    best = random_bar(random_rows, test_cap)
+    bar = best[0] if best else None
+    bar_label = (f"{best[1]}, {bar:.1f} steps with its episodes cut at the test cap of "
+                 f"{test_cap}" if best else "no random baseline run: nothing marked")
     grid_rows = grid.cell_table(grid_results, bar)
     variant_rows = grid.cell_table(variant_results, bar)
     _write_csv(out / "random_summary.csv", random_rows)
@@ -385,7 +427,7 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
     results_by = {"random": random_results, "grid": grid_results, "variants": variant_results,
                   "peg": peg_results}
     budget = {
-        "random": ("random baselines", "several noises, 1000-step cap",
+        "random": ("random baselines", "several noises, 1000-step cap, up to 3000 steps each",
                    f"{len(pr.noises)} settings x {pr.episodes} episodes, cap {pr.max_steps}"),
         "grid": ("grid", "8 cells x 2 algorithms x 3 seeds, 40 train + 8 test episodes (cap 200)",
                  f"{len(pg.cells)} cells x {len(pg.algorithms)} algorithms x {len(pg.seeds)} "
@@ -413,6 +455,7 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
               "deterministic per seed (tested in `tests/experiments/test_runner.py`).", ""]
     lines += _random_section(random_rows, random_results, figures)
     lines += _grid_section(grid_rows, grid_results, bar, bar_label)
+    lines += _learning_curves(grid_results, grid_rows, figures, bar)
     lines += _q_section(grid_results, grid_rows, figures, q_range)
     lines += _variant_section(variant_rows, bar)
     peg_lines, peg_data = _peg_section(peg_results, figures)
