@@ -37,6 +37,9 @@ LATCHED = rclpy.qos.QoSProfile(depth=1, reliability=rclpy.qos.ReliabilityPolicy.
 
 #: [s] how long StartEpisode waits for /sim/reset to be discovered before refusing.
 ROBOT_DISCOVERY_GRACE = 3.0
+#: [s] an episode's first step waits this long for a learner never heard from (it may just
+#: not be discovered yet) before running degraded with the zero residual.
+LEARNER_DISCOVERY_GRACE = 3.0
 
 
 class EpisodeAborted(Exception):
@@ -108,6 +111,13 @@ class ExecutorNode(Node):
             self.at_rest[int(msg.seq)] = msg
         self.at_rest_event.set()
 
+    def _await_first_learner_contact(self, timeout: float) -> None:
+        """Give a learner that was never heard from ``timeout`` seconds to be discovered."""
+        deadline = time.monotonic() + timeout
+        while (self.last_learner_time == -float("inf") and time.monotonic() < deadline
+               and not self.stop_requested.is_set()):
+            time.sleep(0.01)
+
     def learner_alive(self) -> bool:
         return time.monotonic() - self.last_learner_time < self.learner_timeout
 
@@ -163,6 +173,7 @@ class ExecutorNode(Node):
     def _run_episode(self, episode: Episode) -> None:
         try:
             episode.begin(observation_from_msg(self._reset(episode)))
+            self._await_first_learner_contact(LEARNER_DISCOVERY_GRACE)
             self._set_state("running")
             while not episode.done:
                 if self.stop_requested.is_set():

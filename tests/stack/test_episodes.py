@@ -1,6 +1,7 @@
 """End to end with real processes: robot, executor and learner, episodes by service call."""
 from __future__ import annotations
 
+import dataclasses
 import signal
 import time
 from pathlib import Path
@@ -202,3 +203,51 @@ def test_executor_without_robot_refuses_with_a_clear_message(stack):
     with stack.client() as cli:
         response = Episodes(cli).start(mode="train")
         assert not response.success and "robot side is not up" in response.message
+
+
+def test_in_process_runner_repeats_the_ros_stack_episode(stack, tmp_path):
+    """The experiments' fast runner must agree with the ROS stack: the same test episode (same
+    start pose, the learner's initial actor, no noise) gives the same transitions in both."""
+    from qg_learning_node.core.episode import Episode
+    from qg_learning_node.core.learner_params import learner_config_from_params
+    from qg_learning_node.experiments.runner import (LivePolicy, PandaTask, StackSettings,
+                                                     run_episode)
+    from qg_learning_node.learner_core import LearnerCore
+    from qg_learning_node.core.residual_task import ACTION_DIM, STATE_DIM
+    from qg_learning_node.offline import iter_transitions
+    from sim_robot_node.core.params import config_dir, load_ros_params
+
+    steps, pose = 4, 3
+    executor = ("executor", "qg_learning_node", "executor",
+                ("--ros-args", "-p", f"task.test_max_steps:={steps}"))
+    stack.start(ROBOT, learner_spec(tmp_path / "checkpoints"), executor)
+    with stack.client() as cli:
+        episodes = Episodes(cli)
+        episodes.wait_for_learner()
+        response = episodes.start(mode="test", initial_pose=pose, reward="dense")
+        assert response.success, response.message + stack.logs()
+        final = episodes.final(response.episode_id, timeout=240.0)
+        assert final.state == "done" and not final.degraded, final.message + stack.logs()
+    bag = wait_for_bag(Path(stack.env["QG_RUNS_DIR"]) / "episodes", response.episode_id)
+    ros = sorted(iter_transitions([bag]), key=lambda t: t.step)
+
+    settings = StackSettings.load()
+    settings = dataclasses.replace(
+        settings, task=dataclasses.replace(settings.task, test_max_steps=steps))
+    params = load_ros_params(config_dir() / "learner.yaml", "learner")["learner"]
+    learner = LearnerCore(learner_config_from_params(params), STATE_DIM, ACTION_DIM)
+    env = PandaTask(settings, "ekf")
+    local: list = []
+    episode = Episode("local", "test", pose, "dense", env.residual)
+    result = run_episode(env, episode, LivePolicy(learner.agent), local.append)
+
+    assert result["steps"] == final.step == len(ros) >= 1
+    # Same code, same numbers; the two processes' physics differ only by float rounding (the
+    # first states and actions are identical, later ones within ~1e-6).
+    for mine, theirs in zip(local, ros):
+        np.testing.assert_allclose(mine.action, theirs.action, atol=1e-5)
+        np.testing.assert_allclose(mine.state, theirs.state, atol=1e-5)
+        np.testing.assert_allclose(mine.next_state, theirs.next_state, atol=1e-5)
+        assert mine.reward == pytest.approx(theirs.reward, abs=1e-5)
+        assert mine.terminal == theirs.terminal
+    np.testing.assert_array_equal(local[0].state, ros[0].state)
