@@ -17,12 +17,16 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from .bag_reader import bag_info, read_raw
 
 __all__ = ["PlayResult", "message_class", "play"]
+
+#: [s] at the end, how long to wait for subscribers to acknowledge the last reliable messages.
+ACK_TIMEOUT_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -105,6 +109,10 @@ def play(
             publishers[message.topic].publish(message.data)
             last, last_t = time.monotonic(), message.t_ns
             count += 1
+        # The last reliable messages may still be in flight: destroying the node now would drop
+        # them, so wait (bounded) until every matched subscriber has acknowledged them.
+        for publisher in publishers.values():
+            publisher.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
         return PlayResult(count, 0.0 if first_t is None else (last_t - first_t) * 1e-9,
                           0.0 if first_t is None else last - start)
     finally:
