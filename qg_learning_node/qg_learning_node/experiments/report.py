@@ -168,10 +168,10 @@ def _learning_curves(results: list[dict[str, Any]], rows: list[dict[str, Any]],
             x = np.arange(1, steps.shape[1] + 1)
             ax.plot(x, mean, color=_COLORS[a], label=f"{label}, {len(runs)} seeds")
             ax.fill_between(x, mean - sem, mean + sem, color=_COLORS[a], alpha=0.2)
-        n_train = runs[0]["spec"]["train_episodes"] if chosen else 0
+        n_train = results[0]["spec"]["train_episodes"]
         ax.axvline(n_train + 0.5, color="k", lw=1)
-        ax.text(n_train + 0.7, ax.get_ylim()[1] * 0.95 if ax.get_ylim()[1] > 0 else 1, "test",
-                fontsize=8, va="top")
+        ax.text(n_train + 0.7, 0.97, "test", transform=ax.get_xaxis_transform(), fontsize=8,
+                va="top")
         if bar is not None:
             ax.axhline(bar, color="gray", ls="--", lw=1, label="best random (cut at test cap)")
         ax.set_xlabel("episode (training, then test)")
