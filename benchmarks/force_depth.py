@@ -19,7 +19,8 @@ import time
 import numpy as np
 from robot_bridge_node.core.robot_loop import RobotLoop, build_panda_loop
 from robot_bridge_node.core.types import PoseReference, WrenchSetpoint
-from sim_robot_node.core.panda_scene import N_START_POSES
+from sim_robot_node.core.panda_scene import N_START_POSES, PandaSceneConfig
+from sim_robot_node.core.params import config_dir, load_ros_params
 
 PUSH = -15.0
 UPRIGHT = np.diag([1.0, -1.0, -1.0])
@@ -113,8 +114,11 @@ def main() -> None:
     parser.add_argument("--force-only", action="store_true", help="only the force-vs-depth part")
     args = parser.parse_args()
     wall = time.perf_counter()
-    loop = build_panda_loop()
-    out: dict = {}
+    # the stack's own numbers (config/panda_scene.yaml, config/bridge.yaml: rest.max_time & co)
+    scene = load_ros_params(config_dir() / "panda_scene.yaml")["panda_scene"]
+    loop = build_panda_loop(PandaSceneConfig.from_dict(scene),
+                            load_ros_params(config_dir() / "bridge.yaml"))
+    out: dict = {"rest_max_time": loop.rest.config.max_time}
     if args.force_only:
         out.update(force_depth(loop))
         out["wall_s"] = round(time.perf_counter() - wall, 1)

@@ -2,7 +2,7 @@
 # The experiment suite in one command: setup (idempotent), then every experiment of a profile
 # through the fast in-process runner, then docs/results.md with its figures.
 #
-#   scripts/experiments.sh                  the full profile (planned for 2 hours on 2 cores)
+#   scripts/experiments.sh                  the thesis profile (about an hour on 2 cores)
 #   scripts/experiments.sh --profile small  a reduced set (about an hour)
 #   scripts/experiments.sh --profile tiny   every code path in a minute (also a CI test)
 # Further arguments go to `python -m qg_learning_node.experiments` (e.g. --only random,grid,
@@ -12,5 +12,5 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 bash scripts/setup.sh
 args=("$@")
-[[ " ${args[*]-} " == *" --profile "* ]] || args=(--profile full "${args[@]}")
+[[ " ${args[*]-} " == *" --profile "* ]] || args=(--profile thesis "${args[@]}")
 exec .venv/bin/python -m qg_learning_node.experiments "${args[@]}"

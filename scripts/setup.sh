@@ -44,7 +44,8 @@ fi
 if [[ "$(cat "$STAMPS/cmakefix" 2>/dev/null)" != "$deps_hash" ]]; then
   py_inc="$("$PY" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')"
   np_inc="$("$PY" -c 'import numpy; print(numpy.get_include())')"
-  grep -rl --include='*.cmake' '/opt/python/cp311-cp311' "$VENV/share" 2>/dev/null | while read -r f; do
+  # (grep finds nothing once the files are patched: not an error under pipefail)
+  { grep -rl --include='*.cmake' '/opt/python/cp311-cp311' "$VENV/share" 2>/dev/null || true; } | while read -r f; do
     sed -i -e "s#/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include#${np_inc}#g" \
            -e "s#/opt/python/cp311-cp311/include/python3.11#${py_inc}#g" "$f"
   done

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 from qg_interfaces.msg import ActorParameters, AtRest, Transition
+from scipy.spatial.transform import Rotation
 
 from qg_learning_node.core.episode import TransitionRecord
 from qg_learning_node.core.residual_task import Observation
@@ -12,12 +13,13 @@ __all__ = ["observation_from_msg", "transition_to_msg",
 
 
 def observation_from_msg(msg: AtRest) -> Observation:
-    w, gt = msg.wrench_estimate, msg.ground_truth
+    w, gt, q = msg.wrench_estimate, msg.ground_truth, msg.ee_pose.orientation
     return Observation(
         wrench=np.array([w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y, w.torque.z]),
         success=bool(gt.success), position_error=float(gt.position_error),
         orientation_error=float(np.linalg.norm(np.asarray(gt.orientation_error, float))),
-        lateral_offset=float(gt.lateral_offset))
+        lateral_offset=float(gt.lateral_offset),
+        tool_rotation=Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix())
 
 
 def transition_to_msg(t: TransitionRecord) -> Transition:

@@ -161,6 +161,11 @@ class ActorMLP:
             raise ValueError('expected weight/bias pairs')
         return cls(list(zip(arrays[0::2], arrays[1::2])))
 
+    @property
+    def input_dim(self) -> int:
+        """Length of the state the actor takes."""
+        return int(self.layers[0][0].shape[1])
+
     def __call__(self, state: np.ndarray) -> np.ndarray:
         x = np.asarray(state, dtype=np.float32)
         for weight, bias in self.layers:

@@ -99,6 +99,12 @@ class ExecutorNode(Node):
         except (ValueError, KeyError) as exc:
             self.get_logger().error(f"ignoring malformed actor parameters v{msg.version}: {exc}")
             return
+        if actor.input_dim != self.task.state_dim:
+            self.get_logger().error(
+                f"ignoring actor v{msg.version}: it takes {actor.input_dim}-D states, the "
+                f"{self.task.config.observation!r} observation is {self.task.state_dim}-D "
+                "(set the learner's `observation` to the executor's `task.observation`)")
+            return
         with self.lock:
             self.actor, self.actor_version = actor, int(msg.version)
             self.last_learner_time = time.monotonic()

@@ -1,9 +1,16 @@
 """Learner core: replay memory, Q-Graph and DDPG agent driven by 20-step training cycles (SPEC §2).
 
 Shared by the ROS learner node and the fast experiment runner, so both learn identically. It only
-sees transitions: ``add_transition`` after every RL step returns True when a cycle of
-``cycle_steps`` steps is complete, then ``train_cycle`` runs ``iterations_per_cycle`` train steps
-and bumps ``actor_version`` (the executor should switch to the new actor).
+sees transitions: ``add_transition`` after every RL step returns True when training is due, then
+``train_cycle`` runs the due train steps and bumps ``actor_version`` (the executor should switch
+to the new actor). Two schedules decide when training is due:
+
+* ``cycle`` (the thesis): ``iterations_per_cycle`` train steps after every ``cycle_steps`` steps;
+* ``async`` (beyond the thesis, as SERL's actor-learner split): the learner keeps training while
+  the robot moves, ``updates_per_step`` train steps per received transition on average, and
+  hands out a new actor every ``publish_every`` train steps. The learner node runs it in its own
+  thread; the in-process runner, which has no second thread, trains the same number of steps
+  synchronously, so its results are the deterministic stand-in for the node's.
 
 Zero actions: when ``zero_action`` is set, the never-executed self-loop ``(s', a_zero, r, s')`` goes
 into the Q-Graph AND into replay memory. Decision and reason: the thesis trains the zero-action
@@ -29,9 +36,10 @@ from qg_learning_node.ddpg import DDPG, DIAGNOSTIC_KEYS, DDPGConfig
 from qg_learning_node.qgraph import TRANSITION_KINDS, QGraph
 from qg_learning_node.replay import ReplayMemory
 
-__all__ = ['LearnerConfig', 'LearnerCore']
+__all__ = ['LearnerConfig', 'LearnerCore', 'SCHEDULES']
 
 _GRAPH_BOUNDS = ('qgraph', 'qgraph+apriori')
+SCHEDULES = ('cycle', 'async')
 
 
 @dataclass(frozen=True)
@@ -49,6 +57,11 @@ class LearnerConfig:
     :param census_every: recompute the graph census every this many cycles (it walks the whole
         graph, ~0.1 s per 80k transitions); the last census is reported in between.
     :param seed: seed of minibatch sampling (the networks use ``ddpg.seed``).
+    :param graph_resolution: Q-Graph state-merging grid in scaled state units (0: exact states,
+        the thesis; see ``qgraph``).
+    :param schedule: ``cycle`` | ``async`` (see the module docstring).
+    :param updates_per_step: ``async``: train steps per received transition.
+    :param publish_every: ``async``: train steps between two published actors.
     """
 
     ddpg: DDPGConfig = field(default_factory=DDPGConfig)
@@ -60,8 +73,16 @@ class LearnerConfig:
     batch_size: int = 64
     census_every: int = 1
     seed: int = 0
+    graph_resolution: float = 0.0
+    schedule: str = 'cycle'
+    updates_per_step: float = 10.0
+    publish_every: int = 20
 
     def __post_init__(self) -> None:
+        if self.schedule not in SCHEDULES:
+            raise ValueError(f'schedule must be one of {SCHEDULES}, got {self.schedule!r}')
+        if not self.updates_per_step > 0 or self.publish_every < 1:
+            raise ValueError('updates_per_step must be > 0 and publish_every >= 1')
         if self.zero_action is not None:
             object.__setattr__(self, 'zero_action', tuple(float(x) for x in self.zero_action))
         if self.replay_capacity is not None and self.replay_capacity < 1:
@@ -101,10 +122,11 @@ class LearnerCore:
             raise ValueError(f'zero_action needs {action_dim} entries, '
                              f'got {len(config.zero_action)}')
         self.replay = ReplayMemory(config.replay_capacity, state_dim, action_dim)
-        self.graph = (QGraph(config.ddpg.gamma, config.replay_capacity, self.zero_action)
-                      if config.use_qgraph else None)
+        self.graph = (QGraph(config.ddpg.gamma, config.replay_capacity, self.zero_action,
+                             config.graph_resolution) if config.use_qgraph else None)
         self.agent = DDPG(config.ddpg, state_dim, action_dim)
         self.steps = 0
+        self.updates = 0
         self.actor_version = 0
         self._census: dict = {}
 
@@ -119,13 +141,25 @@ class LearnerCore:
         if self.graph is not None:
             self.graph.add(s, a, r, s_next, terminal)
         self.steps += 1
-        return self.steps % self.config.cycle_steps == 0
+        return self.training_due()
+
+    def training_due(self) -> bool:
+        """Whether ``train_cycle`` should run now: train steps are owed for the transitions so
+        far (false again once they are done, so ``while training_due(): train_cycle()`` is safe)."""
+        if self.config.schedule == 'async':
+            return self.updates + self.config.publish_every <= (self.config.updates_per_step
+                                                                * self.steps)
+        owed = (self.steps // self.config.cycle_steps) * self.config.iterations_per_cycle
+        return self.steps % self.config.cycle_steps == 0 and self.updates < owed
 
     def train_cycle(self) -> dict:
-        """``iterations_per_cycle`` train steps; averaged diagnostics, census and actor version."""
+        """The due train steps (``iterations_per_cycle``, or ``publish_every`` when ``async``);
+        averaged diagnostics, census and the new actor version."""
+        iterations = (self.config.publish_every if self.config.schedule == 'async'
+                      else self.config.iterations_per_cycle)
         ddpg = self.config.ddpg
         totals = dict.fromkeys(DIAGNOSTIC_KEYS, 0.0)
-        for _ in range(self.config.iterations_per_cycle):
+        for _ in range(iterations):
             batch = self.replay.sample(self.config.batch_size, self.rng)
             if self.graph is not None:
                 batch = batch._replace(
@@ -136,14 +170,15 @@ class LearnerCore:
             diagnostics = self.agent.train_step(batch, reward_range, context)
             for key in DIAGNOSTIC_KEYS:
                 totals[key] += diagnostics[key]
-        result = {k: v / self.config.iterations_per_cycle for k, v in totals.items()}
+        self.updates += iterations
+        result = {k: v / iterations for k, v in totals.items()}
         if self.graph is not None:
             if self.actor_version % self.config.census_every == 0:
                 census = self.graph.census()
                 self._census = {k: census[k] for k in (*TRANSITION_KINDS, 'total')}
             result.update(self._census)
         self.actor_version += 1
-        result.update(actor_version=self.actor_version, steps=self.steps,
+        result.update(actor_version=self.actor_version, steps=self.steps, updates=self.updates,
                       replay_size=len(self.replay))
         return result
 
@@ -157,6 +192,7 @@ class LearnerCore:
             'graph': None if self.graph is None else self.graph.state_dict(),
             'rng': self.rng.bit_generator.state,
             'steps': self.steps,
+            'updates': self.updates,
             'actor_version': self.actor_version,
             'census': self._census,
         }, pathlib.Path(path))
@@ -171,5 +207,6 @@ class LearnerCore:
             core.graph = QGraph.from_state_dict(state['graph'])
         core.rng.bit_generator.state = state['rng']
         core.steps, core.actor_version = state['steps'], state['actor_version']
+        core.updates = state.get('updates', core.actor_version * core.config.iterations_per_cycle)
         core._census = state['census']
         return core

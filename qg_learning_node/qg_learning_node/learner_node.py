@@ -1,7 +1,10 @@
 """The ``learner`` node: QG-DDPG on the transitions the executor publishes.
 
-Every ``cycle_steps`` transitions it trains ``iterations_per_cycle`` times and publishes the new
-actor (latched, so a restarted executor gets it at once) and its diagnostics. At the end of
+With ``learner.schedule: cycle`` (the thesis) it trains ``iterations_per_cycle`` times every
+``cycle_steps`` transitions, in the transition callback; with ``async`` a training thread keeps
+training while the robot moves (``updates_per_step`` per transition, see ``learner_core``).
+Each time it publishes the new actor (latched, so a restarted executor gets it at once) and its
+diagnostics. At the end of
 every episode it checkpoints networks, optimizers, Q-Graph and replay memory; with
 ``resume: true`` a restarted learner continues from the last checkpoint.
 """
@@ -9,6 +12,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from qg_interfaces.msg import ActorParameters, EpisodeStatus, LearnerDiagnostics, Transition
@@ -21,7 +25,7 @@ from sim_robot_node.node_runtime import node_params, run_nodes
 from qg_learning_node.conversions import actor_to_msg
 from qg_learning_node.core.episode import TransitionRecord
 from qg_learning_node.core.learner_params import learner_config_from_params
-from qg_learning_node.core.residual_task import ACTION_DIM, STATE_DIM
+from qg_learning_node.core.residual_task import ACTION_DIM, state_dim
 from qg_learning_node.executor_node import LATCHED, RELIABLE_DEEP
 from qg_learning_node.learner_core import LearnerCore
 
@@ -43,7 +47,8 @@ class LearnerNode(Node):
             self.get_logger().info(f"resumed from {self.checkpoint}: {self.core.steps} "
                                    f"transitions, actor v{self.core.actor_version}")
         else:
-            self.core = LearnerCore(config, STATE_DIM, ACTION_DIM)
+            self.core = LearnerCore(config, state_dim(p.get("observation", "thesis")),
+                                    ACTION_DIM)
         self.lock = threading.Lock()
         self.received: dict[str, int] = {}        # transitions per episode id
         self.pending_checkpoint: dict[str, tuple[int, float]] = {}  # id -> (final steps, ended at)
@@ -67,12 +72,26 @@ class LearnerNode(Node):
             cycle_due = self.core.add_transition(t.state, t.action, t.reward, t.next_state,
                                                  t.terminal)
             self.received[t.episode_id] = self.received.get(t.episode_id, 0) + 1
+            cycle_due = cycle_due and self.core.config.schedule == "cycle"
             if cycle_due:
                 self.last_diagnostics = self.core.train_cycle()
         if cycle_due:
             self._publish_actor()
             self._publish_diagnostics()
         self._maybe_checkpoint(t.episode_id)
+
+    def train_while_running(self, stop: threading.Event) -> None:
+        """The ``async`` schedule's training thread: train whenever updates are due."""
+        while not stop.is_set():
+            with self.lock:
+                due = self.core.training_due()
+                if due:
+                    self.last_diagnostics = self.core.train_cycle()
+            if due:
+                self._publish_actor()
+                self._publish_diagnostics()
+            else:
+                stop.wait(0.002)
 
     def _on_status(self, msg: EpisodeStatus) -> None:
         if msg.state in ("done", "aborted") and msg.episode_id and msg.mode == "train" \
@@ -118,7 +137,7 @@ class LearnerNode(Node):
     def _publish_diagnostics(self) -> None:
         d = self.last_diagnostics
         msg = LearnerDiagnostics(actor_version=self.core.actor_version,
-                                 updates=self.core.actor_version * self.core.config.iterations_per_cycle,
+                                 updates=self.core.updates,
                                  transitions=self.core.steps)
         msg.stamp = self.get_clock().now().to_msg()
         for key in ("critic_loss", "actor_loss", "mean_q", "frac_raised_lower",
@@ -130,8 +149,26 @@ class LearnerNode(Node):
         self.diagnostics_pub.publish(msg)
 
 
+def _start_training_thread(nodes: list[Node]) -> Callable[[], None]:
+    """The ``async`` schedule trains in its own thread; ``cycle`` needs none."""
+    node = nodes[0]
+    assert isinstance(node, LearnerNode)
+    if node.core.config.schedule != "async":
+        return lambda: None
+    stop = threading.Event()
+    thread = threading.Thread(target=node.train_while_running, args=(stop,),
+                              name="learner-training", daemon=True)
+    thread.start()
+
+    def stop_training() -> None:
+        stop.set()
+        thread.join(timeout=5.0)
+
+    return stop_training
+
+
 def main(args: list[str] | None = None) -> int:
-    return run_nodes([LearnerNode], ["learner.yaml"], args)
+    return run_nodes([LearnerNode], ["learner.yaml"], args, background=_start_training_thread)
 
 
 if __name__ == "__main__":

@@ -39,6 +39,14 @@ transitions that reached ``s'`` (a reference count), so capacity counts real tra
 
 Determinism assumption: an edge is identified by ``(s, a)``. A repeated ``(s, a)`` only raises the
 multiplicity of the stored edge; its first ``(r, s')`` is kept.
+
+State merging (``resolution > 0``, beyond the thesis): continuous states of a real task never
+repeat bit for bit, so the exact graph is a set of chains joined only by the zero-action loops,
+and its bounds are mostly ``r / (1 - gamma)`` of those loops. Rounding every state to a grid of
+``resolution`` (in scaled state units) before identifying it joins the chains of different
+episodes that pass through the same cell, so a path to the goal found once bounds every
+transition that reaches that cell. The price: the graph's MDP is then an aggregation of the real
+one, and its values are lower bounds only up to the value spread inside a cell.
 """
 
 from __future__ import annotations
@@ -77,16 +85,20 @@ class QGraph:
     :param gamma: discount factor in [0, 1).
     :param capacity: maximum number of real (executed) transitions; ``None`` = unbounded.
     :param zero_action: action that leaves the state unchanged; enables the self-loops.
+    :param resolution: grid cell size for identifying states (0: exact, the thesis's graph).
     """
 
     def __init__(self, gamma: float, capacity: int | None = None,
-                 zero_action: np.ndarray | None = None) -> None:
+                 zero_action: np.ndarray | None = None, resolution: float = 0.0) -> None:
         if not 0.0 <= gamma < 1.0:
             raise ValueError(f'gamma must lie in [0, 1), got {gamma}')
         if capacity is not None and capacity < 1:
             raise ValueError(f'capacity must be >= 1 or None, got {capacity}')
+        if not resolution >= 0.0:
+            raise ValueError(f'resolution must be >= 0, got {resolution}')
         self.gamma = float(gamma)
         self.capacity = capacity
+        self.resolution = float(resolution)
         self.zero_action = (None if zero_action is None
                             else np.asarray(zero_action, dtype=np.float64).ravel().copy())
         self._zero_bytes = None if self.zero_action is None else _as_bytes(self.zero_action)
@@ -119,7 +131,7 @@ class QGraph:
     def add(self, s: np.ndarray, a: np.ndarray, r: float, s_next: np.ndarray,
             terminal: bool) -> None:
         """Store a transition, add its zero-action self-loop and update all bounds."""
-        sb, nb = _as_bytes(s), _as_bytes(s_next)
+        sb, nb = self._state_key(s), self._state_key(s_next)
         r = float(r)
         terminal = bool(terminal)
         edge = self._insert(sb, _as_bytes(a), r, nb, terminal, zero=False)
@@ -138,12 +150,12 @@ class QGraph:
 
     def lower_bound(self, s: np.ndarray, a: np.ndarray) -> float:
         """Graph Q-value of ``(s, a)``; ``-inf`` if unknown or a loose end."""
-        edge = self._edge_of.get(_as_bytes(s) + _as_bytes(a))
+        edge = self._edge_of.get(self._state_key(s) + _as_bytes(a))
         return NEG_INF if edge is None else self._edge_bound(edge)
 
     def lower_bounds(self, states: np.ndarray, actions: np.ndarray) -> np.ndarray:
         """Row-wise :meth:`lower_bound` of a batch (one dict lookup per row)."""
-        states = np.ascontiguousarray(states, dtype=np.float64)
+        states = np.ascontiguousarray(self._snap(states), dtype=np.float64)
         actions = np.ascontiguousarray(actions, dtype=np.float64)
         get, bound = self._edge_of.get, self._edge_bound
         out = np.full(len(states), NEG_INF)
@@ -165,7 +177,7 @@ class QGraph:
     def transition_kind(self, s: np.ndarray, a: np.ndarray) -> tuple[str, int | None]:
         """Kind of the stored transition ``(s, a)`` (SPEC §3) and, unless it is disconnected or a
         loose end, the number of transitions from its ``s'`` to the nearest terminal."""
-        edge = self._edge_of.get(_as_bytes(s) + _as_bytes(a))
+        edge = self._edge_of.get(self._state_key(s) + _as_bytes(a))
         if edge is None:
             raise KeyError('transition not stored')
         edges, kind, hops = self._classify()
@@ -191,11 +203,22 @@ class QGraph:
     @classmethod
     def from_state_dict(cls, state: dict) -> 'QGraph':
         graph = cls.__new__(cls)
+        graph.resolution = 0.0            # checkpoints from before state merging
         graph.__dict__.update(state)
         graph._fifo = deque(state['_fifo'])
         return graph
 
     # ------------------------------------------------------------------ storage
+    def _snap(self, states: np.ndarray) -> np.ndarray:
+        """States rounded to the merging grid (``+ 0.0`` turns -0.0 into 0.0: same bytes)."""
+        states = np.asarray(states, dtype=np.float64)
+        if self.resolution == 0.0:
+            return states
+        return np.round(states / self.resolution) * self.resolution + 0.0
+
+    def _state_key(self, s: np.ndarray) -> bytes:
+        return _as_bytes(self._snap(s))
+
     def _node(self, key: bytes) -> int:
         node = self._node_of.get(key)
         if node is not None:

@@ -72,3 +72,27 @@ def test_tiny_suite_writes_results_figures_and_report(tmp_path) -> None:
     before = {p: p.stat().st_mtime_ns for p in out.glob("*/*.json")}
     run_suite(profile, tmp_path / "runs", tmp_path / "docs", workers=1, command="test")
     assert {p: p.stat().st_mtime_ns for p in out.glob("*/*.json")} == before
+
+
+def test_monte_carlo_check_uses_exact_returns_of_goal_episodes_only() -> None:
+    from qg_learning_node.core.episode import TransitionRecord
+    from qg_learning_node.experiments.runner import MonteCarloCheck
+
+    def step(i, r, terminal=False, timeout=False):
+        return TransitionRecord("e", i, np.full(2, float(i)), np.zeros(2), r, np.zeros(2),
+                                terminal, timeout, False)
+
+    class Critic:                                     # Q = 0 everywhere
+        def q_values(self, states, actions):
+            return np.zeros((len(states), 1))
+
+    check = MonteCarloCheck(gamma=0.5)
+    assert np.isnan(check.error(Critic()))
+    for record in (step(0, -1.0), step(1, -1.0, timeout=True)):    # cut: no exact return
+        check.add(record)
+    assert check.returns == []
+    for record in (step(0, -1.0), step(1, -1.0), step(2, 0.0, terminal=True)):
+        check.add(record)
+    # returns from the end: 0, -1 + 0.5 * 0, -1 + 0.5 * -1
+    assert sorted(check.returns) == [-1.5, -1.0, 0.0]
+    assert check.error(Critic()) == pytest.approx((1.5 + 1.0 + 0.0) / 3)

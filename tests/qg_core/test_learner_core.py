@@ -65,3 +65,22 @@ def test_save_load_gives_identical_next_cycle(tmp_path):
     x = np.random.default_rng(2).uniform(-1, 1, (5, 4))
     np.testing.assert_array_equal(restored.agent.act(x), core.agent.act(x))
     assert isinstance(restored.config.ddpg, DDPGConfig)
+
+
+def test_async_schedule_trains_updates_per_step_in_chunks():
+    """``async``: 2.5 train steps per transition on average, an actor every 5 train steps."""
+    core = LearnerCore(config(schedule='async', updates_per_step=2.5, publish_every=5), 4, 2)
+    versions = []
+    for due in feed(core, 10):
+        while core.training_due():
+            versions.append(core.train_cycle()['actor_version'])
+    assert core.updates == 25 and versions == [1, 2, 3, 4, 5]
+    assert not core.training_due()
+    # the thesis schedule owes iterations_per_cycle per cycle, and nothing once they are done
+    cycle = LearnerCore(config(), 4, 2)
+    feed(cycle, 20)
+    assert cycle.training_due()
+    cycle.train_cycle()
+    assert cycle.updates == 3 and not cycle.training_due()
+    with pytest.raises(ValueError, match='schedule'):
+        config(schedule='sometimes')

@@ -174,3 +174,27 @@ def test_invalid_arguments_raise():
         QGraph(1.0)
     with pytest.raises(ValueError):
         QGraph(0.9, capacity=0)
+
+
+def test_state_merging_joins_episodes_that_pass_through_the_same_cell() -> None:
+    """Episode A reaches the goal through s1; episode B ends (a loose end) 4e-4 away from s1.
+    The exact graph knows nothing of B's transition; with a 0.01 grid B reaches s1's cell and
+    inherits its path to the goal."""
+    gamma = 0.9
+    s0, s1, goal = np.array([0.0, 0.0]), np.array([0.5, 0.5]), np.array([1.0, 1.0])
+    b_start, b_end = np.array([0.2, -0.2]), np.array([0.5004, 0.4996])
+    a, b = np.array([1.0]), np.array([0.3])
+    for resolution, expected in ((0.0, -math.inf), (0.01, -1.0 + gamma * 0.0)):
+        graph = QGraph(gamma, resolution=resolution)
+        graph.add(s0, a, -1.0, s1, False)
+        graph.add(s1, a, 0.0, goal, True)
+        graph.add(b_start, b, -1.0, b_end, False)
+        assert graph.lower_bound(b_start, b) == expected
+        np.testing.assert_array_equal(graph.lower_bounds(np.array([b_start]), np.array([b])),
+                                      [expected])
+    # -0.0 and 0.0 are one cell, and a bad resolution is refused
+    graph = QGraph(gamma, resolution=0.1)
+    graph.add(np.array([-0.01, 0.0]), a, 0.0, goal, True)
+    assert graph.lower_bound(np.array([0.01, 0.0]), a) == 0.0
+    with pytest.raises(ValueError, match="resolution"):
+        QGraph(gamma, resolution=-1.0)

@@ -25,8 +25,10 @@ def test_fires_after_the_hold_time_of_stillness() -> None:
 @pytest.mark.parametrize("speeds", [(0.0021, 0.0), (0.0, 0.021)])
 def test_either_speed_above_threshold_keeps_the_step_running(speeds: tuple[float, float]) -> None:
     detector = RestDetector()
-    assert ticks_until_done(detector, [speeds] * 499) == -1
-    assert detector.update(*speeds, DT)  # the 500th ms: maximum step time
+    limit = round(detector.config.max_time / DT)
+    assert limit == 250
+    assert ticks_until_done(detector, [speeds] * (limit - 1)) == -1
+    assert detector.update(*speeds, DT)  # the 250th ms: maximum step time
     assert detector.timed_out and not detector.at_rest
 
 

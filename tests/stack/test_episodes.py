@@ -219,7 +219,7 @@ def test_in_process_runner_repeats_the_ros_stack_episode(stack, tmp_path):
     from qg_learning_node.experiments.runner import (LivePolicy, PandaTask, StackSettings,
                                                      run_episode)
     from qg_learning_node.learner_core import LearnerCore
-    from qg_learning_node.core.residual_task import ACTION_DIM, STATE_DIM
+    from qg_learning_node.core.residual_task import ACTION_DIM
     from qg_learning_node.offline import iter_transitions
     from sim_robot_node.core.params import config_dir, load_ros_params
 
@@ -241,8 +241,8 @@ def test_in_process_runner_repeats_the_ros_stack_episode(stack, tmp_path):
     settings = dataclasses.replace(
         settings, task=dataclasses.replace(settings.task, test_max_steps=steps))
     params = load_ros_params(config_dir() / "learner.yaml", "learner")["learner"]
-    learner = LearnerCore(learner_config_from_params(params), STATE_DIM, ACTION_DIM)
     env = PandaTask(settings, "ekf")
+    learner = LearnerCore(learner_config_from_params(params), env.residual.state_dim, ACTION_DIM)
     local: list = []
     episode = Episode("local", "test", pose, "dense", env.residual)
     result = run_episode(env, episode, LivePolicy(learner.agent), local.append)
@@ -256,4 +256,7 @@ def test_in_process_runner_repeats_the_ros_stack_episode(stack, tmp_path):
         np.testing.assert_allclose(mine.next_state, theirs.next_state, atol=1e-5)
         assert mine.reward == pytest.approx(theirs.reward, abs=1e-5)
         assert mine.terminal == theirs.terminal
-    np.testing.assert_array_equal(local[0].state, ros[0].state)
+    # The first state: the wrench part bit-identical; the tilt part crosses the message as a
+    # quaternion, which costs a few ulps.
+    np.testing.assert_array_equal(local[0].state[:4], ros[0].state[:4])
+    np.testing.assert_allclose(local[0].state, ros[0].state, rtol=0, atol=1e-12)

@@ -2,7 +2,9 @@
 
 Brings the stack up (``config/stack.yaml``), trains QG-DDPG for a few episodes by calling
 ``/executor/start_episode`` like any client would, tests on the 8 initial poses, and saves a
-learning-curve PNG next to the MCAP episodes the stack recorded.
+learning-curve PNG, TensorBoard scalars (``tensorboard/``, Stable-Baselines3's tag names) and
+``episodes.json`` next to the MCAP episodes the stack recorded. The progress bar follows
+``/transitions``, so it moves at every RL step.
 """
 from __future__ import annotations
 
@@ -14,8 +16,10 @@ from pathlib import Path
 
 from qg_learning_node.cli.launcher import Launcher, ProcessSpec, load_stack_config
 from qg_learning_node.cli.ros_env import repo_root, stack_env
+from qg_learning_node.training_log import TrainingLog
 
-__all__ = ["add_parser", "EpisodeOutcome"]
+__all__ = ["add_parser", "EpisodeOutcome", "StepMonitor", "run_episode_by_service",
+           "wait_for_stack", "with_demo_settings"]
 
 
 @dataclass
@@ -31,7 +35,78 @@ class EpisodeOutcome:
     wall_time: float
 
 
-def _run_episode(cli, index: int, mode: str, pose: int, seed: int, timeout: float) -> EpisodeOutcome:
+class StepMonitor:
+    """Follows the running stack for the demo: a progress line per RL step, training scalars.
+
+    :param bar: the tqdm bar (one unit per episode) whose postfix shows the current step.
+    :param log: where episode and learner scalars go.
+    """
+
+    def __init__(self, cli, bar, log: TrainingLog, episodes: int) -> None:
+        from qg_interfaces.msg import LearnerDiagnostics, Transition
+
+        from qg_learning_node.executor_node import RELIABLE_DEEP
+        self.bar, self.log, self.episodes = bar, log, episodes
+        self.steps = 0
+        self.started = time.monotonic()
+        self.label, self.episode_id = "", ""
+        self.episode_steps, self.episode_return, self.last_return = 0, 0.0, float("nan")
+        self.successes = {"train": [0, 0], "test": [0, 0]}
+        self.actor_version = -1
+        cli.node.create_subscription(Transition, "/transitions", self._on_transition,
+                                     RELIABLE_DEEP)
+        cli.node.create_subscription(LearnerDiagnostics, "/learner/diagnostics",
+                                     self._on_diagnostics, 10)
+
+    @property
+    def fps(self) -> float:
+        """RL steps per wall second since the first episode started."""
+        return self.steps / max(1e-9, time.monotonic() - self.started)
+
+    def begin(self, index: int, mode: str) -> None:
+        if index == 0:
+            self.started = time.monotonic()
+        self.label = f"{mode} {index + 1}/{self.episodes}"
+        self.episode_steps, self.episode_return = 0, 0.0
+        self._show()
+
+    def _on_transition(self, msg) -> None:
+        if msg.episode_id != self.episode_id:
+            self.episode_id, self.episode_steps, self.episode_return = msg.episode_id, 0, 0.0
+        self.steps += 1
+        self.episode_steps = int(msg.step) + 1
+        self.episode_return += float(msg.reward)
+        self._show()
+
+    def _on_diagnostics(self, msg) -> None:
+        if int(msg.actor_version) != self.actor_version:      # a new training cycle, not a heartbeat
+            self.actor_version = int(msg.actor_version)
+            if self.actor_version > 0:
+                self.log.training({"critic_loss": msg.critic_loss, "actor_loss": msg.actor_loss,
+                                   "mean_q": msg.mean_q,
+                                   "frac_raised_lower": msg.frac_raised_lower}, self.steps)
+
+    def end(self, outcome: EpisodeOutcome) -> None:
+        done = self.successes[outcome.mode]
+        done[0] += int(outcome.success)
+        done[1] += 1
+        self.last_return = outcome.episode_return
+        self.log.episode(outcome.mode, outcome.steps, outcome.success, outcome.episode_return,
+                         self.steps, self.fps)
+        self.bar.update(1)
+        self._show()
+
+    def _show(self) -> None:
+        train, test = self.successes["train"], self.successes["test"]
+        self.bar.set_postfix_str(
+            f"{self.label} step {self.episode_steps} | {self.fps:.1f} steps/s | last return "
+            f"{self.last_return:.2f} | inserted: train {train[0]}/{train[1]}"
+            + (f", test {test[0]}/{test[1]}" if test[1] else ""))
+
+
+def run_episode_by_service(cli, index: int, mode: str, pose: int, seed: int,
+                           timeout: float) -> EpisodeOutcome:
+    """Start one episode by ``/executor/start_episode`` and wait for its final status."""
     from qg_interfaces.msg import EpisodeStatus
     from qg_interfaces.srv import StartEpisode
 
@@ -62,7 +137,7 @@ def _run_episode(cli, index: int, mode: str, pose: int, seed: int, timeout: floa
                           float(msg.episode_return), bool(msg.success), time.monotonic() - t0)
 
 
-def _wait_for_stack(cli, timeout: float) -> None:
+def wait_for_stack(cli, timeout: float) -> None:
     """Until the robot answers resets, the executor takes episodes and the learner is alive."""
     from qg_interfaces.msg import LearnerDiagnostics
     from qg_interfaces.srv import ResetSim, StartEpisode
@@ -107,13 +182,25 @@ def _plot(outcomes: list[EpisodeOutcome], path: Path) -> None:
     plt.close(fig)
 
 
-def _with_step_cap(spec: ProcessSpec, train_max_steps: int) -> ProcessSpec:
-    """The executor's spec with training episodes capped (a demo should end in minutes)."""
-    if (spec.package, spec.executable) != ("qg_learning_node", "executor"):
+def with_demo_settings(spec: ProcessSpec, args: argparse.Namespace) -> ProcessSpec:
+    """The executor's and learner's specs with the demo's overrides (``-p`` ROS arguments).
+
+    Training episodes are capped shorter than the executor's default (a demo should end in
+    minutes, and a jammed early episode teaches little after its first tens of steps), and the
+    learner runs the grid cell that learned fastest here (docs/learning.md).
+    """
+    overrides = {("qg_learning_node", "executor"): {"task.train_max_steps": args.train_max_steps},
+                 ("qg_learning_node", "learner"): {
+                     "learner.ddpg.critic_lr": args.critic_lr,
+                     "learner.iterations_per_cycle": args.iterations,
+                     "learner.schedule": args.schedule,
+                     "learner.updates_per_step": float(args.updates_per_step)}}
+    params = overrides.get((spec.package, spec.executable))
+    if not params:
         return spec
     ros_args = () if "--ros-args" in spec.args else ("--ros-args",)
-    return replace(spec, args=spec.args + ros_args
-                   + ("-p", f"task.train_max_steps:={train_max_steps}"))
+    extra = tuple(x for key, value in params.items() for x in ("-p", f"{key}:={value}"))
+    return replace(spec, args=spec.args + ros_args + extra)
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -125,34 +212,42 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     env = stack_env(log_dir=run_dir / "ros_log")
     env["QG_RUNS_DIR"] = str(run_dir)     # episodes/ (MCAP) and checkpoints/ go here
     launcher = Launcher(env=env, out=None, log_dir=run_dir / "logs")
-    launcher.start([_with_step_cap(spec, args.train_max_steps)
+    launcher.start([with_demo_settings(spec, args)
                     for spec in load_stack_config(Path(args.config))])
     schedule = [("train", -1)] * args.train_episodes + [("test", p) for p in range(args.test_poses)]
     outcomes: list[EpisodeOutcome] = []
+    log = TrainingLog(run_dir / "tensorboard")
     print(f"[qgl demo] stack up (logs: {run_dir / 'logs'}); {args.train_episodes} training "
-          f"episodes, then tests on {args.test_poses} poses", flush=True)
+          f"episodes, then tests on {args.test_poses} poses; TensorBoard: "
+          f"tensorboard --logdir {run_dir / 'tensorboard'}", flush=True)
+    started = time.monotonic()
     try:
         with CliNode("qgl_demo", domain_id=int(env["ROS_DOMAIN_ID"])) as cli, \
                 tqdm(total=len(schedule), unit="episode", dynamic_ncols=True) as bar:
-            _wait_for_stack(cli, timeout=180.0)
+            wait_for_stack(cli, timeout=180.0)
+            monitor = StepMonitor(cli, bar, log, len(schedule))
             for i, (mode, pose) in enumerate(schedule):
                 died = launcher.poll()
                 if died:
                     raise RuntimeError(f"process {died[0][0]} exited with code {died[0][1]}")
-                outcome = _run_episode(cli, i, mode, pose, seed=args.seed + i,
+                monitor.begin(i, mode)
+                outcome = run_episode_by_service(cli, i, mode, pose, seed=args.seed + i,
                                        timeout=args.episode_timeout)
                 outcomes.append(outcome)
-                bar.set_postfix(mode=mode, steps=outcome.steps, inserted=outcome.success)
-                bar.update(1)
+                monitor.end(outcome)
+            tests = [o for o in outcomes if o.mode == "test"]
+            log.evaluation([o.steps for o in tests], [o.success for o in tests], monitor.steps)
     finally:
         codes = launcher.stop()
+        log.close()
     (run_dir / "episodes.json").write_text(json.dumps([asdict(o) for o in outcomes], indent=1))
     _plot(outcomes, run_dir / "learning_curve.png")
     tests = [o for o in outcomes if o.mode == "test"]
     bags = sorted(p.parent for p in (run_dir / "episodes").glob("*/metadata.yaml"))
     print(f"[qgl demo] test: {sum(o.success for o in tests)}/{len(tests)} inserted, mean steps "
           f"{sum(o.steps for o in tests) / max(1, len(tests)):.1f}; {len(bags)} MCAP episodes in "
-          f"{run_dir / 'episodes'}; plot {run_dir / 'learning_curve.png'}; exit codes {codes}")
+          f"{run_dir / 'episodes'}; plot {run_dir / 'learning_curve.png'}; TensorBoard "
+          f"{run_dir / 'tensorboard'}; {time.monotonic() - started:.0f} s; exit codes {codes}")
     return 0 if all(c == 0 for c in codes.values()) else 1
 
 
@@ -160,11 +255,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     demo = sub.add_parser("demo", help="the main job: train on the ROS stack, test, plot")
     demo.add_argument("--config", default=str(repo_root() / "config" / "stack.yaml"))
     demo.add_argument("--runs-dir", default=str(repo_root() / "runs"))
-    demo.add_argument("--train-episodes", type=int, default=8)
+    demo.add_argument("--train-episodes", type=int, default=40, help="(thesis: 40)")
     demo.add_argument("--test-poses", type=int, default=8)
-    demo.add_argument("--train-max-steps", type=int, default=200,
+    demo.add_argument("--train-max-steps", type=int, default=50,
                       help="step cap of the demo's training episodes (the executor's default "
-                           "is 1000; a jammed 1000-step episode takes ~15 min here)")
+                           "is 1000, the thesis's)")
+    demo.add_argument("--critic-lr", type=float, default=1e-4,
+                      help="critic learning rate (actor: one tenth)")
+    demo.add_argument("--iterations", type=int, default=50,
+                      help="training iterations per 20-step cycle (schedule cycle)")
+    demo.add_argument("--schedule", choices=("cycle", "async"), default="cycle",
+                      help="cycle: train after every 20 steps (the thesis); async: the learner "
+                           "trains while the robot moves")
+    demo.add_argument("--updates-per-step", type=float, default=10.0,
+                      help="train steps per RL step (schedule async)")
     demo.add_argument("--seed", type=int, default=1)
     demo.add_argument("--episode-timeout", type=float, default=900.0, help="[s]")
     demo.set_defaults(func=_cmd_demo)

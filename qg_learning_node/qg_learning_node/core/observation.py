@@ -15,8 +15,12 @@ from qg_learning_node.core.residual_task import Observation
 __all__ = ["observation_from_step"]
 
 
-def observation_from_step(result: StepResult) -> Observation:
+def observation_from_step(result: StepResult,
+                          tool_rotation: np.ndarray | None = None) -> Observation:
     """Observation at the end of one RL step.
+
+    :param tool_rotation: (3, 3) tool orientation from forward kinematics of the measured joints
+        (the ``ee_pose`` of the ROS path's ``AtRest``), for the ``tilt`` observation.
 
     :raises ValueError: if the loop ran without a wrench estimator (the state would be unknown).
     """
@@ -26,4 +30,6 @@ def observation_from_step(result: StepResult) -> Observation:
     return Observation(wrench=np.asarray(result.wrench_estimate, dtype=np.float64).copy(),
                        success=bool(truth.success), position_error=float(truth.position_error),
                        orientation_error=truth.orientation_error_norm,
-                       lateral_offset=float(truth.lateral_offset))
+                       lateral_offset=float(truth.lateral_offset),
+                       tool_rotation=None if tool_rotation is None
+                       else np.array(tool_rotation, dtype=np.float64))

@@ -1,7 +1,13 @@
 """The residual force-policy MDP of the shaft insertion: state, action, reward, episode end.
 
 One definition for the ROS executor and the fast in-process runner, so both run the same task:
-- state: estimated contact (Fx, Fy, Tx, Ty) in the EEF frame, linearly scaled to [-1, 1];
+- state, by ``TaskConfig.observation``:
+  ``thesis``: estimated contact (Fx, Fy, Tx, Ty) in the EEF frame, linearly scaled to [-1, 1]
+  (SPEC section 1). At rest the contact wrench balances the commanded one, so this state echoes
+  the previous action and hides which way the shaft is tilted (docs/learning.md).
+  ``tilt``: the same four numbers plus the tool's tilt away from the push axis, (ex, ey) of the
+  rotation that would align the tool z axis with it, in the EEF frame, from forward kinematics of
+  the measured joints (a real arm has it); scaled by ``tilt_range``.
 - action: actor output in [-1, 1]^2 scaled to residual torques (tx, ty) of at most 3 Nm, on top
   of the constant base push Fz = -15 N: the feed-forward wrench [0, 0, Fz, tx, ty, 0];
 - reward: sparse (-1 per step, 0 at the goal) or dense (pose error to the inserted pose);
@@ -14,10 +20,36 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["TaskConfig", "Observation", "ResidualTask", "STATE_DIM", "ACTION_DIM"]
+__all__ = ["TaskConfig", "Observation", "ResidualTask", "OBSERVATIONS", "STATE_DIM", "ACTION_DIM",
+           "state_dim", "tilt_from_push_axis"]
 
-STATE_DIM = 4
+#: State definitions (see the module docstring) and their lengths.
+OBSERVATIONS = {"thesis": 4, "tilt": 6}
+STATE_DIM = OBSERVATIONS["thesis"]
 ACTION_DIM = 2
+
+
+def state_dim(observation: str) -> int:
+    """Length of the scaled state of ``observation`` (one of :data:`OBSERVATIONS`)."""
+    if observation not in OBSERVATIONS:
+        raise ValueError(f"observation must be one of {sorted(OBSERVATIONS)}, got {observation!r}")
+    return OBSERVATIONS[observation]
+
+
+def tilt_from_push_axis(rotation: np.ndarray, push_axis: np.ndarray) -> np.ndarray:
+    """(ex, ey): the rotation vector, in the tool frame, that turns tool z onto ``push_axis``.
+
+    Its direction says which way to tilt back, its norm by how much [rad]; z is always zero.
+    :param rotation: (3, 3) tool orientation in the base frame; :param push_axis: unit vector,
+        base frame, along which the shaft should point (tip first).
+    """
+    axis_in_tool = np.asarray(rotation).T @ np.asarray(push_axis, dtype=np.float64)
+    # rotation taking e_z onto axis_in_tool: about e_z x axis = (-a_y, a_x, 0), angle atan2(|.|, a_z)
+    sine = np.hypot(axis_in_tool[0], axis_in_tool[1])
+    if sine < 1e-12:
+        return np.zeros(2)
+    angle = np.arctan2(sine, axis_in_tool[2])
+    return angle / sine * np.array([-axis_in_tool[1], axis_in_tool[0]])
 
 
 @dataclass(frozen=True)
@@ -29,6 +61,10 @@ class TaskConfig:
     :param max_lateral_offset: the episode ends (not terminal) past this tip offset [m].
     :param train_max_steps: step cap of training episodes; :param test_max_steps: of test ones.
     :param reward: default reward type, sparse | dense.
+    :param observation: the state, one of :data:`OBSERVATIONS` (``thesis``: 4-D wrench).
+    :param tilt_range: tilt [rad] that maps to state 1.0 (``tilt`` observation).
+    :param push_axis: base-frame direction the shaft should point along (the bore axis, tip
+        first); the ``tilt`` observation measures the tool's tilt away from it.
     """
     base_force: float = -15.0
     max_residual_torque: float = 3.0
@@ -40,12 +76,20 @@ class TaskConfig:
     train_max_steps: int = 1000
     test_max_steps: int = 200
     reward: str = "dense"
+    observation: str = "thesis"
+    tilt_range: float = 0.5
+    push_axis: tuple[float, float, float] = (0.0, 0.0, -1.0)
 
     def __post_init__(self) -> None:
         if self.reward not in ("sparse", "dense"):
             raise ValueError(f"reward must be sparse or dense, got {self.reward!r}")
+        state_dim(self.observation)
+        axis = np.asarray(self.push_axis, dtype=np.float64)
+        if axis.shape != (3,) or not np.isfinite(axis).all() or np.linalg.norm(axis) < 1e-9:
+            raise ValueError(f"push_axis must be a non-zero 3-vector, got {self.push_axis!r}")
+        object.__setattr__(self, "push_axis", tuple(float(x) for x in axis / np.linalg.norm(axis)))
         for name in ("max_residual_torque", "force_range", "torque_range", "sigma_position",
-                     "sigma_orientation", "max_lateral_offset"):
+                     "sigma_orientation", "max_lateral_offset", "tilt_range"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.train_max_steps < 1 or self.test_max_steps < 1:
@@ -70,6 +114,7 @@ class Observation:
     position_error: float         # [m] to the inserted pose
     orientation_error: float      # [rad] norm of the x/y angle-axis error
     lateral_offset: float         # [m] tip from the hole axis
+    tool_rotation: np.ndarray | None = None  # (3, 3) tool orientation, base frame, from measured joints
 
 
 class ResidualTask:
@@ -78,13 +123,23 @@ class ResidualTask:
     def __init__(self, config: TaskConfig) -> None:
         self.config = config
         c = config
-        self._state_scale = np.array([c.force_range, c.force_range, c.torque_range, c.torque_range])
+        self.state_dim = state_dim(c.observation)
+        self._state_scale = np.array([c.force_range, c.force_range, c.torque_range, c.torque_range,
+                                      c.tilt_range, c.tilt_range])[:self.state_dim]
+        self._push_axis = np.asarray(c.push_axis)
 
     def state(self, obs: Observation) -> np.ndarray:
-        """(Fx, Fy, Tx, Ty) scaled to [-1, 1] (clipped)."""
+        """(Fx, Fy, Tx, Ty[, ex, ey]) scaled to [-1, 1] (clipped).
+
+        :raises ValueError: for the ``tilt`` observation without the tool orientation.
+        """
         w = np.asarray(obs.wrench, dtype=np.float64)
-        raw = np.array([w[0], w[1], w[3], w[4]])
-        return np.clip(raw / self._state_scale, -1.0, 1.0)
+        raw = [w[0], w[1], w[3], w[4]]
+        if self.state_dim > 4:
+            if obs.tool_rotation is None:
+                raise ValueError("the tilt observation needs the tool orientation")
+            raw.extend(tilt_from_push_axis(obs.tool_rotation, self._push_axis))
+        return np.clip(np.array(raw) / self._state_scale, -1.0, 1.0)
 
     def wrench(self, action: np.ndarray) -> np.ndarray:
         """Feed-forward wrench [0, 0, Fz, tx, ty, 0] for an actor output in [-1, 1]^2.

@@ -14,7 +14,7 @@ from qg_learning_node.experiments.tasks import MAX_WORKERS
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m qg_learning_node.experiments",
                                      description=__doc__)
-    parser.add_argument("--profile", default="small", help="full | small | tiny "
+    parser.add_argument("--profile", default="small", help="thesis | small | tiny "
                         "(config/experiments.yaml)")
     parser.add_argument("--only", default=",".join(EXPERIMENTS),
                         help=f"comma-separated subset of {','.join(EXPERIMENTS)}")

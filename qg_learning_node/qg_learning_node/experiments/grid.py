@@ -25,7 +25,7 @@ def grid_specs(budget: GridBudget, estimator: str = "ekf",
                     seed=seed, train_episodes=budget.train_episodes,
                     test_episodes=budget.test_episodes, train_max_steps=budget.train_max_steps,
                     test_max_steps=budget.test_max_steps, cycle_steps=budget.cycle_steps,
-                    estimator=estimator, config_dir=config_dir)
+                    estimator=estimator, config_dir=config_dir, observation=budget.observation)
             for lr, iterations in budget.cells for algorithm in budget.algorithms
             for seed in budget.seeds]
 

@@ -1,4 +1,4 @@
-"""Experiment budgets by profile (``config/experiments.yaml``): full, small and tiny (CI).
+"""Experiment budgets by profile (``config/experiments.yaml``): thesis, small and tiny (CI).
 
 One profile fixes, for every experiment, how many runs, episodes and steps are spent; the task,
 bridge, estimator and learner numbers always come from the stack's own config files.
@@ -12,6 +12,7 @@ from typing import Any
 import yaml
 from sim_robot_node.core.params import config_dir
 
+from qg_learning_node.core.residual_task import state_dim
 from qg_learning_node.experiments.runner import ALGORITHMS, ESTIMATORS
 
 __all__ = ["RandomBudget", "GridBudget", "VariantBudget", "PegBudget", "Profile", "load_profile"]
@@ -39,7 +40,11 @@ class RandomBudget:
 
 @dataclass(frozen=True)
 class GridBudget:
-    """:param cells: ``((critic_lr, iterations per cycle), ...)``."""
+    """:param cells: ``((critic_lr, iterations per cycle), ...)``.
+
+    :param observation: the state of every run (``residual_task.OBSERVATIONS``); ``None`` keeps
+        ``executor.yaml``'s.
+    """
     cells: tuple[tuple[float, int], ...]
     algorithms: tuple[str, ...] = ALGORITHMS
     seeds: tuple[int, ...] = (0,)
@@ -48,8 +53,11 @@ class GridBudget:
     train_max_steps: int = 1000
     test_max_steps: int = 200
     cycle_steps: int = 20
+    observation: str | None = None
 
     def __post_init__(self) -> None:
+        if self.observation is not None:
+            state_dim(self.observation)
         if not self.cells or not self.seeds:
             raise ValueError("grid: needs cells and seeds")
         if set(self.algorithms) - set(ALGORITHMS):

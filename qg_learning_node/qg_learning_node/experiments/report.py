@@ -463,8 +463,11 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
               "executor's actor is replaced). Start poses rotate 0..7. Vanilla DDPG: no bounds "
               "and no zero-action loops (as in the thesis); QG-DDPG: Q-Graph plus a-priori "
               f"bounds, zero action (0, 0) whose self-loops go into graph and replay. Exploration "
-              f"in training: {noise.kind} noise, sigma {noise.sigma:g} (actor units). Runs are "
-              "deterministic per seed (tested in `tests/experiments/test_runner.py`).", ""]
+              f"in training: {noise.kind} noise, sigma {noise.sigma:g} (actor units). State: "
+              f"the `{pg.observation or settings.task.observation}` observation "
+              "(`residual_task.OBSERVATIONS`; why, and the thesis's 4-D state beside it: "
+              "[learning.md](learning.md)). Runs are deterministic per seed (tested in "
+              "`tests/experiments/test_runner.py`).", ""]
     lines += _random_section(random_rows, random_results, figures)
     lines += _grid_section(grid_rows, grid_results, bar, bar_label)
     lines += _learning_curves(grid_results, grid_rows, figures, bar)

@@ -33,12 +33,13 @@ from qg_learning_node.core.episode import Actor, Episode, TransitionRecord
 from qg_learning_node.core.learner_params import learner_config_from_params
 from qg_learning_node.core.noise import ActionNoise, NoiseConfig
 from qg_learning_node.core.observation import observation_from_step
-from qg_learning_node.core.residual_task import (ACTION_DIM, STATE_DIM, Observation,
+from qg_learning_node.core.residual_task import (ACTION_DIM, Observation,
                                                  ResidualTask, TaskConfig)
 from qg_learning_node.ddpg import ActorMLP, DDPG
 from qg_learning_node.learner_core import LearnerConfig, LearnerCore
 
 __all__ = ["ALGORITHMS", "ESTIMATORS", "StackSettings", "PandaTask", "LivePolicy", "RunSpec",
+           "MonteCarloCheck",
            "algorithm_config", "run_episode", "run_training", "episode_noise_seed", "zero_policy",
            "config_digest", "STACK_CONFIG_FILES"]
 
@@ -113,6 +114,8 @@ class PandaTask:
     It answers what the executor asks over DDS: a reset to a start pose, and one wrench executed
     until rest, each as an :class:`Observation`.
     :param estimator: ``ekf`` (what the ROS stack runs) or ``ground_truth`` (a perfect sensor).
+    ``housing_yaw`` [rad] rotates the housing, and with it the start tilts, about the vertical
+    at every reset (the generalisation test trains at one yaw and tests at another).
     """
 
     def __init__(self, settings: StackSettings, estimator: str = "ekf") -> None:
@@ -127,15 +130,16 @@ class PandaTask:
         self.sim_time = 0.0
         self.steps = 0
         self.step_timeouts = 0
+        self.housing_yaw = 0.0
 
     def reset(self, initial_pose: int) -> Observation:
         """Start pose ``initial_pose`` settled, observed like the end of a step."""
-        self.loop.reset(initial_pose)
+        self.loop.reset(initial_pose, self.housing_yaw)
         tool = self.loop.controller.tool
         return observation_from_step(StepResult(
             duration=0.0, timed_out=False, linear_speed=tool.linear_speed,
             angular_speed=tool.angular_speed, ground_truth=self.loop.scene.ground_truth(),
-            wrench_estimate=self.loop.wrench_estimate))
+            wrench_estimate=self.loop.wrench_estimate), tool.rotation)
 
     def step(self, action: np.ndarray) -> Observation:
         """Execute the residual ``action`` (actor units) until the tool is at rest."""
@@ -143,7 +147,7 @@ class PandaTask:
         self.sim_time += result.duration
         self.steps += 1
         self.step_timeouts += int(result.timed_out)
-        return observation_from_step(result)
+        return observation_from_step(result, self.loop.controller.tool.rotation)
 
 
 class LivePolicy:
@@ -188,6 +192,16 @@ class RunSpec:
     :param iterations: training iterations per cycle of ``cycle_steps`` RL steps.
     :param replay_capacity: ``None`` keeps ``learner.yaml``'s setting; so does ``cycle_steps``.
     :param reward: ``dense`` | ``sparse``.
+    :param observation: the state (``residual_task.OBSERVATIONS``); ``None`` keeps
+        ``executor.yaml``'s.
+    :param test_housing_yaw: [rad] housing rotation about the vertical in the test episodes
+        (training always runs at 0): the generalisation test.
+    :param graph_resolution: Q-Graph state merging (``LearnerConfig.graph_resolution``).
+    :param schedule: the learner's schedule, ``cycle`` | ``async`` (``learner_core``); with
+        ``async``, ``updates_per_step`` and ``publish_every`` apply.
+    :param eval_every: > 0: after every this many training episodes, test on the test poses
+        (``evaluations`` in the result, simulated robot time included) and stop at the first
+        evaluation that solves them all; the final test phase is then left out.
     """
     algorithm: str
     critic_lr: float
@@ -203,6 +217,13 @@ class RunSpec:
     estimator: str = "ekf"
     config_dir: str | None = None
     experiment: str = "grid"
+    observation: str | None = None
+    test_housing_yaw: float = 0.0
+    graph_resolution: float = 0.0
+    schedule: str = "cycle"
+    updates_per_step: float = 10.0
+    publish_every: int = 20
+    eval_every: int = 0
 
     def __post_init__(self) -> None:
         if self.algorithm not in ALGORITHMS:
@@ -218,6 +239,12 @@ class RunSpec:
     def name(self) -> str:
         extra = f"_{self.reward}" if self.reward != "dense" else ""
         extra += f"_cap{self.replay_capacity}" if self.replay_capacity else ""
+        extra += f"_{self.observation}" if self.observation else ""
+        extra += f"_yaw{self.test_housing_yaw:g}" if self.test_housing_yaw else ""
+        extra += f"_res{self.graph_resolution:g}" if self.graph_resolution else ""
+        extra += (f"_async{self.updates_per_step:g}x{self.publish_every}"
+                  if self.schedule == "async" else "")
+        extra += f"_eval{self.eval_every}" if self.eval_every else ""
         return f"{self.algorithm}_lr{self.critic_lr:g}_it{self.iterations}{extra}_s{self.seed}"
 
     def learner_config(self, base: LearnerConfig) -> LearnerConfig:
@@ -226,6 +253,8 @@ class RunSpec:
                                    seed=self.seed)
         return dataclasses.replace(
             config, ddpg=ddpg, iterations_per_cycle=self.iterations, seed=self.seed,
+            graph_resolution=self.graph_resolution, schedule=self.schedule,
+            updates_per_step=self.updates_per_step, publish_every=self.publish_every,
             replay_capacity=self.replay_capacity or config.replay_capacity,
             cycle_steps=self.cycle_steps or config.cycle_steps)
 
@@ -233,42 +262,97 @@ class RunSpec:
         return run_training(self)
 
 
+class MonteCarloCheck:
+    """How far the critic is from the true discounted return of the episodes it was trained on.
+
+    For every finished training episode that reached the goal, the discounted return from each
+    step on is known exactly (the episode ended in a terminal state); ``error`` is the mean
+    absolute difference between the critic's ``Q(s_t, a_t)`` and that return over all of them.
+    Episodes cut by the step cap have no exact return and are left out.
+    """
+
+    def __init__(self, gamma: float) -> None:
+        self.gamma = gamma
+        self._open: list[TransitionRecord] = []
+        self.states: list[np.ndarray] = []
+        self.actions: list[np.ndarray] = []
+        self.returns: list[float] = []
+
+    def add(self, record: TransitionRecord) -> None:
+        self._open.append(record)
+        if record.terminal:
+            value = 0.0
+            for step in reversed(self._open):
+                value = step.reward + self.gamma * value
+                self.states.append(step.state)
+                self.actions.append(step.action)
+                self.returns.append(value)
+        if record.terminal or record.timeout:
+            self._open = []
+
+    def error(self, agent: DDPG) -> float:
+        """Mean |Q(s, a) - G| over the goal-reaching episodes so far (NaN before the first)."""
+        if not self.returns:
+            return float("nan")
+        q = agent.q_values(np.array(self.states), np.array(self.actions))
+        return float(np.mean(np.abs(np.ravel(q) - np.array(self.returns))))
+
+
 def run_training(spec: RunSpec) -> dict[str, Any]:
     """Train for ``spec.train_episodes`` episodes, then test; records per episode and cycle.
 
     :returns: ``spec``, ``episodes`` (train then test), ``cycles`` (diagnostics of every training
-        cycle, including ``mean_q``: the critic's mean prediction on that cycle's minibatches),
-        simulated/wall time and step counts.
+        cycle, including ``mean_q``: the critic's mean prediction on that cycle's minibatches,
+        and ``critic_mc_error``: see :class:`MonteCarloCheck`), simulated/wall time and step
+        counts.
     """
     torch.set_num_threads(1)
     start = time.perf_counter()
     settings = StackSettings.load(spec.config_dir)
     task_config = dataclasses.replace(settings.task, train_max_steps=spec.train_max_steps,
-                                      test_max_steps=spec.test_max_steps)
+                                      test_max_steps=spec.test_max_steps,
+                                      observation=spec.observation or settings.task.observation)
     env = PandaTask(dataclasses.replace(settings, task=task_config), spec.estimator)
-    learner = LearnerCore(spec.learner_config(settings.learner), STATE_DIM, ACTION_DIM)
+    learner = LearnerCore(spec.learner_config(settings.learner), env.residual.state_dim,
+                          ACTION_DIM)
     policy = LivePolicy(learner.agent)
     cycles: list[dict[str, Any]] = []
+    check = MonteCarloCheck(learner.config.ddpg.gamma)
 
     def learn(record: TransitionRecord) -> None:
-        if learner.add_transition(record.state, record.action, record.reward,
-                                  record.next_state, record.terminal):
+        check.add(record)
+        learner.add_transition(record.state, record.action, record.reward, record.next_state,
+                               record.terminal)
+        while learner.training_due():
             diagnostics = learner.train_cycle()
+            diagnostics["critic_mc_error"] = check.error(learner.agent)
             cycles.append({k: float(v) for k, v in diagnostics.items()})
             policy.update(learner.agent)
 
-    episodes = []
+    def test_phase(tag: str) -> list[dict[str, Any]]:
+        return [run_episode(env, Episode(f"{tag}{index:03d}", "test", index % N_START_POSES,
+                                         spec.reward, env.residual), policy)
+                for index in range(spec.test_episodes)]
+
+    episodes, evaluations = [], []
     for index in range(spec.train_episodes):
         noise = ActionNoise(settings.noise, ACTION_DIM, episode_noise_seed(spec.seed, index))
         episode = Episode(f"train{index:03d}", "train", index % N_START_POSES, spec.reward,
                           env.residual, noise)
         episodes.append(run_episode(env, episode, policy, learn))
-    for index in range(spec.test_episodes):
-        episode = Episode(f"test{index:03d}", "test", index % N_START_POSES, spec.reward,
-                          env.residual)
-        episodes.append(run_episode(env, episode, policy))
+        if spec.eval_every and (index + 1) % spec.eval_every == 0:
+            tests = test_phase(f"eval{index + 1:03d}_")
+            evaluations.append({"train_episodes": index + 1, "sim_time": env.sim_time,
+                                "rl_steps": env.steps,
+                                "successes": sum(e["success"] for e in tests),
+                                "mean_steps": float(np.mean([e["steps"] for e in tests]))})
+            if evaluations[-1]["successes"] == spec.test_episodes:
+                break
+    env.housing_yaw = spec.test_housing_yaw
+    if not spec.eval_every:
+        episodes += test_phase("test")
     return {"experiment": spec.experiment, "name": spec.name, "spec": dataclasses.asdict(spec),
             "config_digest": config_digest(spec.config_dir), "episodes": episodes,
-            "cycles": cycles, "rl_steps": env.steps,
+            "evaluations": evaluations, "cycles": cycles, "rl_steps": env.steps,
             "step_timeouts": env.step_timeouts, "sim_time": env.sim_time,
             "wall_time": time.perf_counter() - start}

@@ -42,7 +42,11 @@ def _saved(out: Path, spec: RunnableSpec) -> dict[str, Any] | None:
     if not path.exists():
         return None
     result = json.loads(path.read_text())
-    same = (result.get("spec") == json.loads(json.dumps(dataclasses.asdict(spec)))
+    # A spec field added after a run was saved, at its default, leaves that run the same run.
+    defaults = {f.name: f.default for f in dataclasses.fields(spec)
+                if f.default is not dataclasses.MISSING}
+    saved_spec = json.loads(json.dumps({**defaults, **result.get("spec", {})}))
+    same = (saved_spec == json.loads(json.dumps(dataclasses.asdict(spec)))
             and result.get("config_digest") == config_digest(spec.config_dir))
     return result if same else None
 

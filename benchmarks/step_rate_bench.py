@@ -1,0 +1,98 @@
+"""RL steps per wall second: the in-process runner against the ROS stack, same learning episodes.
+
+Both paths run QG-DDPG training episodes with the demo's settings (tilt observation, critic lr
+1e-4, 50 iterations per 20-step cycle, episodes capped at 50 steps) from the repo's config/:
+first in this process (``RunSpec.run``: sim + bridge + EKF + learner on one core), then through
+the real stack (robot, executor and learner processes, episodes started by service call).
+Printed per path: RL steps, wall time, RL steps per wall second, the fraction of steps that end
+at the rest detector's time limit (``rest.max_time``) and simulated seconds per step.
+Goals (issue 12): <= 10 % of steps at the time limit; >= 20 RL steps/s in process; the stack
+>= 80 % of the in-process rate. The last line is one JSON object.
+
+Usage: python benchmarks/step_rate_bench.py [--episodes 8] [--skip-ros]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import torch
+from qg_learning_node.experiments.runner import RunSpec
+
+CRITIC_LR, ITERATIONS, CAP = 1e-4, 50, 50
+
+
+def in_process(episodes: int) -> dict:
+    torch.set_num_threads(1)
+    result = RunSpec("qgddpg", CRITIC_LR, ITERATIONS, seed=0, train_episodes=episodes,
+                     test_episodes=0, train_max_steps=CAP).run()
+    steps = result["rl_steps"]
+    return {"rl_steps": steps, "wall_time": result["wall_time"],
+            "steps_per_second": steps / result["wall_time"],
+            "timeout_fraction": result["step_timeouts"] / steps,
+            "sim_seconds_per_step": result["sim_time"] / steps}
+
+
+def through_ros(episodes: int) -> dict:
+    import argparse as _argparse
+
+    from qg_interfaces.msg import AtRest
+
+    from qg_learning_node.cli.demo import (run_episode_by_service, wait_for_stack,
+                                           with_demo_settings)
+    from qg_learning_node.cli.launcher import Launcher, load_stack_config
+    from qg_learning_node.cli.ros_client import CliNode
+    from qg_learning_node.cli.ros_env import repo_root, stack_env
+
+    run_dir = Path(tempfile.mkdtemp(prefix="step_rate_"))
+    env = stack_env(log_dir=run_dir / "ros_log")
+    env["QG_RUNS_DIR"] = str(run_dir)
+    env["ROS_DOMAIN_ID"] = os.environ.get("ROS_DOMAIN_ID", "77")
+    settings = _argparse.Namespace(train_max_steps=CAP, critic_lr=CRITIC_LR,
+                                   iterations=ITERATIONS)
+    launcher = Launcher(env=env, out=None, log_dir=run_dir / "logs")
+    launcher.start([with_demo_settings(spec, settings)
+                    for spec in load_stack_config(repo_root() / "config" / "stack.yaml")])
+    events: list[AtRest] = []
+    try:
+        with CliNode("step_rate_bench", domain_id=int(env["ROS_DOMAIN_ID"])) as cli:
+            wait_for_stack(cli, timeout=180.0)
+            cli.node.create_subscription(AtRest, "/ee_at_rest", events.append, 100)
+            start = time.monotonic()
+            outcomes = [run_episode_by_service(cli, i, "train", -1, seed=i, timeout=600.0)
+                        for i in range(episodes)]
+            wall = time.monotonic() - start
+    finally:
+        launcher.stop()
+    steps = sum(o.steps for o in outcomes)
+    step_events = [e for e in events if e.seq > 0]       # seq 0: the reset's settled state
+    return {"rl_steps": steps, "wall_time": wall, "steps_per_second": steps / wall,
+            "timeout_fraction": sum(e.timed_out for e in step_events) / max(1, len(step_events)),
+            "sim_seconds_per_step": sum(e.duration for e in step_events) / max(1, len(step_events))}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=8)
+    parser.add_argument("--skip-ros", action="store_true", help="only the in-process runner")
+    args = parser.parse_args()
+    result = {"in_process": in_process(args.episodes)}
+    print("in process:", json.dumps(result["in_process"]), flush=True)
+    if not args.skip_ros:
+        result["ros"] = through_ros(args.episodes)
+        print("ROS stack: ", json.dumps(result["ros"]), flush=True)
+        result["ros_over_in_process"] = (result["ros"]["steps_per_second"]
+                                         / result["in_process"]["steps_per_second"])
+    ip = result["in_process"]
+    result["goals"] = {"timeouts_at_most_10_percent": ip["timeout_fraction"] <= 0.10,
+                       "in_process_at_least_20_steps_per_s": ip["steps_per_second"] >= 20.0,
+                       "ros_at_least_80_percent": result.get("ros_over_in_process", 0.0) >= 0.8}
+    print(json.dumps(result))
+
+
+if __name__ == "__main__":
+    main()

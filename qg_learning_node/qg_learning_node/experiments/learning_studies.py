@@ -1,0 +1,164 @@
+"""The studies behind docs/learning.md, beside the thesis grid: which lever makes the robot learn.
+
+``python -m qg_learning_node.experiments.learning_studies`` runs (resumably, two workers) and
+summarises, all with the thesis protocol of the ``thesis`` profile (40 training episodes capped at
+50 steps, 8 test episodes capped at 200, 3 seeds):
+
+* ``observation``: the thesis's 4-D wrench state at the same cell as the tilt state's runs;
+* ``graph``: the critic's error against the Monte-Carlo return of the goal-reaching episodes
+  (``runner.MonteCarloCheck``) for DDPG, QG-DDPG on the exact graph and QG-DDPG on a merged
+  graph (``graph_resolution``), and how many TD targets each graph bound changes;
+* ``housing``: trained at housing yaw 0, tested with the housing turned 90 degrees;
+* ``schedule``: simulated robot time until a test on all 8 poses (every 4 training episodes,
+  50-step cap) first succeeds everywhere: the thesis's train-every-20-steps schedule against
+  the ``async`` learner (10 updates per step; in process its deterministic stand-in).
+
+Results go to ``<out>/<study>/``; ``docs/data/learning_studies.json`` and two figures to
+``docs``.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from qg_learning_node.experiments.grid import grid_specs, test_steps
+from qg_learning_node.experiments.profile import load_profile
+from qg_learning_node.experiments.runner import RunSpec
+from qg_learning_node.experiments.tasks import MAX_WORKERS, run_specs
+
+__all__ = ["study_specs", "summarise", "main"]
+
+#: The cell the studies compare at (the thesis grid's lr 1e-4 with 50 iterations per cycle).
+CELL = (1e-4, 50)
+#: Merging grid of the ``graph`` study, in scaled state units.
+RESOLUTION = 0.1
+
+
+def study_specs(profile_name: str = "thesis") -> dict[str, list[RunSpec]]:
+    """The runs of every study, built on the grid of ``profile_name``."""
+    grid = load_profile(profile_name).grid
+    at = dataclasses.replace(grid, cells=(CELL,))
+    observation = [dataclasses.replace(s, observation="thesis", experiment="observation")
+                   for s in grid_specs(at)]
+    graph = [dataclasses.replace(s, experiment="graph") for s in grid_specs(at)]
+    graph += [dataclasses.replace(s, experiment="graph", graph_resolution=RESOLUTION)
+              for s in grid_specs(dataclasses.replace(at, algorithms=("qgddpg",)))]
+    housing = [dataclasses.replace(s, experiment="housing", test_housing_yaw=math.pi / 2)
+               for s in grid_specs(dataclasses.replace(at, algorithms=("qgddpg",)))]
+    timed = dataclasses.replace(at, algorithms=("qgddpg",), test_max_steps=50)
+    schedule = [dataclasses.replace(s, experiment="schedule", eval_every=4, **extra)
+                for extra in ({}, {"schedule": "async", "updates_per_step": 10.0,
+                                   "publish_every": 20})
+                for s in grid_specs(timed)]
+    return {"observation": observation, "graph": graph, "housing": housing,
+            "schedule": schedule}
+
+
+def _label(spec: dict[str, Any]) -> str:
+    label = f"{spec['algorithm']} lr {spec['critic_lr']:g} / {spec['iterations']} it"
+    if spec.get("observation"):
+        label += f", {spec['observation']} state"
+    if spec.get("graph_resolution"):
+        label += f", merged graph ({spec['graph_resolution']:g})"
+    if spec.get("schedule") == "async":
+        label += f", async learner ({spec['updates_per_step']:g} updates/step)"
+    elif spec.get("eval_every"):
+        label += ", thesis schedule (2.5 updates/step)"
+    if spec.get("test_housing_yaw"):
+        label += f", tested at housing yaw {math.degrees(spec['test_housing_yaw']):.0f} deg"
+    return label
+
+
+def summarise(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One row per label (seeds pooled): test success, test steps, MC error, bound effect."""
+    groups: dict[str, list[dict[str, Any]]] = {}
+    for r in results:
+        groups.setdefault(_label(r["spec"]), []).append(r)
+    rows = []
+    for label, group in groups.items():
+        steps = np.array([n for r in group for n in test_steps(r)], dtype=float)
+        success = [e["success"] for r in group for e in r["episodes"] if e["mode"] == "test"]
+        cycles = [c for r in group for c in r["cycles"]]
+        mc = [c["critic_mc_error"] for c in cycles if not math.isnan(c.get("critic_mc_error",
+                                                                             math.nan))]
+        rows.append({"label": label, "seeds": len(group),
+                     "test_success": float(np.mean(success)), "mean_test_steps": float(steps.mean()),
+                     "median_test_steps": float(np.median(steps)),
+                     "per_seed_mean_test_steps": [float(np.mean(test_steps(r))) for r in group],
+                     "critic_mc_error_last": float(np.mean([
+                         [c["critic_mc_error"] for c in r["cycles"]][-1] for r in group]))
+                     if mc else None,
+                     "frac_targets_raised": float(np.mean([c.get("frac_raised_lower", 0.0)
+                                                           for c in cycles])) if cycles else None,
+                     "rl_steps": int(sum(r["rl_steps"] for r in group)),
+                     "robot_minutes_to_solve": [_solved_at(r) for r in group]})
+    return rows
+
+
+def _solved_at(result: dict[str, Any]) -> float | None:
+    """Simulated robot minutes (training and tests) until every test pose succeeded, if ever."""
+    for evaluation in result.get("evaluations", []):
+        if evaluation["successes"] == result["spec"]["test_episodes"]:
+            return evaluation["sim_time"] / 60.0
+    return None
+
+
+def _mc_figure(results: list[dict[str, Any]], path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    groups: dict[str, list[dict[str, Any]]] = {}
+    for r in results:
+        groups.setdefault(_label(r["spec"]), []).append(r)
+    for label, group in sorted(groups.items()):
+        n = min(len(r["cycles"]) for r in group)
+        for ax, key in zip(axes, ("critic_mc_error", "frac_raised_lower")):
+            curves = np.array([[c.get(key, np.nan) for c in r["cycles"][:n]] for r in group])
+            ax.plot(np.arange(1, n + 1), np.nanmean(curves, axis=0), label=label)
+    axes[0].set_ylabel("mean |Q(s,a) - MC return|")
+    axes[1].set_ylabel("share of TD targets raised by a bound")
+    for ax in axes:
+        ax.set_xlabel("training cycle (20 steps)")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m qg_learning_node.experiments."
+                                     "learning_studies", description=__doc__)
+    parser.add_argument("--only", default="observation,graph,housing,schedule")
+    parser.add_argument("--out", type=Path, default=Path("runs/experiments/studies"))
+    parser.add_argument("--docs", type=Path, default=Path("docs"))
+    parser.add_argument("--workers", type=int, default=MAX_WORKERS)
+    args = parser.parse_args(argv)
+    studies = study_specs()
+    summary: dict[str, Any] = {}
+    for name in args.only.split(","):
+        results = run_specs(studies[name], args.out, args.workers, f"study {name}")
+        summary[name] = summarise(results)
+        if name == "graph":
+            (args.docs / "figures").mkdir(parents=True, exist_ok=True)
+            _mc_figure(results, args.docs / "figures" / "learning_critic_vs_mc.png")
+    (args.docs / "data").mkdir(parents=True, exist_ok=True)
+    path = args.docs / "data" / "learning_studies.json"
+    old = json.loads(path.read_text()) if path.exists() else {}
+    path.write_text(json.dumps({**old, **summary}, indent=1))
+    for name, rows in summary.items():
+        for row in rows:
+            print(f"{name:12s} {row['label']:60s} success {row['test_success']:.2f} "
+                  f"mean steps {row['mean_test_steps']:.1f} MC err {row['critic_mc_error_last']} "
+                  f"raised {row['frac_targets_raised']}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,42 @@
+"""Training scalars land in TensorBoard under Stable-Baselines3's tags, and in progress.csv."""
+from __future__ import annotations
+
+import csv
+
+import pytest
+
+from qg_learning_node.training_log import EPISODE_WINDOW, TrainingLog
+
+
+def test_scalars_are_readable_by_tensorboard_with_sb3_tags(tmp_path) -> None:
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+    log = TrainingLog(tmp_path)
+    lengths = [50, 30, 10] + [5] * EPISODE_WINDOW
+    step = 0
+    for i, length in enumerate(lengths):
+        step += length
+        log.episode("train", length, success=length < 50, episode_return=-length / 10,
+                    step=step, fps=12.5)
+        log.training({"critic_loss": 0.5 / (i + 1), "actor_loss": 3.0, "mean_q": -20.0}, step)
+    log.episode("test", 7, True, -0.7, step + 7, 12.5)
+    log.evaluation([7, 200], [True, False], step + 207)
+    log.close()
+
+    events = EventAccumulator(str(tmp_path))
+    events.Reload()
+    tags = set(events.Tags()["scalars"])
+    assert {"rollout/ep_len_mean", "rollout/success_rate", "train/critic_loss",
+            "train/actor_loss", "train/mean_q", "time/fps", "eval/mean_ep_length",
+            "eval/success_rate"} <= tags
+    ep_len = events.Scalars("rollout/ep_len_mean")
+    assert ep_len[0].value == 50 and ep_len[1].value == 40 and ep_len[2].value == 30
+    assert ep_len[-1].value == 5            # the window has forgotten the long early episodes
+    success = events.Scalars("rollout/success_rate")
+    assert success[0].value == 0 and success[-1].value == 1
+    assert events.Scalars("eval/success_rate")[0].value == pytest.approx(0.5)
+    assert events.Scalars("eval/mean_ep_length")[0].step == step + 207
+
+    with (tmp_path / "progress.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    critic = [float(r["value"]) for r in rows if r["tag"] == "train/critic_loss"]
+    assert len(critic) == len(lengths) and critic[0] == 0.5
