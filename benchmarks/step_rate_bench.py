@@ -53,7 +53,7 @@ def through_ros(episodes: int) -> dict:
     env["QG_RUNS_DIR"] = str(run_dir)
     env["ROS_DOMAIN_ID"] = os.environ.get("ROS_DOMAIN_ID", "77")
     settings = _argparse.Namespace(train_max_steps=CAP, critic_lr=CRITIC_LR,
-                                   iterations=ITERATIONS)
+                                   iterations=ITERATIONS, schedule="cycle", updates_per_step=10.0)
     launcher = Launcher(env=env, out=None, log_dir=run_dir / "logs")
     launcher.start([with_demo_settings(spec, settings)
                     for spec in load_stack_config(repo_root() / "config" / "stack.yaml")])

@@ -260,7 +260,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     demo.add_argument("--train-max-steps", type=int, default=50,
                       help="step cap of the demo's training episodes (the executor's default "
                            "is 1000, the thesis's)")
-    demo.add_argument("--critic-lr", type=float, default=1e-4,
+    demo.add_argument("--critic-lr", type=float, default=1e-3,
                       help="critic learning rate (actor: one tenth)")
     demo.add_argument("--iterations", type=int, default=50,
                       help="training iterations per 20-step cycle (schedule cycle)")
