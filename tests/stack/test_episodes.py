@@ -120,7 +120,7 @@ def test_train_episode_is_recorded_and_replays_into_the_same_graph(stack, tmp_pa
             counts[channel.topic] = counts.get(channel.topic, 0) + 1
             if channel.topic == "/transitions":
                 steps.append(msg.step)
-                assert len(msg.state) == 4 and np.all(np.abs(msg.state) <= 1.0)
+                assert len(msg.state) == 6 and np.all(np.abs(msg.state) <= 1.0)   # tilt state
     assert counts["/transitions"] == final.step, counts
     assert sorted(steps) == list(range(final.step))
     for topic in ("/joint_states", "/wrench_estimate", "/ee_pose", "/ee_twist",
@@ -135,6 +135,30 @@ def test_train_episode_is_recorded_and_replays_into_the_same_graph(stack, tmp_pa
     kinds = ("directly_connected", "connected", "disconnected", "loose_end")
     assert online.steps == final.step
     assert {k: offline.census[k] for k in kinds} == {k: online.graph.census()[k] for k in kinds}
+
+
+def test_async_learner_trains_while_the_robot_moves(stack, tmp_path):
+    """``learner.schedule: async``: the learner's own thread trains ``updates_per_step`` per
+    transition and publishes an actor every ``publish_every`` updates, during the episode."""
+    learner = ("learner", "qg_learning_node", "learner",
+               ("--ros-args", "-p", "learner.schedule:=async", "-p",
+                "learner.updates_per_step:=4.0", "-p", "learner.publish_every:=4",
+                "-p", f"checkpoint_dir:={tmp_path / 'checkpoints'}"))
+    stack.start(ROBOT, learner, executor_spec(max_steps=12))
+    with stack.client() as cli:
+        episodes = Episodes(cli)
+        episodes.wait_for_learner()
+        response = episodes.start(mode="train", initial_pose=1, seed=3)
+        assert response.success, response.message + stack.logs()
+        final = episodes.final(response.episode_id, timeout=240.0)
+        assert final.state == "done" and not final.degraded, final.message + stack.logs()
+
+        def caught_up():
+            d = episodes.learner_heartbeats[-1]
+            return d.transitions == final.step and d.updates == 4 * final.step
+        assert cli.spin_until(caught_up, 30.0), episodes.learner_heartbeats[-1]
+    # 4 updates per step in chunks of 4: one new actor per step
+    assert episodes.learner_heartbeats[-1].actor_version == final.step
 
 
 def test_learner_killed_mid_episode_degrades_then_resumes(stack, tmp_path):
@@ -242,6 +266,9 @@ def test_in_process_runner_repeats_the_ros_stack_episode(stack, tmp_path):
         settings, task=dataclasses.replace(settings.task, test_max_steps=steps))
     params = load_ros_params(config_dir() / "learner.yaml", "learner")["learner"]
     env = PandaTask(settings, "ekf")
+    # The robot process settles its start pose (sim.initial_pose, 0) when it starts, and
+    # pybullet keeps contact state across resets: give the twin the same history.
+    env.reset(load_ros_params(config_dir() / "sim.yaml")["sim"]["initial_pose"])
     learner = LearnerCore(learner_config_from_params(params), env.residual.state_dim, ACTION_DIM)
     local: list = []
     episode = Episode("local", "test", pose, "dense", env.residual)
