@@ -38,25 +38,17 @@ def in_process(episodes: int) -> dict:
 
 
 def through_ros(episodes: int) -> dict:
-    import argparse as _argparse
-
     from qg_interfaces.msg import AtRest
 
-    from qg_learning_node.cli.demo import (run_episode_by_service, wait_for_stack,
-                                           with_demo_settings)
-    from qg_learning_node.cli.launcher import Launcher, load_stack_config
+    from qg_learning_node.cli.demo import (DemoSettings, run_episode_by_service, start_stack,
+                                           wait_for_stack)
     from qg_learning_node.cli.ros_client import CliNode
-    from qg_learning_node.cli.ros_env import repo_root, stack_env
+    from qg_learning_node.cli.ros_env import repo_root
 
-    run_dir = Path(tempfile.mkdtemp(prefix="step_rate_"))
-    env = stack_env(log_dir=run_dir / "ros_log")
-    env["QG_RUNS_DIR"] = str(run_dir)
-    env["ROS_DOMAIN_ID"] = os.environ.get("ROS_DOMAIN_ID", "77")
-    settings = _argparse.Namespace(train_max_steps=CAP, critic_lr=CRITIC_LR,
-                                   iterations=ITERATIONS, schedule="cycle", updates_per_step=10.0)
-    launcher = Launcher(env=env, out=None, log_dir=run_dir / "logs")
-    launcher.start([with_demo_settings(spec, settings)
-                    for spec in load_stack_config(repo_root() / "config" / "stack.yaml")])
+    settings = DemoSettings(train_max_steps=CAP, critic_lr=CRITIC_LR, iterations=ITERATIONS)
+    launcher, env = start_stack(Path(tempfile.mkdtemp(prefix="step_rate_")), settings,
+                                repo_root() / "config" / "stack.yaml",
+                                os.environ.get("ROS_DOMAIN_ID", "77"))
     events: list[AtRest] = []
     try:
         with CliNode("step_rate_bench", domain_id=int(env["ROS_DOMAIN_ID"])) as cli:

@@ -236,12 +236,13 @@ class ExecutorNode(Node):
         msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z = (float(v) for v in wrench[3:])
         deadline = time.monotonic() + self.step_timeout
         resend = self.keepalive_period > 0.0
-        first = True
+
+        def send() -> None:
+            msg.header.stamp = self.get_clock().now().to_msg()
+            self.setpoint_pub.publish(msg)
+
+        send()
         while True:
-            if first or resend:
-                msg.header.stamp = self.get_clock().now().to_msg()
-                self.setpoint_pub.publish(msg)
-                first = False
             self.at_rest_event.wait(self.keepalive_period if resend else 0.05)
             with self.lock:
                 self.at_rest_event.clear()
@@ -254,6 +255,8 @@ class ExecutorNode(Node):
             if time.monotonic() > deadline:
                 raise EpisodeAborted(f"no at-rest event within {self.step_timeout} s "
                                      "(is the robot process up?)")
+            if resend:
+                send()
 
     def _send_zero_residual(self) -> None:
         """Leave the robot pushing with the base force only, from where it is."""

@@ -18,8 +18,28 @@ from qg_learning_node.cli.launcher import Launcher, ProcessSpec, load_stack_conf
 from qg_learning_node.cli.ros_env import repo_root, stack_env
 from qg_learning_node.training_log import TrainingLog
 
-__all__ = ["add_parser", "EpisodeOutcome", "StepMonitor", "run_episode_by_service",
-           "wait_for_stack", "with_demo_settings"]
+__all__ = ["add_parser", "DemoSettings", "EpisodeOutcome", "StepMonitor",
+           "run_episode_by_service", "start_stack", "wait_for_stack"]
+
+
+@dataclass(frozen=True)
+class DemoSettings:
+    """What the demo changes in the executor and learner (``-p`` ROS arguments).
+
+    Training episodes are capped shorter than the executor's default (a demo should end in
+    minutes, and a jammed early episode teaches little after its first tens of steps), and the
+    learner runs the grid cell where every QG-DDPG seed learned (docs/learning.md).
+    :param train_max_steps: step cap of training episodes (the executor's default is 1000).
+    :param critic_lr: critic learning rate (the actor's is one tenth).
+    :param iterations: training iterations per 20-step cycle (schedule ``cycle``).
+    :param schedule: ``cycle`` (the thesis) | ``async`` (train while the robot moves).
+    :param updates_per_step: train steps per RL step (schedule ``async``).
+    """
+    train_max_steps: int = 50
+    critic_lr: float = 1e-3
+    iterations: int = 50
+    schedule: str = "cycle"
+    updates_per_step: float = 10.0
 
 
 @dataclass
@@ -182,19 +202,15 @@ def _plot(outcomes: list[EpisodeOutcome], path: Path) -> None:
     plt.close(fig)
 
 
-def with_demo_settings(spec: ProcessSpec, args: argparse.Namespace) -> ProcessSpec:
-    """The executor's and learner's specs with the demo's overrides (``-p`` ROS arguments).
-
-    Training episodes are capped shorter than the executor's default (a demo should end in
-    minutes, and a jammed early episode teaches little after its first tens of steps), and the
-    learner runs the grid cell that learned fastest here (docs/learning.md).
-    """
-    overrides = {("qg_learning_node", "executor"): {"task.train_max_steps": args.train_max_steps},
+def _with_demo_settings(spec: ProcessSpec, settings: DemoSettings) -> ProcessSpec:
+    """The executor's and learner's specs with the demo's overrides; others unchanged."""
+    overrides = {("qg_learning_node", "executor"): {
+                     "task.train_max_steps": settings.train_max_steps},
                  ("qg_learning_node", "learner"): {
-                     "learner.ddpg.critic_lr": args.critic_lr,
-                     "learner.iterations_per_cycle": args.iterations,
-                     "learner.schedule": args.schedule,
-                     "learner.updates_per_step": float(args.updates_per_step)}}
+                     "learner.ddpg.critic_lr": settings.critic_lr,
+                     "learner.iterations_per_cycle": settings.iterations,
+                     "learner.schedule": settings.schedule,
+                     "learner.updates_per_step": float(settings.updates_per_step)}}
     params = overrides.get((spec.package, spec.executable))
     if not params:
         return spec
@@ -203,17 +219,29 @@ def with_demo_settings(spec: ProcessSpec, args: argparse.Namespace) -> ProcessSp
     return replace(spec, args=spec.args + ros_args + extra)
 
 
+def start_stack(run_dir: Path, settings: DemoSettings, config: Path,
+                domain_id: str | None = None) -> tuple[Launcher, dict[str, str]]:
+    """Start the processes of ``config`` with ``settings``; episodes, checkpoints, logs and ROS
+    logs go under ``run_dir``. :returns: the launcher (stop it) and the stack's environment."""
+    env = stack_env(log_dir=run_dir / "ros_log")
+    env["QG_RUNS_DIR"] = str(run_dir)     # episodes/ (MCAP) and checkpoints/ go here
+    if domain_id is not None:
+        env["ROS_DOMAIN_ID"] = domain_id
+    launcher = Launcher(env=env, out=None, log_dir=run_dir / "logs")
+    launcher.start([_with_demo_settings(spec, settings) for spec in load_stack_config(config)])
+    return launcher, env
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from qg_learning_node.cli.ros_client import CliNode
     run_dir = Path(args.runs_dir) / time.strftime("demo_%Y%m%d_%H%M%S")
     run_dir.mkdir(parents=True, exist_ok=True)
-    env = stack_env(log_dir=run_dir / "ros_log")
-    env["QG_RUNS_DIR"] = str(run_dir)     # episodes/ (MCAP) and checkpoints/ go here
-    launcher = Launcher(env=env, out=None, log_dir=run_dir / "logs")
-    launcher.start([with_demo_settings(spec, args)
-                    for spec in load_stack_config(Path(args.config))])
+    settings = DemoSettings(train_max_steps=args.train_max_steps, critic_lr=args.critic_lr,
+                            iterations=args.iterations, schedule=args.schedule,
+                            updates_per_step=args.updates_per_step)
+    launcher, env = start_stack(run_dir, settings, Path(args.config))
     schedule = [("train", -1)] * args.train_episodes + [("test", p) for p in range(args.test_poses)]
     outcomes: list[EpisodeOutcome] = []
     log = TrainingLog(run_dir / "tensorboard")
@@ -257,17 +285,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     demo.add_argument("--runs-dir", default=str(repo_root() / "runs"))
     demo.add_argument("--train-episodes", type=int, default=40, help="(thesis: 40)")
     demo.add_argument("--test-poses", type=int, default=8)
-    demo.add_argument("--train-max-steps", type=int, default=50,
+    demo.add_argument("--train-max-steps", type=int, default=DemoSettings.train_max_steps,
                       help="step cap of the demo's training episodes (the executor's default "
                            "is 1000, the thesis's)")
-    demo.add_argument("--critic-lr", type=float, default=1e-3,
+    demo.add_argument("--critic-lr", type=float, default=DemoSettings.critic_lr,
                       help="critic learning rate (actor: one tenth)")
-    demo.add_argument("--iterations", type=int, default=50,
+    demo.add_argument("--iterations", type=int, default=DemoSettings.iterations,
                       help="training iterations per 20-step cycle (schedule cycle)")
-    demo.add_argument("--schedule", choices=("cycle", "async"), default="cycle",
+    # (learner_core.SCHEDULES; not imported: it would load torch for every `qgl` command)
+    demo.add_argument("--schedule", choices=("cycle", "async"), default=DemoSettings.schedule,
                       help="cycle: train after every 20 steps (the thesis); async: the learner "
                            "trains while the robot moves")
-    demo.add_argument("--updates-per-step", type=float, default=10.0,
+    demo.add_argument("--updates-per-step", type=float, default=DemoSettings.updates_per_step,
                       help="train steps per RL step (schedule async)")
     demo.add_argument("--seed", type=int, default=1)
     demo.add_argument("--episode-timeout", type=float, default=900.0, help="[s]")
