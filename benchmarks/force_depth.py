@@ -17,10 +17,10 @@ import json
 import time
 
 import numpy as np
-from robot_bridge_node.core.robot_loop import RobotLoop, build_panda_loop
-from robot_bridge_node.core.types import PoseReference, WrenchSetpoint
-from sim_robot_node.core.panda_scene import N_START_POSES, PandaSceneConfig
-from sim_robot_node.core.params import config_dir, load_ros_params
+from robot_bridge_node.core.hardware_interface import load_robot
+from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
+from qg_common.types import N_START_POSES, PoseReference, WrenchSetpoint
+from qg_common.params import config_dir, load_ros_params
 
 PUSH = -15.0
 UPRIGHT = np.diag([1.0, -1.0, -1.0])
@@ -34,7 +34,7 @@ def episode(loop: RobotLoop, pose: int, max_steps: int, policy) -> tuple[bool, i
         result = loop.execute(WrenchSetpoint.residual(PUSH, *policy(loop)))
         rested += not result.timed_out
         gt = result.ground_truth
-        if gt.success or gt.lateral_offset > loop.scene.config.max_lateral_offset:
+        if gt.success or gt.lateral_offset > loop.simulation.scene.config.max_lateral_offset:
             return gt.success, step, rested / step
     return False, max_steps, rested / max_steps
 
@@ -45,7 +45,7 @@ def press(loop: RobotLoop, force: float | None, seconds: float, ramp: tuple[floa
 
     :returns: (commanded force, tip depth, plunger travel) every 10 ms.
     """
-    target = loop.scene.target_tool_position()
+    target = loop.simulation.scene.target_tool_position()
     ticks = round(seconds / loop.config.dt)
     trace = []
     for i in range(ticks):
@@ -55,7 +55,7 @@ def press(loop: RobotLoop, force: float | None, seconds: float, ramp: tuple[floa
                                         PoseReference(target, UPRIGHT)))
         loop.tick()
         if i % 10 == 0:
-            gt = loop.scene.ground_truth()
+            gt = loop.simulation.scene.ground_truth()
             trace.append((f, gt.insertion_depth, gt.plunger_travel))
     return trace
 
@@ -77,7 +77,7 @@ def force_depth(loop: RobotLoop) -> dict:
     for i in range(0, len(trace), 10):
         print(f"  {forces[i]:6.2f}   {trace[i][1] * 1e3:9.3f}   {travel[i] * 1e3:9.3f}"
               f"   {speed[i] * 1e3:9.2f}")
-    c = loop.scene.config
+    c = loop.simulation.scene.config
     moving = np.flatnonzero(speed > 0.001)                  # > 1 mm/s: sliding, not creeping
     done = np.flatnonzero(travel >= c.plunger_travel - c.success_tolerance)
     before = speed[: moving[0]] if len(moving) else speed
@@ -85,9 +85,9 @@ def force_depth(loop: RobotLoop) -> dict:
     finishes = {}
     for force in (9.0, 10.0, 10.5, 11.0, 11.5, 12.0, 13.0):
         land(loop)
-        landed = loop.scene.plunger_travel()
+        landed = loop.simulation.scene.plunger_travel()
         press(loop, force, 2.0)
-        gt = loop.scene.ground_truth()
+        gt = loop.simulation.scene.ground_truth()
         finishes[force] = gt.success
         print(f"  {force:5.1f} N: ring moved {(gt.plunger_travel - landed) * 1e3:.2f} mm,"
               f" {'finished' if gt.success else 'stalled'}")
@@ -102,7 +102,7 @@ def force_depth(loop: RobotLoop) -> dict:
 
 def tilt_back(loop: RobotLoop) -> tuple[float, float]:
     """Floor policy from ground truth: torque turning the shaft upright (contact convention)."""
-    error = loop.scene.ground_truth().orientation_error
+    error = loop.simulation.scene.ground_truth().orientation_error
     return tuple(np.clip(-20.0 * error, -3.0, 3.0))
 
 
@@ -116,8 +116,8 @@ def main() -> None:
     wall = time.perf_counter()
     # the stack's own numbers (config/panda_scene.yaml, config/bridge.yaml: rest.max_time & co)
     scene = load_ros_params(config_dir() / "panda_scene.yaml")["panda_scene"]
-    loop = build_panda_loop(PandaSceneConfig.from_dict(scene),
-                            load_ros_params(config_dir() / "bridge.yaml"))
+    loop = build_loop(load_robot("sim_panda", {"panda_scene": scene}),
+                      load_ros_params(config_dir() / "bridge.yaml"))
     out: dict = {"rest_max_time": loop.rest.config.max_time}
     if args.force_only:
         out.update(force_depth(loop))
@@ -129,7 +129,7 @@ def main() -> None:
     zero = []
     for k in range(N_START_POSES):
         ok, steps, rest = episode(loop, k, args.zero_steps, lambda _: (0.0, 0.0))
-        gt = loop.scene.ground_truth()
+        gt = loop.simulation.scene.ground_truth()
         zero.append(ok)
         print(f"  start {k}: {'inserted in ' + str(steps) if ok else 'jammed'} "
               f"(depth {gt.insertion_depth * 1e3:.2f} mm, tilt {np.degrees(gt.tilt):.1f} deg, "

@@ -15,8 +15,9 @@ import json
 import time
 
 import numpy as np
-from robot_bridge_node.core.robot_loop import GroundTruthWrench, build_panda_loop
-from robot_bridge_node.core.types import WrenchSetpoint
+from robot_bridge_node.core.hardware_interface import load_robot
+from robot_bridge_node.core.robot_loop import GroundTruthWrench, build_loop
+from qg_common.types import WrenchSetpoint
 
 
 def main() -> None:
@@ -24,8 +25,9 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=5.0, help="simulated seconds")
     parser.add_argument("--pose", type=int, default=0, help="start pose 0..7")
     args = parser.parse_args()
-    loop = build_panda_loop(estimator=lambda scene, model: GroundTruthWrench(scene))
-    scene = loop.scene
+    loop = build_loop(load_robot("sim_panda"),
+                      estimator=lambda robot, model: GroundTruthWrench(robot.simulation))
+    scene = loop.simulation.scene
     ticks = round(args.seconds / loop.config.dt)
     rng = np.random.default_rng(0)
     loop.reset(args.pose)

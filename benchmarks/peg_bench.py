@@ -22,7 +22,7 @@ for package in ("sim_robot_node", "robot_bridge_node"):
 from robot_bridge_node.core.position_control import (  # noqa: E402
     PositionControlConfig, TaskSpacePositionController)
 from sim_robot_node.core.nextage_scene import nextage_urdf_path  # noqa: E402
-from sim_robot_node.core.params import config_dir, load_ros_params  # noqa: E402
+from qg_common.params import config_dir, load_ros_params  # noqa: E402
 from sim_robot_node.core.peg_env import PegEnv, PegEnvConfig, toward_goal  # noqa: E402
 
 

@@ -30,14 +30,14 @@ from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.timer import Timer
-from robot_bridge_node.conversions import setpoint_msg
-from sim_robot_node.conversions import time_msg
-from robot_bridge_node.core.types import WrenchSetpoint
+from qg_common.conversions import setpoint_msg
+from qg_common.conversions import time_msg
+from qg_common.types import WrenchSetpoint
 from robot_bridge_node.bridge_node import BridgeNode
 from robot_bridge_node.estimator_node import WrenchEstimatorNode
 from robot_bridge_node.robot_process import CONFIG_FILES, RobotProcess
-from sim_robot_node.node_runtime import node_args
-from sim_robot_node.sim_node import SimNode
+from qg_common.node_runtime import node_args
+from robot_bridge_node.simulation_node import SimulationNode
 
 ON_TIME = 1.5e-3   # [s] largest tick period counted as on time
 
@@ -48,7 +48,7 @@ def start_process(mode: str, publish_rate: float, priority: int = 0
         "realtime_bench", "--ros-args", "-p", f"sim.clock_mode:={mode}",
         "-p", f"sim.publish_rate:={float(publish_rate)}",
         "-p", f"sim.realtime_priority:={priority}"]))
-    nodes = [SimNode(), BridgeNode(), WrenchEstimatorNode()]
+    nodes = [SimulationNode(), BridgeNode(), WrenchEstimatorNode()]
     return RobotProcess(*nodes), nodes
 
 

@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from robot_bridge_node.recording.bag_reader import bag_info
-from robot_bridge_node.recording.episode_recorder import EpisodeRecorder
+from qg_recording.bag_reader import bag_info
+from qg_recording.episode_recorder import EpisodeRecorder
 
 NAMES = [f"panda_joint{i}" for i in range(1, 8)]
 PERIOD_NS = 1_000_000

@@ -35,7 +35,7 @@ from ekf_harness import (DT, PandaTorqueHarness, Trace, descend_reference, rmse,
 
 from robot_bridge_node.core.panda_model import Q_READY, PandaModel  # noqa: E402
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig  # noqa: E402
-from sim_robot_node.core.params import config_dir, load_ros_params  # noqa: E402
+from qg_common.params import config_dir, load_ros_params  # noqa: E402
 
 W = np.array([5.0, -3.0, -15.0, 0.5, -0.3, 0.2])
 TOLERANCE = (0.3, 0.03)          # [N], [Nm]: the accuracy target of the issue

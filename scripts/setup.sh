@@ -53,9 +53,19 @@ if [[ "$(cat "$STAMPS/cmakefix" 2>/dev/null)" != "$deps_hash" ]]; then
 fi
 
 # 4. Our packages' sources are importable from .venv (the pure-Python cores need no ROS
-#    environment), and `qgl` is a console script of the venv.
+#    environment), with their metadata: robots and environments are plugins found through
+#    entry points (egg-info beside each source tree), and `qgl` is a console script of the venv.
+PY_PACKAGES=(ros_ws/src/qg_common ros_ws/src/qg_recording sim_robot_node robot_bridge_node qg_learning_node)
 site="$("$PY" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
-printf '%s\n' "$ROOT/sim_robot_node" "$ROOT/robot_bridge_node" "$ROOT/qg_learning_node" > "$site/qg_stack_sources.pth"
+printf "$ROOT/%s\n" "${PY_PACKAGES[@]}" > "$site/qg_stack_sources.pth"
+meta_hash="$(cd "$ROOT" && cat "${PY_PACKAGES[@]/%//setup.py}" | sha256sum | cut -c1-16)"
+if [[ "$(cat "$STAMPS/egg_info" 2>/dev/null)" != "$meta_hash" ]]; then
+  for pkg in "${PY_PACKAGES[@]}"; do
+    ( cd "$ROOT/$pkg" && "$PY" setup.py --quiet egg_info >/dev/null 2>&1 ) \
+      || { log "egg_info failed in $pkg"; exit 1; }
+  done
+  echo "$meta_hash" > "$STAMPS/egg_info"
+fi
 cat > "$VENV/bin/qgl" <<EOF
 #!$PY
 import sys
@@ -64,8 +74,8 @@ sys.exit(main())
 EOF
 chmod +x "$VENV/bin/qgl"
 
-# 5. colcon build of the workspace (interface package + the three ament_python packages).
-src_hash="$(cd "$ROOT" && find ros_ws/src/qg_interfaces sim_robot_node robot_bridge_node qg_learning_node \
+# 5. colcon build of the workspace (interface package + the five ament_python packages).
+src_hash="$(cd "$ROOT" && find ros_ws/src/qg_interfaces "${PY_PACKAGES[@]}" \
   -type f \( -name '*.msg' -o -name '*.srv' -o -name 'CMakeLists.txt' -o -name 'package.xml' \
   -o -name 'setup.py' -o -name 'setup.cfg' \) -print0 | sort -z | xargs -0 cat | sha256sum | cut -c1-16)"
 if [[ "$(cat "$STAMPS/colcon" 2>/dev/null)" != "$src_hash" || ! -f "$ROOT/ros_ws/install/setup.bash" ]]; then

@@ -21,5 +21,13 @@ setup(
         'console_scripts': [
             'sim = sim_robot_node.sim_node:main',
         ],
+        # The robots this package simulates, loaded by name by robot_bridge_node's robot process.
+        'robot_bridge_node.robots': [
+            'sim_panda = sim_robot_node.plugins:SIM_PANDA',
+        ],
+        # Environments of the in-process experiments (qg_learning_node.environments).
+        'qg_learning_node.environments': [
+            'peg = sim_robot_node.core.peg_env:make_peg_env',
+        ],
     },
 )

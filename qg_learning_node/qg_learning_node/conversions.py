@@ -29,7 +29,7 @@ def transition_to_msg(t: TransitionRecord) -> Transition:
 
 
 def actor_to_msg(version: int, tensors: list[tuple[str, np.ndarray]]) -> ActorParameters:
-    msg = ActorParameters(version=version, activation="tanh")
+    msg = ActorParameters(version=version)
     msg.tensor_names = [name for name, _ in tensors]
     msg.tensor_ndims = [t.ndim for _, t in tensors]
     msg.tensor_shapes = [int(d) for _, t in tensors for d in t.shape]

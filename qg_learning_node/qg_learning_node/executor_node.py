@@ -13,14 +13,14 @@ import threading
 import time
 
 import numpy as np
-import rclpy.qos
+from qg_common import topics
+from qg_common.node_runtime import node_params, run_nodes
+from qg_common.topics import LATCHED, RELIABLE_DEEP
 from qg_interfaces.msg import (ActorParameters, AtRest, EpisodeStatus, LearnerDiagnostics,
                                Transition, WrenchSetpoint)
 from qg_interfaces.srv import ResetSim, StartEpisode, StopEpisode
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
-
-from sim_robot_node.node_runtime import node_params, run_nodes
 
 from qg_learning_node.conversions import (actor_tensors_from_msg, observation_from_msg,
                                           transition_to_msg)
@@ -30,9 +30,6 @@ from qg_learning_node.core.noise import ActionNoise, NoiseConfig
 from qg_learning_node.core.residual_task import ACTION_DIM, ResidualTask, TaskConfig
 from qg_learning_node.ddpg import ActorMLP
 
-RELIABLE_DEEP = rclpy.qos.QoSProfile(depth=1000, reliability=rclpy.qos.ReliabilityPolicy.RELIABLE)
-LATCHED = rclpy.qos.QoSProfile(depth=1, reliability=rclpy.qos.ReliabilityPolicy.RELIABLE,
-                               durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 #: [s] how long StartEpisode waits for /sim/reset to be discovered before refusing.
@@ -59,21 +56,22 @@ class ExecutorNode(Node):
         self.keepalive_period = float(p.get("keepalive_period", 0.0))
         self.learner_timeout = float(p.get("learner_timeout", 2.0))
 
-        self.status_pub = self.create_publisher(EpisodeStatus, "/episode_status", LATCHED)
-        self.transition_pub = self.create_publisher(Transition, "/transitions", RELIABLE_DEEP)
-        self.setpoint_pub = self.create_publisher(WrenchSetpoint, "/wrench_setpoint", 10)
+        self.status_pub = self.create_publisher(EpisodeStatus, topics.EPISODE_STATUS, LATCHED)
+        self.transition_pub = self.create_publisher(Transition, topics.TRANSITIONS, RELIABLE_DEEP)
+        self.setpoint_pub = self.create_publisher(WrenchSetpoint, topics.WRENCH_SETPOINT,
+                                                  topics.COMMAND_QOS)
         callbacks = ReentrantCallbackGroup()
-        self.create_subscription(ActorParameters, "/actor_parameters", self._on_actor, LATCHED,
+        self.create_subscription(ActorParameters, topics.ACTOR_PARAMETERS, self._on_actor, LATCHED,
                                  callback_group=callbacks)
-        self.create_subscription(LearnerDiagnostics, "/learner/diagnostics", self._on_learner,
+        self.create_subscription(LearnerDiagnostics, topics.LEARNER_DIAGNOSTICS, self._on_learner,
                                  10, callback_group=callbacks)
-        self.create_subscription(AtRest, "/ee_at_rest", self._on_at_rest, 10,
+        self.create_subscription(AtRest, topics.EE_AT_REST, self._on_at_rest, 10,
                                  callback_group=callbacks)
-        self.reset_client = self.create_client(ResetSim, "/sim/reset", callback_group=callbacks)
+        self.reset_client = self.create_client(ResetSim, topics.SIM_RESET, callback_group=callbacks)
         services = MutuallyExclusiveCallbackGroup()
-        self.create_service(StartEpisode, "/executor/start_episode", self._on_start,
+        self.create_service(StartEpisode, topics.START_EPISODE, self._on_start,
                             callback_group=services)
-        self.create_service(StopEpisode, "/executor/stop_episode", self._on_stop,
+        self.create_service(StopEpisode, topics.STOP_EPISODE, self._on_stop,
                             callback_group=services)
         self.create_timer(0.5, self._publish_status, callback_group=callbacks)
 
@@ -208,8 +206,7 @@ class ExecutorNode(Node):
             self._set_state("aborted", f"error: {exc}")
 
     def _reset(self, episode: Episode) -> AtRest:
-        request = ResetSim.Request(initial_pose=episode.initial_pose, housing_yaw=0.0,
-                                   seed=self.episodes_started)
+        request = ResetSim.Request(initial_pose=episode.initial_pose, housing_yaw=0.0)
         future = self.reset_client.call_async(request)
         deadline = time.monotonic() + self.reset_timeout
         while not future.done():

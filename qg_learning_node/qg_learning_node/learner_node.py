@@ -15,18 +15,18 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from qg_common import topics
+from qg_common.node_runtime import node_params, run_nodes
+from qg_common.params import runs_dir
+from qg_common.topics import LATCHED, RELIABLE_DEEP
 from qg_interfaces.msg import ActorParameters, EpisodeStatus, LearnerDiagnostics, Transition
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
-
-from sim_robot_node.core.params import runs_dir
-from sim_robot_node.node_runtime import node_params, run_nodes
 
 from qg_learning_node.conversions import actor_to_msg
 from qg_learning_node.core.episode import TransitionRecord
 from qg_learning_node.core.learner_params import learner_config_from_params
 from qg_learning_node.core.residual_task import ACTION_DIM, state_dim
-from qg_learning_node.executor_node import LATCHED, RELIABLE_DEEP
 from qg_learning_node.learner_core import LearnerCore
 
 CHECKPOINT_NAME = "learner.pt"
@@ -55,12 +55,13 @@ class LearnerNode(Node):
         self.checkpointed: set[str] = set()
         self.last_diagnostics: dict = {}
 
-        self.actor_pub = self.create_publisher(ActorParameters, "/actor_parameters", LATCHED)
-        self.diagnostics_pub = self.create_publisher(LearnerDiagnostics, "/learner/diagnostics", 10)
+        self.actor_pub = self.create_publisher(ActorParameters, topics.ACTOR_PARAMETERS, LATCHED)
+        self.diagnostics_pub = self.create_publisher(LearnerDiagnostics, topics.LEARNER_DIAGNOSTICS,
+                                                     topics.COMMAND_QOS)
         group = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(Transition, "/transitions", self._on_transition, RELIABLE_DEEP,
+        self.create_subscription(Transition, topics.TRANSITIONS, self._on_transition, RELIABLE_DEEP,
                                  callback_group=group)
-        self.create_subscription(EpisodeStatus, "/episode_status", self._on_status, LATCHED,
+        self.create_subscription(EpisodeStatus, topics.EPISODE_STATUS, self._on_status, LATCHED,
                                  callback_group=group)
         # A heartbeat, so the executor knows the learner is alive between training cycles.
         self.create_timer(0.5, self._heartbeat, callback_group=group)

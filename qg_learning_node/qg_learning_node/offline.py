@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from robot_bridge_node.recording.bag_reader import read_bag
+from qg_recording.bag_reader import read_bag
 
 from qg_learning_node.core.episode import TransitionRecord
 

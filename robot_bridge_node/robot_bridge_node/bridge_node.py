@@ -2,11 +2,11 @@
 
 The bridge owns the 1 kHz loop (``core/robot_loop.py``), like a robot's controller process:
 ``LoopRunner`` drives it on a dedicated thread (not an rclpy timer, whose jitter is several ms),
-takes ``/wrench_setpoint`` in, and publishes the tool pose and twist and the ``/ee_at_rest``
-event that ends an RL step. In the composed ``robot`` process the loop steps the simulator
-itself; run on its own (``ros2 run robot_bridge_node bridge``) the loop's robot is
-``RemoteRobot``, which reads ``/joint_states`` from the separate sim and writes
-``/joint_commands``, one tick per received state.
+takes ``wrench_setpoint`` in, and publishes the tool pose and twist and
+the ``ee_at_rest`` event that ends an RL step. In the composed ``robot`` process the loop's
+hardware is the robot plugin; run on its own (``ros2 run robot_bridge_node bridge``) it is
+``RemoteRobot``, which reads ``joint_states`` from the separate sim and writes
+``joint_commands``, one tick per received state.
 """
 from __future__ import annotations
 
@@ -17,40 +17,28 @@ from dataclasses import dataclass, replace
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from qg_common import topics
+from qg_common.conversions import (at_rest_msg, ground_truth_from_msg, joint_state_from_msg,
+                                   pose_stamped, setpoint_from_msg, time_msg, time_ns,
+                                   twist_stamped, wrench_from_msg)
+from qg_common.node_runtime import LoopThread, node_params, run_nodes
+from qg_common.types import NO_GROUND_TRUTH, GroundTruth, JointState
 from qg_interfaces.msg import AtRest, GroundTruth as GroundTruthMsg
 from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
 from rclpy.node import Node
 from sensor_msgs.msg import JointState as JointStateMsg
-from sim_robot_node.core.panda_scene import PandaSceneConfig
-from sim_robot_node.conversions import (at_rest_msg, ground_truth_from_msg, joint_state_from_msg,
-                                        pose_stamped, time_msg, time_ns, twist_stamped,
-                                        wrench_from_msg)
-from sim_robot_node.core.types import GroundTruth, JointState
-from sim_robot_node.node_runtime import LoopThread, node_params, run_nodes
-from sim_robot_node.sim_node import RESTARTED_QOS, RESTARTED_TOPIC, SENSOR_QOS
 from std_msgs.msg import Header
 
-from robot_bridge_node.conversions import setpoint_from_msg
+from robot_bridge_node.core.hardware_interface import robot_plugin
 from robot_bridge_node.core.impedance import HybridImpedanceController, ImpedanceConfig, ToolState
-from robot_bridge_node.core.panda_model import PandaModel
 from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
-from robot_bridge_node.core.robot_loop import LoopConfig, RobotLoop
+from robot_bridge_node.core.robot_loop import LoopConfig, RobotLoop, tool_model
 from robot_bridge_node.core.safety import SafetyFilter, SafetyLimits, SetpointRejected
-from robot_bridge_node.core.types import StepResult
 
-__all__ = ["COMMAND_QOS", "BridgeNode", "LoopRunner", "LoopObserver", "RemoteRobot",
-           "LatestWrench", "task_model", "main"]
-
-COMMAND_QOS = 10
+__all__ = ["BridgeNode", "LoopRunner", "LoopObserver", "RemoteRobot", "LatestWrench", "main"]
 
 #: Called after every tick with the simulated time [ns] (e.g. an MCAP recorder).
 LoopObserver = Callable[[int, RobotLoop], None]
-
-
-def task_model(scene: PandaSceneConfig) -> PandaModel:
-    """The Panda model of the shaft task: tool frame at the grasp point, shaft as payload."""
-    return PandaModel(tool_offset=scene.tool_offset, payload_mass=scene.shaft_mass,
-                      payload_com=scene.tool_offset + scene.shaft_com)
 
 
 class BridgeNode(Node):
@@ -59,12 +47,12 @@ class BridgeNode(Node):
     def __init__(self) -> None:
         super().__init__("bridge", automatically_declare_parameters_from_overrides=True)
         self.params = node_params(self)
-        self.ee_pose = self.create_publisher(PoseStamped, "/ee_pose", SENSOR_QOS)
-        self.ee_twist = self.create_publisher(TwistStamped, "/ee_twist", SENSOR_QOS)
-        self.ee_at_rest = self.create_publisher(AtRest, "/ee_at_rest", COMMAND_QOS)
+        self.ee_pose = self.create_publisher(PoseStamped, topics.EE_POSE, topics.SENSOR_QOS)
+        self.ee_twist = self.create_publisher(TwistStamped, topics.EE_TWIST, topics.SENSOR_QOS)
+        self.ee_at_rest = self.create_publisher(AtRest, topics.EE_AT_REST, topics.COMMAND_QOS)
         self.setpoint_handler: Callable[[WrenchSetpointMsg], None] | None = None
-        self.create_subscription(WrenchSetpointMsg, "/wrench_setpoint", self._on_setpoint,
-                                 COMMAND_QOS)
+        self.create_subscription(WrenchSetpointMsg, topics.WRENCH_SETPOINT, self._on_setpoint,
+                                 topics.COMMAND_QOS)
 
     def _on_setpoint(self, msg: WrenchSetpointMsg) -> None:
         if self.setpoint_handler is None:
@@ -129,7 +117,7 @@ class LoopRunner:
         self._setpoint: WrenchSetpointMsg | None = None
         self._reset: _ResetJob | None = None
         self._seq: int | None = None        # last accepted setpoint
-        self._step_start: float | None = None   # scene time of the running step's start
+        self._step_start: float | None = None   # loop time of the running step's start
 
     # --- called from ROS callbacks -----------------------------------------------------------
     def submit_setpoint(self, msg: WrenchSetpointMsg) -> None:
@@ -150,7 +138,7 @@ class LoopRunner:
         """Reset and settle on the loop thread; the settled observation (also on /ee_at_rest).
 
         :raises TimeoutError: if the loop thread does not finish in ``timeout`` seconds.
-        :raises RuntimeError, ValueError: what the scene raised (e.g. IK out of reach).
+        :raises RuntimeError, ValueError: what the simulation raised (e.g. IK out of reach).
         :raises TimeoutError: also when a remote robot sends no state after its restart.
         """
         job = self.request_reset(initial_pose, housing_yaw)
@@ -197,7 +185,7 @@ class LoopRunner:
     def _take_setpoint(self, msg: WrenchSetpointMsg) -> None:
         loop = self.loop
         if msg.seq == self._seq:
-            loop.safety.feed_watchdog(loop.scene.time)
+            loop.safety.feed_watchdog(loop.time)
             return
         try:
             loop.command(setpoint_from_msg(msg))
@@ -207,7 +195,7 @@ class LoopRunner:
                 throttle_duration_sec=1.0)
             return
         self._seq = msg.seq
-        self._step_start = loop.scene.time
+        self._step_start = loop.time
 
     def _do_reset(self, job: _ResetJob) -> None:
         try:
@@ -221,7 +209,7 @@ class LoopRunner:
         self._step_start = None
         self.clock_ns += self._settle_ticks * self._dt_ns
         stamp = self._stamp()
-        job.observation = self._event(0, self.loop.scene.time - self.loop.config.settle_time, stamp)
+        job.observation = self._event(0, self.loop.time - self.loop.config.settle_time, stamp)
         self.publish_sample(stamp)
         self.bridge.ee_at_rest.publish(job.observation)
         job.done.set()
@@ -252,59 +240,54 @@ class LoopRunner:
             self.publish(stamp)
 
     def _event(self, seq: int, start: float, stamp: Time) -> AtRest:
-        """The ``AtRest`` of the step that started at scene time ``start``."""
-        loop = self.loop
-        tool = loop.controller.tool
-        estimate = loop.wrench_estimate
-        result = StepResult(duration=loop.scene.time - start, timed_out=loop.rest.timed_out,
-                            linear_speed=tool.linear_speed, angular_speed=tool.angular_speed,
-                            ground_truth=loop.scene.ground_truth(),
-                            wrench_estimate=None if estimate is None else estimate.copy())
-        return at_rest_msg(seq, result, tool.position, tool.rotation, stamp)
+        """The ``AtRest`` of the step that started at loop time ``start``."""
+        tool = self.loop.controller.tool
+        return at_rest_msg(seq, self.loop.result(start), tool.position, tool.rotation, stamp)
+
 
 
 # --- separate-process mode ------------------------------------------------------------------
-_NO_TRUTH = GroundTruth(wrench=np.zeros(6), insertion_depth=0.0, plunger_travel=0.0,
-                        success=False, position_error=0.0, orientation_error=np.zeros(2),
-                        lateral_offset=0.0, tilt=0.0)
-
-
 class RemoteRobot:
-    """The loop's ``Scene`` over topics: the arm is the separate sim process.
+    """The loop's hardware and simulation over topics: the arm is the separate sim process.
 
-    ``joint_state`` is the latest ``/joint_states``, ``apply_torques`` publishes
-    ``/joint_commands`` and ``step`` waits (up to ``timeout``) for the next state, so the loop
-    ticks once per state the sim publishes. ``time`` is the state's stamp. The first state and
-    every ``/sim/restarted`` call ``on_restart``; ``reset`` then waits for a state from after
-    the restart, so the loop settles from the new pose.
+    ``read`` is the latest ``joint_states``; ``write`` publishes ``joint_commands`` and waits (up
+    to ``timeout``) for the next state, so the loop ticks once per state the sim publishes. The
+    first state and every ``sim/restarted`` call ``on_restart``; ``reset`` then waits for a state
+    from after the restart, so the loop settles from the new pose.
     """
 
-    def __init__(self, node: Node, on_restart: Callable[[], None], timeout: float = 0.05) -> None:
+    def __init__(self, node: Node, n_joints: int, on_restart: Callable[[], None],
+                 timeout: float = 0.05) -> None:
         self.node = node
+        self.n_joints = n_joints
         self.on_restart = on_restart
         self.timeout = timeout
-        self.time = 0.0
+        self._stamp = 0.0
         self._state: JointState | None = None
         self._truth: GroundTruthMsg | None = None
         self._restart_time = 0.0
         self._fresh = threading.Condition()
         self._received = 0
         self._used = 0
-        self.commands = node.create_publisher(JointStateMsg, "/joint_commands", SENSOR_QOS)
-        node.create_subscription(JointStateMsg, "/joint_states", self._on_state, SENSOR_QOS)
-        node.create_subscription(GroundTruthMsg, "/sim/ground_truth", self._on_truth, SENSOR_QOS)
-        node.create_subscription(Header, RESTARTED_TOPIC, self._on_restarted, RESTARTED_QOS)
+        self.commands = node.create_publisher(JointStateMsg, topics.JOINT_COMMANDS,
+                                              topics.SENSOR_QOS)
+        node.create_subscription(JointStateMsg, topics.JOINT_STATES, self._on_state,
+                                 topics.SENSOR_QOS)
+        node.create_subscription(GroundTruthMsg, topics.GROUND_TRUTH, self._on_truth,
+                                 topics.SENSOR_QOS)
+        node.create_subscription(Header, topics.SIM_RESTARTED, self._on_restarted,
+                                 topics.RESTARTED_QOS)
 
     def _on_state(self, msg: JointStateMsg) -> None:
         try:
-            state = joint_state_from_msg(msg)
+            state = joint_state_from_msg(msg, self.n_joints)
         except ValueError as exc:
-            self.node.get_logger().error(f"bad /joint_states: {exc}", throttle_duration_sec=1.0)
+            self.node.get_logger().error(f"bad joint_states: {exc}", throttle_duration_sec=1.0)
             return
         first = self._state is None
         with self._fresh:
             self._state = state
-            self.time = time_ns(msg.header.stamp) * 1e-9
+            self._stamp = time_ns(msg.header.stamp) * 1e-9
             self._received += 1
             self._fresh.notify()
         if first:
@@ -325,34 +308,36 @@ class RemoteRobot:
                 self._fresh.wait(self.timeout)
             return self._state is not None
 
-    # --- Scene protocol ------------------------------------------------------------------------
-    def reset(self, initial_pose: int, housing_yaw: float = 0.0) -> None:
-        """The sim resets itself (``/sim/reset``): wait for its first state after that.
-
-        :raises TimeoutError: if the sim publishes none within a second.
-        """
-        del initial_pose, housing_yaw
-        with self._fresh:
-            if not self._fresh.wait_for(lambda: self.time >= self._restart_time, timeout=1.0):
-                raise TimeoutError("no /joint_states after the sim restarted")
-
-    def joint_state(self) -> JointState:
-        assert self._state is not None, "no /joint_states yet (wait_ready first)"
+    # --- torque interface ------------------------------------------------------------------
+    def read(self) -> JointState:
+        assert self._state is not None, "no joint_states yet (wait_ready first)"
         return self._state
 
-    def apply_torques(self, tau: np.ndarray) -> None:
+    def write(self, tau: np.ndarray) -> None:
         msg = JointStateMsg(effort=np.asarray(tau, float).tolist())
         msg.header.stamp = self.node.get_clock().now().to_msg()
         self.commands.publish(msg)
-
-    def step(self) -> None:
         with self._fresh:
             if self._received == self._used:
                 self._fresh.wait(self.timeout)
             self._used = self._received
 
+    # --- simulation interface --------------------------------------------------------------
+    def reset(self, initial_pose: int, housing_yaw: float = 0.0) -> None:
+        """The sim resets itself (``sim/reset``): wait for its first state after that.
+
+        :raises TimeoutError: if the sim publishes none within a second.
+        """
+        del initial_pose, housing_yaw
+        with self._fresh:
+            if not self._fresh.wait_for(lambda: self._stamp >= self._restart_time, timeout=1.0):
+                raise TimeoutError("no joint_states after the sim restarted")
+
     def ground_truth(self) -> GroundTruth:
-        return _NO_TRUTH if self._truth is None else ground_truth_from_msg(self._truth)
+        return NO_GROUND_TRUTH if self._truth is None else ground_truth_from_msg(self._truth)
+
+    def contact_wrench(self) -> np.ndarray:
+        return self.ground_truth().wrench
 
 
 class LatestWrench:
@@ -360,7 +345,8 @@ class LatestWrench:
 
     def __init__(self, node: Node) -> None:
         self._wrench = np.zeros(6)
-        node.create_subscription(WrenchStamped, "/wrench_estimate", self._on_wrench, SENSOR_QOS)
+        node.create_subscription(WrenchStamped, topics.WRENCH_ESTIMATE, self._on_wrench,
+                                 topics.SENSOR_QOS)
 
     def _on_wrench(self, msg: WrenchStamped) -> None:
         self._wrench = wrench_from_msg(msg.wrench)
@@ -384,15 +370,16 @@ def _start_separate_bridge(nodes: list[Node]) -> Callable[[], None]:
         if runner is not None:
             runner.request_reset(0)
 
-    remote = RemoteRobot(bridge, restart)
-    model = task_model(PandaSceneConfig.from_dict(p.get("panda_scene", {})))
+    description = robot_plugin(p.get("robot", "sim_panda")).describe(p)
+    remote = RemoteRobot(bridge, len(description.joint_names), restart)
     loop = RobotLoop(remote,
                      HybridImpedanceController(ImpedanceConfig.from_dict(p.get("impedance", {})),
-                                               model),
+                                               tool_model(description.tool)),
                      SafetyFilter(SafetyLimits.from_dict(p.get("safety", {}))),
                      RestDetector(RestConfig.from_dict(p.get("rest", {}))),
                      LatestWrench(bridge),
-                     replace(LoopConfig.from_dict(p.get("loop", {})), realtime=True))
+                     replace(LoopConfig.from_dict(p.get("loop", {})), realtime=True),
+                     simulation=remote)
     runner = LoopRunner(loop, bridge, lockstep=False, pace=remote.wait_ready)
     bridge.setpoint_handler = runner.submit_setpoint
     return LoopThread("bridge loop", runner.run, bridge).start().stop

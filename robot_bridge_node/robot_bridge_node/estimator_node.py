@@ -2,7 +2,7 @@
 
 In the composed ``robot`` process the EKF is the loop's estimator and this node only publishes
 its output. Run on its own (``ros2 run robot_bridge_node wrench_estimator``), ``SeparateEstimator``
-runs the EKF on every ``/joint_states`` message (position, velocity and the applied torque in
+runs the EKF on every ``joint_states`` message (position, velocity and the applied torque in
 ``effort``), one simulator step per message.
 """
 from __future__ import annotations
@@ -13,16 +13,16 @@ from typing import Any
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import WrenchStamped
+from qg_common import topics
+from qg_common.conversions import joint_state_from_msg, time_ns, wrench_stamped
+from qg_common.node_runtime import node_params, run_nodes
 from rclpy.node import Node
 from sensor_msgs.msg import JointState as JointStateMsg
-from sim_robot_node.core.panda_scene import PandaSceneConfig
-from sim_robot_node.node_runtime import node_params, run_nodes
-from sim_robot_node.sim_node import RESTARTED_QOS, RESTARTED_TOPIC, SENSOR_QOS
 from std_msgs.msg import Header
 
-from robot_bridge_node.bridge_node import task_model
-from sim_robot_node.conversions import joint_state_from_msg, time_ns, wrench_stamped
+from robot_bridge_node.core.hardware_interface import robot_plugin
 from robot_bridge_node.core.panda_model import PandaModel
+from robot_bridge_node.core.robot_loop import tool_model
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
 
 __all__ = ["WrenchEstimatorNode", "SeparateEstimator", "build_ekf", "main"]
@@ -34,12 +34,13 @@ def build_ekf(params: dict[str, Any], model: PandaModel) -> WrenchEKF:
 
 
 class WrenchEstimatorNode(Node):
-    """Publishes the contact wrench estimate (``/wrench_estimate``, tool frame)."""
+    """Publishes the contact wrench estimate (``wrench_estimate``, tool frame)."""
 
     def __init__(self) -> None:
         super().__init__("wrench_estimator", automatically_declare_parameters_from_overrides=True)
         self.params = node_params(self)
-        self.wrench = self.create_publisher(WrenchStamped, "/wrench_estimate", SENSOR_QOS)
+        self.wrench = self.create_publisher(WrenchStamped, topics.WRENCH_ESTIMATE,
+                                            topics.SENSOR_QOS)
 
     def publish(self, stamp: Time, wrench: np.ndarray) -> None:
         self.wrench.publish(wrench_stamped(wrench, stamp))
@@ -55,26 +56,29 @@ class SeparateEstimator:
 
     def __init__(self, node: WrenchEstimatorNode) -> None:
         self.node = node
-        scene = PandaSceneConfig.from_dict(node.params.get("panda_scene", {}))
-        self.dt = scene.time_step
-        self.ekf = build_ekf(node.params, task_model(scene))
+        robot = robot_plugin(node.params.get("robot", "sim_panda")).describe(node.params)
+        self.dt = robot.dt
+        self.n_joints = len(robot.joint_names)
+        self.ekf = build_ekf(node.params, tool_model(robot.tool))
         self._restart_time: float | None = 0.0     # restart at the first state from then on
-        node.create_subscription(JointStateMsg, "/joint_states", self._on_state, SENSOR_QOS)
-        node.create_subscription(Header, RESTARTED_TOPIC, self._on_restarted, RESTARTED_QOS)
+        node.create_subscription(JointStateMsg, topics.JOINT_STATES, self._on_state,
+                                 topics.SENSOR_QOS)
+        node.create_subscription(Header, topics.SIM_RESTARTED, self._on_restarted,
+                                 topics.RESTARTED_QOS)
 
     def _on_restarted(self, msg: Header) -> None:
         self._restart_time = time_ns(msg.stamp) * 1e-9
 
     def _on_state(self, msg: JointStateMsg) -> None:
         try:
-            state = joint_state_from_msg(msg)
+            state = joint_state_from_msg(msg, self.n_joints)
             restart = self._restart_time
             if restart is not None and time_ns(msg.header.stamp) * 1e-9 >= restart:
                 self.ekf.reset(state.q)
                 self._restart_time = None
             wrench = self.ekf.update(state.q, state.dq, state.tau, self.dt)
         except ValueError as exc:
-            self.node.get_logger().error(f"bad /joint_states: {exc}", throttle_duration_sec=1.0)
+            self.node.get_logger().error(f"bad joint_states: {exc}", throttle_duration_sec=1.0)
             return
         self.node.publish(msg.header.stamp, wrench)
 

@@ -12,23 +12,19 @@ import threading
 import time
 from pathlib import Path
 
+from qg_common import topics
+from qg_common.conversions import quaternion_from_matrix
+from qg_common.node_runtime import node_params
+from qg_common.params import runs_dir
 from qg_interfaces.msg import AtRest, EpisodeStatus, Transition, WrenchSetpoint
+from qg_recording.episode_recorder import EpisodeRecorder
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from sim_robot_node.conversions import quaternion_from_matrix
-from sim_robot_node.core.params import runs_dir
-from sim_robot_node.node_runtime import node_params
 
-from robot_bridge_node.core.panda_model import JOINT_NAMES
 from robot_bridge_node.core.robot_loop import RobotLoop
-from robot_bridge_node.recording.episode_recorder import EpisodeRecorder
 
 __all__ = ["RecorderNode"]
 
-_RELIABLE_DEEP = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-_LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 _FINAL = ("done", "aborted")
 
 
@@ -54,13 +50,14 @@ class RecorderNode(Node):
         self.ended_at = 0.0
         self.ticks = 0
         group = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(EpisodeStatus, "/episode_status", self._on_status, _LATCHED,
-                                 callback_group=group)
-        self.create_subscription(Transition, "/transitions", self._on_transition, _RELIABLE_DEEP,
-                                 callback_group=group)
-        self.create_subscription(WrenchSetpoint, "/wrench_setpoint", self._on_setpoint, 10,
-                                 callback_group=group)
-        self.create_subscription(AtRest, "/ee_at_rest", self._on_at_rest, 10, callback_group=group)
+        self.create_subscription(EpisodeStatus, topics.EPISODE_STATUS, self._on_status,
+                                 topics.LATCHED, callback_group=group)
+        self.create_subscription(Transition, topics.TRANSITIONS, self._on_transition,
+                                 topics.RELIABLE_DEEP, callback_group=group)
+        self.create_subscription(WrenchSetpoint, topics.WRENCH_SETPOINT, self._on_setpoint,
+                                 topics.COMMAND_QOS, callback_group=group)
+        self.create_subscription(AtRest, topics.EE_AT_REST, self._on_at_rest,
+                                 topics.COMMAND_QOS, callback_group=group)
         self.create_timer(0.2, self._close_if_complete, callback_group=group)
         self.last_t_ns = 0
         self.last_setpoint_seq = -1
@@ -72,8 +69,8 @@ class RecorderNode(Node):
             return
         self.last_t_ns = t_ns
         rec = self.recorder
-        state = loop.scene.joint_state()
-        rec.record_joint_state(t_ns, JOINT_NAMES, state.q, state.dq, state.tau)
+        state = loop.hardware.read()
+        rec.record_joint_state(t_ns, loop.hardware.joint_names, state.q, state.dq, state.tau)
         if loop.wrench_estimate is not None:
             w = loop.wrench_estimate
             rec.record_wrench(t_ns, w[:3], w[3:])
@@ -83,7 +80,7 @@ class RecorderNode(Node):
             rec.record_twist(t_ns, tool.twist[:3], tool.twist[3:])
         self.ticks += 1
         if self.ticks % self.ground_truth_every == 0:
-            gt = loop.scene.ground_truth()
+            gt = loop.ground_truth()
             rec.record_ground_truth(t_ns, gt.wrench, gt.insertion_depth, gt.plunger_travel,
                                     gt.success, gt.position_error, gt.orientation_error,
                                     gt.lateral_offset, gt.tilt)

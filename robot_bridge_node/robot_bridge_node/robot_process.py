@@ -1,9 +1,13 @@
 """The ``robot`` process: sim, bridge, estimator and recorder nodes around one 1 kHz loop.
 
-Sending joint states between processes at 1 kHz costs more than the loop itself, so the
-simulator, the controller and the EKF run as one ``RobotLoop`` on one thread
-(``bridge_node.LoopRunner``), and the three nodes only publish what it produced and serve its
-services, under their own names, parameters and topics. Clock modes (``sim.clock_mode``):
+Sending joint states between processes at 1 kHz costs more than the loop itself, so the robot
+(the plugin named by the ``robot`` parameter, ``sim_panda`` by default), the controller and the
+EKF run as one ``RobotLoop`` on one thread (``bridge_node.LoopRunner``), and the nodes only
+publish what it produced and serve its services, under their own names, parameters and topics.
+
+The reset path, end to end: the executor calls ``sim/reset`` -> ``serve_reset`` validates ->
+``LoopRunner.reset`` hands the job to the loop thread -> ``RobotLoop.reset`` resets the plugin's
+simulation and settles -> the settled ``AtRest`` is the answer. Clock modes (``sim.clock_mode``):
 
 - ``lockstep``: the loop ticks as fast as it can while a setpoint executes and pauses once the
   step is at rest until the next setpoint or reset; messages carry simulated time and ``/clock``
@@ -17,14 +21,15 @@ import sys
 from collections.abc import Callable
 
 from builtin_interfaces.msg import Time
+from qg_common.node_runtime import LoopThread, RealtimePacer, run_nodes
 from rclpy.node import Node
-from sim_robot_node.node_runtime import LoopThread, RealtimePacer, run_nodes
-from sim_robot_node.sim_node import SimNode
 
 from robot_bridge_node.bridge_node import BridgeNode, LoopRunner
-from robot_bridge_node.core.robot_loop import RobotLoop, build_panda_loop
+from robot_bridge_node.core.hardware_interface import load_robot
+from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from robot_bridge_node.estimator_node import WrenchEstimatorNode, build_ekf
 from robot_bridge_node.recorder_node import RecorderNode
+from robot_bridge_node.simulation_node import SimulationNode, serve_reset
 
 __all__ = ["CONFIG_FILES", "REALTIME_SWITCH_INTERVAL", "RobotProcess", "main"]
 
@@ -37,23 +42,27 @@ REALTIME_SWITCH_INTERVAL = 1e-4
 
 
 class RobotProcess:
-    """One ``RobotLoop`` (Panda scene, controller, safety, rest detector, EKF) and its nodes.
+    """One ``RobotLoop`` (robot plugin, controller, safety, rest detector, EKF) and its nodes.
 
-    The loop is built from the nodes' parameters; ``runner.loop_observers`` is where a per-tick
+    The loop is built from the nodes' parameters: the robot plugin named by the sim node's
+    ``robot`` parameter from its sections. ``runner.loop_observers`` is where a per-tick
     recorder attaches. The start pose (``sim.initial_pose``) is taken before the loop thread
     starts, so every run has the same history (lockstep runs repeat exactly).
     """
 
-    def __init__(self, sim: SimNode, bridge: BridgeNode, estimator: WrenchEstimatorNode) -> None:
+    def __init__(self, sim: SimulationNode, bridge: BridgeNode,
+                 estimator: WrenchEstimatorNode) -> None:
         self.sim = sim
         self.bridge = bridge
         self.estimator = estimator
         config = sim.config
+        robot = load_robot(sim.params.get("robot", "sim_panda"), sim.params)
+        sim.joint_names = robot.description.joint_names
         bridge_params = {**bridge.params,
                          "loop": {**bridge.params.get("loop", {}), "realtime": config.realtime}}
-        self.loop: RobotLoop = build_panda_loop(
-            sim.scene_config, bridge_params,
-            estimator=lambda scene, model: build_ekf(estimator.params, model))
+        self.loop: RobotLoop = build_loop(
+            robot, bridge_params,
+            estimator=lambda robot, model: build_ekf(estimator.params, model))
         #: Realtime: holds the wall-clock tick period (``missed`` counts dropped ticks).
         self.pacer = RealtimePacer(self.loop.config.dt) if config.realtime else None
         pace = None
@@ -68,14 +77,14 @@ class RobotProcess:
                                  publish=self._publish)
         self.truth_every = config.ground_truth_every(self.loop.config.dt)
         bridge.setpoint_handler = self.runner.submit_setpoint
-        sim.reset_handler = self.runner.reset
+        serve_reset(sim, self.runner)
         self.loop.reset(config.initial_pose)     # before the loop thread exists
 
     def _publish(self, stamp: Time) -> None:
         """The sim's and the estimator's share of a published tick (and ``/clock``)."""
-        scene = self.loop.scene
-        self.sim.publish_state(stamp, scene.joint_state(),
-                               scene.ground_truth() if self.runner.ticks % self.truth_every == 0
+        loop = self.loop
+        self.sim.publish_state(stamp, loop.hardware.read(),
+                               loop.ground_truth() if self.runner.ticks % self.truth_every == 0
                                else None)
         if self.loop.wrench_estimate is not None:
             self.estimator.publish(stamp, self.loop.wrench_estimate)
@@ -92,7 +101,7 @@ class RobotProcess:
 
 def _start(nodes: list[Node]) -> Callable[[], None]:
     sim, bridge, estimator, recorder = nodes
-    assert isinstance(sim, SimNode) and isinstance(bridge, BridgeNode) \
+    assert isinstance(sim, SimulationNode) and isinstance(bridge, BridgeNode) \
         and isinstance(estimator, WrenchEstimatorNode) and isinstance(recorder, RecorderNode)
     process = RobotProcess(sim, bridge, estimator)
     process.runner.loop_observers.append(recorder.observe)
@@ -100,7 +109,7 @@ def _start(nodes: list[Node]) -> Callable[[], None]:
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_nodes([SimNode, BridgeNode, WrenchEstimatorNode, RecorderNode], CONFIG_FILES, args,
+    return run_nodes([SimulationNode, BridgeNode, WrenchEstimatorNode, RecorderNode], CONFIG_FILES, args,
                      background=_start)
 
 

@@ -10,8 +10,7 @@ import json
 
 import numpy as np
 import pytest
-from robot_bridge_node.core.types import StepResult
-from sim_robot_node.core.types import GroundTruth
+from qg_common.types import GroundTruth, StepResult
 
 from qg_learning_node.core.observation import observation_from_step
 from qg_learning_node.experiments import grid, peg

@@ -11,7 +11,7 @@ import sys
 import time
 from pathlib import Path
 
-from robot_bridge_node.recording.episode_recorder import EpisodeRecorder
+from qg_recording.episode_recorder import EpisodeRecorder
 
 
 def main() -> None:

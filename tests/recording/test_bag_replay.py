@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from robot_bridge_node.recording.bag_writer import BagWriter
-from robot_bridge_node.recording.cdr import encode_twist_stamped, encode_wrench_stamped
+from qg_recording.bag_writer import BagWriter
+from qg_recording.cdr import encode_twist_stamped, encode_wrench_stamped
 
 N = 101  # one every 10 ms: a 1.0 s bag
 

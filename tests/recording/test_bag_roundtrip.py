@@ -11,10 +11,10 @@ import yaml
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from robot_bridge_node.recording.bag_reader import bag_info, read_bag
-from robot_bridge_node.recording.bag_writer import BagWriter
-from robot_bridge_node.recording.cdr import encode_wrench_stamped
-from robot_bridge_node.recording.episode_recorder import TOPICS, EpisodeRecorder
+from qg_recording.bag_reader import bag_info, read_bag
+from qg_recording.bag_writer import BagWriter
+from qg_recording.cdr import encode_wrench_stamped
+from qg_recording.episode_recorder import TOPICS, EpisodeRecorder
 
 NAMES = [f"panda_joint{i}" for i in range(1, 8)]
 T0 = 1_763_700_000_000_000_000

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from robot_bridge_node.recording.episode_recorder import EpisodeRecorder
+from qg_recording.episode_recorder import EpisodeRecorder
 
 
 def qgl(*args: str) -> subprocess.CompletedProcess:

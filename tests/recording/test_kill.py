@@ -11,8 +11,8 @@ from pathlib import Path
 
 import yaml
 
-from robot_bridge_node.recording.bag_reader import bag_info, read_bag
-from robot_bridge_node.recording.episode_recorder import ROWS, EpisodeRecorder
+from qg_recording.bag_reader import bag_info, read_bag
+from qg_recording.episode_recorder import ROWS, EpisodeRecorder
 
 CHILD = Path(__file__).with_name("record_child.py")
 CHUNK = 8 * 1024  # about 80 WrenchStamped messages per chunk

@@ -11,7 +11,7 @@ import pytest
 pytest.importorskip("torch")
 from qg_learning_node.cli.bag_commands import add_parsers  # noqa: E402
 from qg_learning_node.learner_core import LearnerConfig, LearnerCore  # noqa: E402
-from robot_bridge_node.recording.episode_recorder import EpisodeRecorder  # noqa: E402
+from qg_recording.episode_recorder import EpisodeRecorder  # noqa: E402
 from qg_learning_node.offline import rebuild_from_bags  # noqa: E402
 
 ZERO = (0.0, 0.0)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 from mcap_ros2._dynamic import generate_dynamic
 
-from robot_bridge_node.recording.episode_recorder import TOPICS
-from robot_bridge_node.recording.schemas import SEPARATOR, MsgNotFoundError, normalize_type_name, schema_text
+from qg_recording.episode_recorder import TOPICS
+from qg_recording.schemas import SEPARATOR, MsgNotFoundError, normalize_type_name, schema_text
 
 
 def test_joint_state_schema_inlines_each_dependency_once() -> None:

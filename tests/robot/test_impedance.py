@@ -5,15 +5,16 @@ import numpy as np
 import pytest
 from robot_bridge_node.core.impedance import HybridImpedanceController, ImpedanceConfig
 from robot_bridge_node.core.panda_model import Q_READY, PandaModel
-from robot_bridge_node.core.robot_loop import RobotLoop, build_panda_loop
-from robot_bridge_node.core.types import WrenchSetpoint
+from robot_bridge_node.core.hardware_interface import load_robot
+from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
+from qg_common.types import WrenchSetpoint
 
 
 @pytest.fixture(scope="module")
 def loop() -> RobotLoop:
-    loop = build_panda_loop()
+    loop = build_loop(load_robot("sim_panda"))
     yield loop
-    loop.scene.close()
+    loop.simulation.scene.close()
 
 
 def test_at_the_reference_and_still_the_law_is_gravity_plus_jt_feedforward() -> None:
@@ -45,16 +46,16 @@ def lift(loop: RobotLoop, seconds: float = 0.3) -> None:
     for _ in range(round(seconds / loop.config.dt)):
         loop.tick()
     loop.execute(WrenchSetpoint(np.zeros(6)))
-    assert loop.scene.ground_truth().insertion_depth < -0.02
+    assert loop.simulation.scene.ground_truth().insertion_depth < -0.02
 
 
 def test_gravity_compensation_holds_the_pose_for_two_seconds(loop: RobotLoop) -> None:
     loop.reset(0)
-    start, _ = loop.scene.tool_pose()
+    start, _ = loop.simulation.scene.tool_pose()
     loop.command(WrenchSetpoint(np.zeros(6)))
     for _ in range(2000):
         loop.tick()
-    end, _ = loop.scene.tool_pose()
+    end, _ = loop.simulation.scene.tool_pose()
     assert np.linalg.norm(end - start) < 0.001
 
 
@@ -69,7 +70,7 @@ def test_measured_lateral_stiffness_is_the_configured_one(loop: RobotLoop, axis:
     loop.command(WrenchSetpoint(wrench, reference))
     for _ in range(1500):
         loop.tick()
-    position, _ = loop.scene.tool_pose()
+    position, _ = loop.simulation.scene.tool_pose()
     displacement = reference.rotation.T @ (position - reference.position)
     stiffness = 3.0 / -displacement[axis]
     configured = loop.controller.config.k_trans[axis]

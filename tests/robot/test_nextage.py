@@ -10,7 +10,7 @@ from robot_bridge_node.core.position_control import (PositionControlConfig,
                                                      TaskSpacePositionController)
 from sim_robot_node.core.nextage_scene import (INIT_POSE, NextagePegScene, NextageSceneConfig,
                                                PegHoleGeometry, nextage_urdf_path)
-from sim_robot_node.core.params import config_dir, load_ros_params
+from qg_common.params import config_dir, load_ros_params
 
 TOOL = "RARM_TOOL"
 #: Published joint limits of the right arm [deg] (the URDF comment's table).

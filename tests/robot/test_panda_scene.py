@@ -5,22 +5,22 @@ import math
 
 import numpy as np
 import pytest
-from robot_bridge_node.core.robot_loop import RobotLoop, build_panda_loop
-from robot_bridge_node.core.types import WrenchSetpoint
-from sim_robot_node.core.panda_scene import N_START_POSES
+from robot_bridge_node.core.hardware_interface import load_robot
+from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
+from qg_common.types import N_START_POSES, WrenchSetpoint
 
 
 @pytest.fixture(scope="module")
 def loop() -> RobotLoop:
-    loop = build_panda_loop()
+    loop = build_loop(load_robot("sim_panda"))
     yield loop
-    loop.scene.close()
+    loop.simulation.scene.close()
 
 
 @pytest.mark.parametrize("yaw", [0.0, 0.3])
 def test_start_poses_are_tilted_on_the_axis_just_above_the_bearing(loop: RobotLoop,
                                                                    yaw: float) -> None:
-    scene = loop.scene
+    scene = loop.simulation.scene
     c = scene.config
     for k in range(N_START_POSES):
         loop.reset(k, yaw)  # placed by IK, then settled for 0.1 s under the controller
@@ -39,7 +39,7 @@ def test_start_poses_are_tilted_on_the_axis_just_above_the_bearing(loop: RobotLo
 
 
 def test_measured_torque_is_the_last_command_and_bad_torques_are_refused(loop: RobotLoop) -> None:
-    scene = loop.scene
+    scene = loop.simulation.scene
     scene.reset(0)
     tau = np.linspace(-1.0, 1.0, 7)
     scene.apply_torques(tau)
@@ -64,9 +64,9 @@ def test_contact_wrench_matches_the_balance_of_the_arm(loop: RobotLoop, pose: in
             break
     else:
         pytest.fail("the arm did not come to rest")
-    before = loop.scene.joint_state()
+    before = loop.simulation.scene.joint_state()
     loop.tick()  # one step of known torque: J^T F = M ddq + C dq + g - tau over that step
-    after = loop.scene.joint_state()
+    after = loop.simulation.scene.joint_state()
     model = loop.controller.model
     kin = model.kinematics(before.q)
     ddq = (after.dq - before.dq) / loop.config.dt
@@ -74,7 +74,7 @@ def test_contact_wrench_matches_the_balance_of_the_arm(loop: RobotLoop, pose: in
                    + model.nonlinear_effects(before.q, before.dq) - after.tau)
     world = np.linalg.pinv(kin.jacobian.T) @ generalised
     balance = np.concatenate([kin.rotation.T @ world[:3], kin.rotation.T @ world[3:]])
-    truth = loop.scene.ground_truth().wrench
+    truth = loop.simulation.scene.ground_truth().wrench
     np.testing.assert_allclose(truth[:3], balance[:3], atol=0.2)
     np.testing.assert_allclose(truth[3:], balance[3:], atol=0.02)
     assert truth[2] == pytest.approx(-15.0, abs=0.5)  # the base push, in the contact convention

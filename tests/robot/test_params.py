@@ -9,7 +9,7 @@ from robot_bridge_node.core.rest_detector import RestConfig
 from robot_bridge_node.core.robot_loop import LoopConfig
 from robot_bridge_node.core.safety import SafetyLimits
 from sim_robot_node.core.panda_scene import PandaSceneConfig
-from sim_robot_node.core.params import ConfigError, config_dir, load_ros_params, unflatten
+from qg_common.params import ConfigError, config_dir, load_ros_params, unflatten
 
 
 def test_node_section_overrides_the_wildcard(tmp_path: Path) -> None:

@@ -7,7 +7,7 @@ import pytest
 from robot_bridge_node.core.position_control import (PositionControlConfig,
                                                      TaskSpacePositionController)
 from sim_robot_node.core.nextage_scene import NextageSceneConfig, nextage_urdf_path
-from sim_robot_node.core.params import config_dir, load_ros_params
+from qg_common.params import config_dir, load_ros_params
 from sim_robot_node.core.peg_env import PegEnv, PegEnvConfig, toward_goal
 
 

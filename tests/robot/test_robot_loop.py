@@ -7,20 +7,21 @@ import math
 
 import numpy as np
 import pytest
+from robot_bridge_node.core.hardware_interface import load_robot
 from robot_bridge_node.core.robot_loop import (GroundTruthWrench, LoopConfig, RobotLoop,
-                                               build_panda_loop)
+                                               build_loop)
 from robot_bridge_node.core.safety import SetpointRejected
-from robot_bridge_node.core.types import PoseReference, WrenchSetpoint
-from sim_robot_node.core.panda_scene import N_START_POSES
+from qg_common.types import N_START_POSES, PoseReference, WrenchSetpoint
 
 PUSH = -15.0  # [N] the constant base policy (contact convention: pressing in)
 
 
 @pytest.fixture(scope="module")
 def loop() -> RobotLoop:
-    loop = build_panda_loop(estimator=lambda scene, model: GroundTruthWrench(scene))
+    loop = build_loop(load_robot("sim_panda"),
+                      estimator=lambda robot, model: GroundTruthWrench(robot.simulation))
     yield loop
-    loop.scene.close()
+    loop.simulation.scene.close()
 
 
 def run_episode(loop: RobotLoop, pose: int, max_steps: int,
@@ -43,7 +44,7 @@ def test_zero_residual_jams_from_most_starts_and_comes_to_rest(loop: RobotLoop) 
     assert jammed >= 6, outcomes
     rest_fraction = sum(r for _, _, r in outcomes) / sum(n for _, n, _ in outcomes)
     assert rest_fraction > 0.9  # jammed steps end by the rest detector, not the timeout
-    depth = loop.scene.ground_truth().insertion_depth
+    depth = loop.simulation.scene.ground_truth().insertion_depth
     assert 0.0 < depth < 0.005  # wedged at the bore entrance
 
 
@@ -60,7 +61,7 @@ def test_uniform_random_residuals_insert_from_at_least_six_of_eight_starts(
 
 def press_upright(loop: RobotLoop, force: float, seconds: float) -> None:
     """Hold the shaft upright over the hole axis and press with ``force`` [N] for ``seconds``."""
-    target = loop.scene.target_tool_position()
+    target = loop.simulation.scene.target_tool_position()
     upright = np.diag([1.0, -1.0, -1.0])  # tool z down
     loop.command(WrenchSetpoint(np.array([0.0, 0.0, -force, 0.0, 0.0, 0.0]),
                                 PoseReference(target, upright)))
@@ -73,12 +74,12 @@ def test_the_last_millimetres_need_a_sustained_push_above_ten_newtons(
         loop: RobotLoop, force: float, finishes: bool) -> None:
     loop.reset(0)
     press_upright(loop, 3.0, 1.2)  # straighten and slide gently down onto the inner ring
-    gt = loop.scene.ground_truth()
-    assert gt.insertion_depth == pytest.approx(loop.scene.config.bore_depth, abs=0.0005)
+    gt = loop.simulation.scene.ground_truth()
+    assert gt.insertion_depth == pytest.approx(loop.simulation.scene.config.bore_depth, abs=0.0005)
     landed = gt.plunger_travel
     assert landed < 0.0003  # only the landing impact moved the ring
     press_upright(loop, force, 0.6)
-    gt = loop.scene.ground_truth()
+    gt = loop.simulation.scene.ground_truth()
     assert gt.success == finishes
     if not finishes:
         assert gt.plunger_travel - landed < 0.0002  # stalled, not creeping
@@ -103,15 +104,15 @@ def test_tilt_stays_inside_the_cone_under_maximal_torque(loop: RobotLoop) -> Non
         loop.command(WrenchSetpoint.residual(0.0, 0.0, -3.0))
         for _ in range(300):
             loop.tick()
-            worst = max(worst, loop.scene.ground_truth().tilt)
+            worst = max(worst, loop.simulation.scene.ground_truth().tilt)
     limit = loop.safety.limits.tilt_max
     assert worst > limit - 0.1  # the torque did drive it to the wall
     assert worst < limit + 0.02
 
 
 def test_realtime_watchdog_holds_the_pose_when_setpoints_stop(loop: RobotLoop) -> None:
-    realtime = RobotLoop(loop.scene, loop.controller, loop.safety, loop.rest, loop.estimator,
-                         LoopConfig(realtime=True))
+    realtime = RobotLoop(loop.hardware, loop.controller, loop.safety, loop.rest, loop.estimator,
+                         LoopConfig(realtime=True), loop.simulation)
     realtime.reset(0)
     realtime.command(WrenchSetpoint.residual(8.0, 0.0, 0.0))  # pulling up
     for _ in range(10):
@@ -123,10 +124,10 @@ def test_realtime_watchdog_holds_the_pose_when_setpoints_stop(loop: RobotLoop) -
     np.testing.assert_array_equal(realtime.setpoint.wrench, np.zeros(6))
     for _ in range(300):
         realtime.tick()
-    held, _ = realtime.scene.tool_pose()
+    held, _ = realtime.simulation.scene.tool_pose()
     for _ in range(300):
         realtime.tick()
-    now, _ = realtime.scene.tool_pose()
+    now, _ = realtime.simulation.scene.tool_pose()
     assert np.linalg.norm(now - held) < 0.0005
 
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from robot_bridge_node.core.panda_model import DTAU_MAX, TAU_MAX
 from robot_bridge_node.core.safety import SafetyFilter, SafetyLimits, SetpointRejected
-from robot_bridge_node.core.types import PoseReference, WrenchSetpoint
-from sim_robot_node.core.rotations import axis_angle_matrix, tilt_from_down
+from qg_common.types import PoseReference, WrenchSetpoint
+from qg_common.rotations import axis_angle_matrix, tilt_from_down
 
 DOWN = np.diag([1.0, -1.0, -1.0])  # tool z pointing down
 

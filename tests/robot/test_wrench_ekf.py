@@ -15,7 +15,7 @@ from ekf_harness import (PandaTorqueHarness, descend_reference, rmse, settling_t
 
 from robot_bridge_node.core.panda_model import Q_READY, PandaModel
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
-from sim_robot_node.core.params import config_dir, load_ros_params
+from qg_common.params import config_dir, load_ros_params
 
 W = np.array([5.0, -3.0, -15.0, 0.5, -0.3, 0.2])     # tool frame [N, Nm]
 NOISE = (1e-5, 1e-3)                                 # [rad, rad/s]

@@ -8,9 +8,8 @@ import rclpy.qos
 from qg_interfaces.msg import AtRest, WrenchSetpoint
 from qg_interfaces.srv import ResetSim
 from qg_learning_node.cli.ros_client import CliNode, call_service
-from robot_bridge_node import conversions
-from robot_bridge_node.core import types
-from sim_robot_node.conversions import time_msg
+from qg_common import conversions, types
+from qg_common.conversions import time_msg
 
 #: Best effort like the 1 kHz publishers, deep enough that a slow test process loses nothing.
 DEEP = rclpy.qos.QoSProfile(depth=2000, reliability=rclpy.qos.ReliabilityPolicy.BEST_EFFORT)

@@ -15,8 +15,8 @@ pytestmark = pytest.mark.ros
 @settings(max_examples=200, deadline=None)
 @given(st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=3), st.floats(0.0, math.pi))
 def test_quaternion_round_trip_recovers_the_rotation(axis, angle):
-    from sim_robot_node.conversions import matrix_from_quaternion, quaternion_from_matrix
-    from sim_robot_node.core.rotations import axis_angle_matrix
+    from qg_common.conversions import matrix_from_quaternion, quaternion_from_matrix
+    from qg_common.rotations import axis_angle_matrix
     axis = np.asarray(axis)
     if np.linalg.norm(axis) < 1e-3:
         axis = np.array([0.0, 0.0, 1.0])
@@ -28,10 +28,9 @@ def test_quaternion_round_trip_recovers_the_rotation(axis, angle):
 
 
 def test_setpoint_messages_convert_both_ways_and_nan_reaches_the_safety_filter():
-    from robot_bridge_node.conversions import setpoint_from_msg, setpoint_msg
-    from sim_robot_node.conversions import time_msg
+    from qg_common.conversions import setpoint_from_msg, setpoint_msg, time_msg
+    from qg_common.types import PoseReference, WrenchSetpoint
     from robot_bridge_node.core.safety import SafetyFilter, SetpointRejected
-    from robot_bridge_node.core.types import PoseReference, WrenchSetpoint
     residual = WrenchSetpoint.residual(-15.0, 0.5, -0.25)
     back = setpoint_from_msg(setpoint_msg(7, residual, time_msg(0)))
     assert back.reference is None
@@ -56,11 +55,10 @@ def test_setpoint_messages_convert_both_ways_and_nan_reaches_the_safety_filter()
 
 
 def test_at_rest_and_joint_state_messages_carry_the_numbers():
-    from sim_robot_node.conversions import (at_rest_msg, joint_state_from_msg,
-                                               joint_state_msg, time_msg, time_ns,
-                                               wrench_from_msg)
-    from robot_bridge_node.core.types import StepResult
-    from sim_robot_node.core.types import GroundTruth, JointState
+    from qg_common.conversions import (at_rest_msg, joint_state_from_msg, joint_state_msg,
+                                       time_msg, time_ns, wrench_from_msg)
+    from qg_common.panda_description import JOINT_NAMES
+    from qg_common.types import GroundTruth, JointState, StepResult
     truth = GroundTruth(wrench=np.arange(6.0), insertion_depth=0.004, plunger_travel=0.001,
                         success=False, position_error=0.01, orientation_error=np.array([0.1, -0.2]),
                         lateral_offset=0.002, tilt=0.26)
@@ -76,10 +74,12 @@ def test_at_rest_and_joint_state_messages_carry_the_numbers():
     assert event.ee_pose.orientation.x == pytest.approx(1.0)   # 180 deg about x: tool z down
 
     state = JointState(q=np.linspace(-1, 1, 7), dq=np.ones(7), tau=np.arange(7.0))
-    back = joint_state_from_msg(joint_state_msg(state, stamp))
+    msg = joint_state_msg(state, stamp, JOINT_NAMES)
+    assert list(msg.name) == list(JOINT_NAMES)
+    back = joint_state_from_msg(msg, 7)
     for name in ("q", "dq", "tau"):
         np.testing.assert_array_equal(getattr(back, name), getattr(state, name))
-    short = joint_state_msg(state, stamp)
+    short = joint_state_msg(state, stamp, JOINT_NAMES)
     short.position = [0.0] * 6
     with pytest.raises(ValueError, match="7 positions"):
-        joint_state_from_msg(short)
+        joint_state_from_msg(short, 7)

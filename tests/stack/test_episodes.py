@@ -32,7 +32,7 @@ class Episodes:
     def __init__(self, cli) -> None:
         from qg_interfaces.msg import EpisodeStatus, LearnerDiagnostics
 
-        from qg_learning_node.executor_node import LATCHED
+        from qg_common.topics import LATCHED
         self.cli = cli
         self.statuses: list = []
         self.learner_heartbeats: list = []
@@ -68,7 +68,7 @@ class Episodes:
 
 
 def wait_for_bag(episodes_dir: Path, episode_id: str, timeout: float = 15.0) -> Path:
-    from robot_bridge_node.recording.bag_reader import bag_info
+    from qg_recording.bag_reader import bag_info
     bag = episodes_dir / episode_id
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -96,7 +96,7 @@ def test_train_episode_is_recorded_and_replays_into_the_same_graph(stack, tmp_pa
     from qg_learning_node.core.learner_params import learner_config_from_params
     from qg_learning_node.learner_core import LearnerCore
     from qg_learning_node.offline import rebuild_from_bags
-    from sim_robot_node.core.params import config_dir, load_ros_params
+    from qg_common.params import config_dir, load_ros_params
 
     checkpoints = tmp_path / "checkpoints"
     stack.start(ROBOT, learner_spec(checkpoints), executor_spec(max_steps=25))
@@ -245,7 +245,7 @@ def test_in_process_runner_repeats_the_ros_stack_episode(stack, tmp_path):
     from qg_learning_node.learner_core import LearnerCore
     from qg_learning_node.core.residual_task import ACTION_DIM
     from qg_learning_node.offline import iter_transitions
-    from sim_robot_node.core.params import config_dir, load_ros_params
+    from qg_common.params import config_dir, load_ros_params
 
     steps, pose = 4, 3
     executor = ("executor", "qg_learning_node", "executor",

@@ -2,11 +2,17 @@
 from __future__ import annotations
 
 import re
+import subprocess
+import sys
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 CORE_FILES = [
     *ROOT.glob("sim_robot_node/sim_robot_node/core/**/*.py"),
+    *(p for p in ROOT.glob("ros_ws/src/qg_common/qg_common/*.py")
+      if p.name not in ("conversions.py", "node_runtime.py", "topics.py")),
     *ROOT.glob("robot_bridge_node/robot_bridge_node/core/**/*.py"),
     *ROOT.glob("qg_learning_node/qg_learning_node/core/**/*.py"),
     *(ROOT / "qg_learning_node/qg_learning_node" / f for f in
@@ -29,3 +35,48 @@ def test_executables_are_where_ros2_run_looks():
         assert (install / pkg / "lib" / pkg / exe).is_file(), f"{pkg}/{exe}"
         marker = install / pkg / "share" / "ament_index" / "resource_index" / "packages" / pkg
         assert marker.is_file(), marker
+
+
+#: Run in a fresh interpreter where the simulator and pybullet cannot be imported at all.
+_IMPORT_EVERYTHING_WITHOUT_THE_SIMULATOR = r"""
+import importlib, pkgutil, sys
+
+class Refuse:
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in ("sim_robot_node", "pybullet"):
+            raise ImportError(f"{name} must not be imported here")
+        return None
+
+sys.meta_path.insert(0, Refuse())
+imported = []
+for top in ("qg_common", "qg_recording", "robot_bridge_node", "qg_learning_node"):
+    package = importlib.import_module(top)
+    imported.append(top)
+    for module in pkgutil.walk_packages(package.__path__, top + "."):
+        if not module.name.endswith("__main__"):
+            importlib.import_module(module.name)
+            imported.append(module.name)
+print(len(imported), " ".join(imported))
+"""
+
+
+@pytest.mark.ros
+def test_bridge_and_learning_import_without_the_simulator():
+    """No arrow from the bridge or learning to the simulator: every module of the common,
+    recording, bridge and learning packages imports where ``sim_robot_node`` cannot."""
+    out = subprocess.run([sys.executable, "-c", _IMPORT_EVERYTHING_WITHOUT_THE_SIMULATOR],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-3000:]
+    count, names = out.stdout.strip().splitlines()[-1].split(" ", 1)
+    assert int(count) >= 50, names
+    for module in ("robot_bridge_node.robot_process", "robot_bridge_node.core.robot_loop",
+                   "qg_learning_node.experiments.runner", "qg_learning_node.executor_node"):
+        assert module in names.split()
+
+
+def test_robots_are_plugins_found_by_name():
+    from robot_bridge_node.core.hardware_interface import robot_names, robot_plugin
+    assert "sim_panda" in robot_names()
+    assert robot_plugin("sim_panda").interface == "torque"
+    with pytest.raises(ValueError, match="no robot plugin named 'franka_typo'"):
+        robot_plugin("franka_typo")

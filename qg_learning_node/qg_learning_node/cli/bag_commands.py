@@ -16,8 +16,8 @@ from pathlib import Path
 import yaml
 
 from qg_learning_node.cli.ros_env import repo_root
-from robot_bridge_node.recording.bag_reader import BagInfo, NotABagError, bag_files, bag_info
-from robot_bridge_node.recording.rosbag2_metadata import METADATA_FILE
+from qg_recording.bag_reader import BagInfo, NotABagError, bag_files, bag_info
+from qg_recording.rosbag2_metadata import METADATA_FILE
 
 __all__ = ["add_parsers", "cmd_info", "cmd_replay", "expand_bag_paths", "format_info"]
 
@@ -124,7 +124,7 @@ def _into_learner(args: argparse.Namespace, paths: list[Path]) -> int:
 def _publish(args: argparse.Namespace, paths: list[Path]) -> int:
     import rclpy
 
-    from robot_bridge_node.recording.player import play
+    from qg_recording.player import play
 
     rclpy.init()
     try:

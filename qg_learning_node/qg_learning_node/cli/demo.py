@@ -65,7 +65,7 @@ class StepMonitor:
     def __init__(self, cli, bar, log: TrainingLog, episodes: int) -> None:
         from qg_interfaces.msg import LearnerDiagnostics, Transition
 
-        from qg_learning_node.executor_node import RELIABLE_DEEP
+        from qg_common.topics import RELIABLE_DEEP
         self.bar, self.log, self.episodes = bar, log, episodes
         self.steps = 0
         self.started = time.monotonic()
@@ -132,7 +132,7 @@ def run_episode_by_service(cli, index: int, mode: str, pose: int, seed: int,
 
     from qg_learning_node.cli.episode_wait import FINAL_STATES
     from qg_learning_node.cli.ros_client import call_service
-    from qg_learning_node.executor_node import LATCHED
+    from qg_common.topics import LATCHED
 
     # Keyed by id: the final status may arrive while the service call is still being answered.
     final: dict[str, EpisodeStatus] = {}

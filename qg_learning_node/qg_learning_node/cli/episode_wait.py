@@ -4,7 +4,7 @@ from __future__ import annotations
 from qg_interfaces.msg import EpisodeStatus
 
 from qg_learning_node.cli.ros_client import CliNode
-from qg_learning_node.executor_node import LATCHED
+from qg_common.topics import LATCHED
 
 __all__ = ["wait_for_episode", "FINAL_STATES"]
 

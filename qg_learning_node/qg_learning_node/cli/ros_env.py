@@ -15,7 +15,8 @@ from pathlib import Path
 
 __all__ = ["repo_root", "install_dir", "stack_env", "PACKAGES", "DEFAULT_DOMAIN_ID"]
 
-PACKAGES = ("qg_interfaces", "sim_robot_node", "robot_bridge_node", "qg_learning_node")
+PACKAGES = ("qg_interfaces", "qg_common", "qg_recording", "sim_robot_node", "robot_bridge_node",
+            "qg_learning_node")
 #: A private DDS domain, so the stack never meets other ROS graphs on the machine.
 DEFAULT_DOMAIN_ID = "42"
 

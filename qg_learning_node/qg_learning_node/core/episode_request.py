@@ -3,11 +3,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from qg_common.types import N_START_POSES as N_POSES
+
 __all__ = ["EpisodeRequest", "MODES", "REWARDS", "N_POSES"]
 
 MODES = ("train", "test")
 REWARDS = ("sparse", "dense")
-N_POSES = 8
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ sees) and the simulator's truth (only for rewards, success and the bore check).
 from __future__ import annotations
 
 import numpy as np
-from robot_bridge_node.core.types import StepResult
+from qg_common.types import StepResult
 
 from qg_learning_node.core.residual_task import Observation
 

@@ -64,7 +64,7 @@ def random_walk(env: PandaTask, episodes: int, steps: int, seed: int) -> dict[st
             action = rng.uniform(-1.0, 1.0, ACTION_DIM)
             obs = env.step(action)
             state = env.residual.state(obs)
-            error = env.loop.scene.ground_truth().orientation_error
+            error = env.loop.ground_truth().orientation_error
             states.append(state)
             actions.append(action)
             truth.append(error)

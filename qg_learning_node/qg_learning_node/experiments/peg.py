@@ -18,12 +18,12 @@ from typing import Any
 
 import numpy as np
 import torch
-from sim_robot_node.core.params import config_dir as default_config_dir
-from sim_robot_node.core.params import load_ros_params
-from sim_robot_node.core.peg_env import PegEnv, PegEnvConfig
+from qg_common.params import config_dir as default_config_dir
+from qg_common.params import load_ros_params
 
 from qg_learning_node.core.learner_params import learner_config_from_params
 from qg_learning_node.core.noise import ActionNoise, NoiseConfig
+from qg_learning_node.environments import make_environment
 from qg_learning_node.experiments.profile import PegBudget
 from qg_learning_node.experiments.runner import (ALGORITHMS, algorithm_config, config_digest,
                                                  episode_noise_seed)
@@ -83,10 +83,10 @@ def run_peg(spec: PegRunSpec) -> dict[str, Any]:
     torch.set_num_threads(1)
     start = time.perf_counter()
     d = Path(spec.config_dir) if spec.config_dir else default_config_dir()
-    env_config = dataclasses.replace(PegEnvConfig.from_dict(load_ros_params(d / "peg_env.yaml")),
-                                     episode_steps=spec.episode_steps)
+    env = make_environment("peg", load_ros_params(d / "peg_env.yaml"),
+                           episode_steps=spec.episode_steps)
     base = learner_config_from_params(load_ros_params(d / "learner.yaml")["learner"])
-    config = algorithm_config(base, spec.algorithm, PegEnv.action_dim)
+    config = algorithm_config(base, spec.algorithm, env.action_dim)
     config = dataclasses.replace(
         config, seed=spec.seed, iterations_per_cycle=spec.train_iterations,
         cycle_steps=spec.episode_steps,
@@ -94,12 +94,11 @@ def run_peg(spec: PegRunSpec) -> dict[str, Any]:
                                  critic_hidden=(200, 200, 200), critic_lr=spec.lr,
                                  actor_lr=spec.lr, seed=spec.seed))
     noise_config = NoiseConfig.from_dict(load_ros_params(d / "executor.yaml").get("noise", {}))
-    env = PegEnv(env_config)
-    learner = LearnerCore(config, PegEnv.state_dim, PegEnv.action_dim)
+    learner = LearnerCore(config, env.state_dim, env.action_dim)
     episodes = []
     try:
         for index in range(spec.episodes):
-            noise = ActionNoise(noise_config, PegEnv.action_dim,
+            noise = ActionNoise(noise_config, env.action_dim,
                                 episode_noise_seed(spec.seed, index))
             state = env.reset(seed=episode_noise_seed(spec.seed, index))
             total, success = 0.0, False

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from sim_robot_node.core.params import config_dir
+from qg_common.params import config_dir
 
 from qg_learning_node.core.residual_task import state_dim
 from qg_learning_node.experiments.runner import ALGORITHMS, ESTIMATORS

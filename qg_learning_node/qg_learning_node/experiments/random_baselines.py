@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from sim_robot_node.core.panda_scene import N_START_POSES
+from qg_common.types import N_START_POSES
 
 from qg_learning_node.core.episode import Episode
 from qg_learning_node.core.noise import KINDS, ActionNoise

@@ -23,11 +23,11 @@ from typing import Any
 
 import numpy as np
 import torch
-from robot_bridge_node.core.robot_loop import GroundTruthWrench, RobotLoop, build_panda_loop
-from robot_bridge_node.core.types import StepResult, WrenchSetpoint
+from qg_common.params import config_dir, load_ros_params
+from qg_common.types import N_START_POSES, WrenchSetpoint
+from robot_bridge_node.core.hardware_interface import load_robot
+from robot_bridge_node.core.robot_loop import GroundTruthWrench, RobotLoop, build_loop
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
-from sim_robot_node.core.panda_scene import N_START_POSES, PandaSceneConfig
-from sim_robot_node.core.params import config_dir, load_ros_params
 
 from qg_learning_node.core.episode import Actor, Episode, TransitionRecord
 from qg_learning_node.core.learner_params import learner_config_from_params
@@ -84,10 +84,11 @@ def episode_noise_seed(run_seed: int, index: int) -> int:
 class StackSettings:
     """What the ROS nodes read from ``config/``, read once: one source of numbers for both paths.
 
+    :param robot: ``ros__parameters`` of ``panda_scene.yaml`` (the ``sim_panda`` robot plugin's);
     :param bridge: ``ros__parameters`` of ``bridge.yaml``; :param ekf: the ``ekf`` section of
         ``wrench_estimator.yaml``; the rest are the executor's and learner's parsed sections.
     """
-    scene: PandaSceneConfig
+    robot: dict[str, Any]
     bridge: dict[str, Any]
     ekf: dict[str, Any]
     task: TaskConfig
@@ -98,8 +99,7 @@ class StackSettings:
     def load(cls, directory: Path | None = None) -> StackSettings:
         d = Path(directory) if directory else config_dir()
         executor = load_ros_params(d / "executor.yaml")
-        return cls(scene=PandaSceneConfig.from_dict(
-                       load_ros_params(d / "panda_scene.yaml")["panda_scene"]),
+        return cls(robot=load_ros_params(d / "panda_scene.yaml"),
                    bridge=load_ros_params(d / "bridge.yaml"),
                    ekf=load_ros_params(d / "wrench_estimator.yaml")["ekf"],
                    task=TaskConfig.from_dict(executor["task"]),
@@ -122,10 +122,10 @@ class PandaTask:
         if estimator not in ESTIMATORS:
             raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
         ekf = WrenchEKFConfig.from_dict(settings.ekf)
-        self.loop: RobotLoop = build_panda_loop(
-            settings.scene, settings.bridge,
-            (lambda scene, model: WrenchEKF(ekf, model)) if estimator == "ekf"
-            else (lambda scene, model: GroundTruthWrench(scene)))
+        self.loop: RobotLoop = build_loop(
+            load_robot("sim_panda", settings.robot), settings.bridge,
+            (lambda robot, model: WrenchEKF(ekf, model)) if estimator == "ekf"
+            else (lambda robot, model: GroundTruthWrench(robot.simulation)))
         self.residual = ResidualTask(settings.task)
         self.sim_time = 0.0
         self.steps = 0
@@ -135,11 +135,8 @@ class PandaTask:
     def reset(self, initial_pose: int) -> Observation:
         """Start pose ``initial_pose`` settled, observed like the end of a step."""
         self.loop.reset(initial_pose, self.housing_yaw)
-        tool = self.loop.controller.tool
-        return observation_from_step(StepResult(
-            duration=0.0, timed_out=False, linear_speed=tool.linear_speed,
-            angular_speed=tool.angular_speed, ground_truth=self.loop.scene.ground_truth(),
-            wrench_estimate=self.loop.wrench_estimate), tool.rotation)
+        return observation_from_step(self.loop.result(self.loop.time),
+                                     self.loop.controller.tool.rotation)
 
     def step(self, action: np.ndarray) -> Observation:
         """Execute the residual ``action`` (actor units) until the tool is at rest."""

@@ -21,10 +21,10 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 from scipy.linalg import lapack
-from sim_robot_node.core.params import config_from_dict
+from qg_common.params import config_from_dict
 
 from robot_bridge_node.core.panda_model import PandaModel
-from robot_bridge_node.core.types import PoseReference, WrenchSetpoint
+from qg_common.types import PoseReference, WrenchSetpoint
 
 __all__ = ["ImpedanceConfig", "HybridImpedanceController", "ToolState"]
 

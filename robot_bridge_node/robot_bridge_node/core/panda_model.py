@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
-from sim_robot_node.core.panda_description import (DTAU_MAX, JOINT_NAMES, N_JOINTS, Q_READY,
+from qg_common.panda_description import (DTAU_MAX, JOINT_NAMES, N_JOINTS, Q_READY,
                                                    TAU_MAX, panda_urdf_path)
 
 __all__ = ["PandaModel", "panda_urdf_path", "N_JOINTS", "JOINT_NAMES", "TAU_MAX", "DTAU_MAX", "Q_READY"]

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from sim_robot_node.core.params import config_from_dict
+from qg_common.params import config_from_dict
 
 __all__ = ["PositionControlConfig", "IKResult", "TaskSpacePositionController", "pose_matrix"]
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from sim_robot_node.core.params import config_from_dict
+from qg_common.params import config_from_dict
 
 __all__ = ["RestConfig", "RestDetector"]
 

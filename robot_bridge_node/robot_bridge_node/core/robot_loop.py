@@ -1,9 +1,10 @@
 """The 1 kHz loop: read the robot, estimate the contact wrench, control, limit, apply, step.
 
-One plain Python method per millisecond (``tick``) composes the simulated hardware, the wrench
+One plain Python method per millisecond (``tick``) composes the hardware interface, the wrench
 estimator, the hybrid controller and the safety filter; ``execute`` runs ticks for one RL step
 until the rest detector ends it. The ROS nodes only publish what the loop produced, so the same
-loop runs in tests, benchmarks, lockstep training and realtime mode.
+loop runs in tests, benchmarks, lockstep training and realtime mode. The loop sees the robot only
+through ``core/hardware_interface.py``: which robot it is was decided by the plugin loaded.
 """
 from __future__ import annotations
 
@@ -12,28 +13,18 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
-from sim_robot_node.core.panda_scene import PandaSceneConfig, PandaShaftScene
-from sim_robot_node.core.params import config_from_dict
-from sim_robot_node.core.types import GroundTruth, JointState
+from qg_common.params import config_from_dict
+from qg_common.types import NO_GROUND_TRUTH, GroundTruth, StepResult, WrenchSetpoint
 
+from robot_bridge_node.core.hardware_interface import (Robot, SimulationInterface,
+                                                       ToolDescription, TorqueInterface)
 from robot_bridge_node.core.impedance import HybridImpedanceController, ImpedanceConfig
 from robot_bridge_node.core.panda_model import PandaModel
 from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
 from robot_bridge_node.core.safety import SafetyFilter, SafetyLimits
-from robot_bridge_node.core.types import StepResult, WrenchSetpoint
 
-__all__ = ["WrenchEstimator", "GroundTruthWrench", "LoopConfig", "RobotLoop", "build_panda_loop"]
-
-
-class Scene(Protocol):
-    """The torque-controlled robot as the loop sees it (simulated here, a driver on hardware)."""
-    time: float
-
-    def reset(self, initial_pose: int, housing_yaw: float = 0.0) -> None: ...
-    def joint_state(self) -> JointState: ...
-    def apply_torques(self, tau: np.ndarray) -> None: ...
-    def step(self) -> None: ...
-    def ground_truth(self) -> GroundTruth: ...
+__all__ = ["WrenchEstimator", "GroundTruthWrench", "LoopConfig", "RobotLoop", "tool_model",
+           "build_loop"]
 
 
 class WrenchEstimator(Protocol):
@@ -53,8 +44,8 @@ class GroundTruthWrench:
     For tests and for comparing against the EKF; it only exists in simulation.
     """
 
-    def __init__(self, scene: PandaShaftScene) -> None:
-        self.scene = scene
+    def __init__(self, simulation: SimulationInterface) -> None:
+        self.simulation = simulation
 
     def reset(self, q: np.ndarray) -> None:
         del q
@@ -62,7 +53,7 @@ class GroundTruthWrench:
     def update(self, q: np.ndarray, dq: np.ndarray, tau_cmd: np.ndarray,
                dt: float) -> np.ndarray:
         del q, dq, tau_cmd, dt
-        return self.scene.contact_wrench()
+        return self.simulation.contact_wrench()
 
 
 @dataclass(frozen=True)
@@ -90,13 +81,18 @@ _HOLD = WrenchSetpoint(np.zeros(6))
 class RobotLoop:
     """Owns one episode's 1 kHz control of the robot.
 
+    :param hardware: read and written once per tick.
     :param estimator: contact-wrench estimator updated every tick; ``None`` runs without one.
+    :param simulation: resets to start poses and ground truth; ``None`` on real hardware, where
+        ``reset`` is refused and the ground truth reads as zeros.
     """
 
-    def __init__(self, scene: Scene, controller: HybridImpedanceController, safety: SafetyFilter,
-                 rest_detector: RestDetector, estimator: WrenchEstimator | None = None,
-                 config: LoopConfig | None = None) -> None:
-        self.scene = scene
+    def __init__(self, hardware: TorqueInterface, controller: HybridImpedanceController,
+                 safety: SafetyFilter, rest_detector: RestDetector,
+                 estimator: WrenchEstimator | None = None, config: LoopConfig | None = None,
+                 simulation: SimulationInterface | None = None) -> None:
+        self.hardware = hardware
+        self.simulation = simulation
         self.controller = controller
         self.safety = safety
         self.rest = rest_detector
@@ -105,11 +101,23 @@ class RobotLoop:
         self.setpoint = _HOLD
         self.wrench_estimate: np.ndarray | None = None
         self.holding = False
+        self.ticks = 0             # since the last reset
+
+    @property
+    def time(self) -> float:
+        """[s] robot time since the last reset: ticks times the period."""
+        return self.ticks * self.config.dt
 
     def reset(self, initial_pose: int, housing_yaw: float = 0.0) -> None:
-        """New episode: scene at start ``initial_pose``, then settle holding that pose."""
-        self.scene.reset(initial_pose, housing_yaw)
-        state = self.scene.joint_state()
+        """New episode: the simulation at start ``initial_pose``, then settle holding that pose.
+
+        :raises RuntimeError: without a simulation (a real arm is not teleported).
+        """
+        if self.simulation is None:
+            raise RuntimeError("this robot has no simulation: it cannot be reset to a start pose")
+        self.simulation.reset(initial_pose, housing_yaw)
+        self.ticks = 0
+        state = self.hardware.read()
         self.controller.reset(state.q)
         self.safety.reset(self.controller.model.gravity(state.q))
         if self.estimator is not None:
@@ -118,7 +126,7 @@ class RobotLoop:
         self.holding = False
         for _ in range(round(self.config.settle_time / self.config.dt)):
             self.tick()
-        self.controller.set_reference_to_current(self.scene.joint_state().q)
+        self.controller.set_reference_to_current(self.hardware.read().q)
 
     def command(self, setpoint: WrenchSetpoint) -> None:
         """Start executing ``setpoint`` (the residual policy's reference is the current pose).
@@ -127,20 +135,20 @@ class RobotLoop:
         """
         checked = self.safety.check_setpoint(setpoint)
         if checked.reference is None:
-            self.controller.set_reference_to_current(self.scene.joint_state().q)
+            self.controller.set_reference_to_current(self.hardware.read().q)
         self.setpoint = checked
         self.holding = False
-        self.safety.feed_watchdog(self.scene.time)
+        self.safety.feed_watchdog(self.time)
         self.rest.reset()
 
     def tick(self) -> bool:
         """One millisecond. True when the current step has come to rest or timed out."""
         dt = self.config.dt
-        state = self.scene.joint_state()
+        state = self.hardware.read()
         if self.estimator is not None:
             self.wrench_estimate = self.estimator.update(state.q, state.dq, state.tau, dt)
         if (self.config.realtime and not self.holding
-                and self.safety.watchdog_expired(self.scene.time)):
+                and self.safety.watchdog_expired(self.time)):
             self.controller.set_reference_to_current(state.q)
             self.setpoint = _HOLD
             self.holding = True
@@ -150,45 +158,56 @@ class RobotLoop:
             setpoint = WrenchSetpoint(self.safety.limit_tilt(setpoint.wrench, tool.rotation),
                                       setpoint.reference)
         tau = self.safety.limit_torques(self.controller.step(state.q, state.dq, setpoint, dt), dt)
-        self.scene.apply_torques(tau)
-        self.scene.step()
+        self.hardware.write(tau)
+        self.ticks += 1
         tool = self.controller.tool
         return self.rest.update(tool.linear_speed, tool.angular_speed, dt)
 
     def execute(self, setpoint: WrenchSetpoint) -> StepResult:
         """Run one RL step: command ``setpoint`` and tick until at rest or the step times out."""
-        start = self.scene.time
+        start = self.time
         self.command(setpoint)
         while not self.tick():
             pass
+        return self.result(start)
+
+    def ground_truth(self) -> GroundTruth:
+        """The simulation's truth now; zeros on real hardware."""
+        return NO_GROUND_TRUTH if self.simulation is None else self.simulation.ground_truth()
+
+    def result(self, start: float) -> StepResult:
+        """How the step that started at loop time ``start`` [s] ended (its at-rest event)."""
         tool = self.controller.tool
-        return StepResult(duration=self.scene.time - start, timed_out=self.rest.timed_out,
+        return StepResult(duration=self.time - start, timed_out=self.rest.timed_out,
                           linear_speed=tool.linear_speed, angular_speed=tool.angular_speed,
-                          ground_truth=self.scene.ground_truth(),
+                          ground_truth=self.ground_truth(),
                           wrench_estimate=None if self.wrench_estimate is None
                           else self.wrench_estimate.copy())
 
 
-def build_panda_loop(scene_config: PandaSceneConfig | None = None,
-                     bridge_params: dict[str, Any] | None = None,
-                     estimator: Callable[[PandaShaftScene, PandaModel], WrenchEstimator] | None
-                     = None) -> RobotLoop:
-    """The simulated Panda task with controller, safety and rest detector from the parameters.
+def tool_model(tool: ToolDescription) -> PandaModel:
+    """The Panda model with the robot's tool: tool frame at its origin, the held part as payload."""
+    return PandaModel(tool_offset=tool.offset, payload_mass=tool.payload_mass,
+                      payload_com=tool.payload_com)
 
+
+def build_loop(robot: Robot, bridge_params: dict[str, Any] | None = None,
+               estimator: Callable[[Robot, PandaModel], WrenchEstimator] | None = None
+               ) -> RobotLoop:
+    """The loop of a torque-controlled robot with controller, safety and rest detector.
+
+    :param robot: from a plugin (``hardware_interface.load_robot``).
     :param bridge_params: the ``ros__parameters`` of ``config/bridge.yaml`` (sections
         ``impedance``, ``safety``, ``rest``, ``loop``); missing sections keep the defaults.
-    :param estimator: builds the wrench estimator from the scene and the controller's model,
-        e.g. ``lambda scene, model: GroundTruthWrench(scene)``; ``None`` runs without one.
+    :param estimator: builds the wrench estimator from the robot and the controller's model,
+        e.g. ``lambda robot, model: GroundTruthWrench(robot.simulation)``; ``None``: none.
     """
     params = bridge_params or {}
-    scene = PandaShaftScene(scene_config or PandaSceneConfig())
-    c = scene.config
-    model = PandaModel(tool_offset=scene.tool_offset, payload_mass=c.shaft_mass,
-                       payload_com=scene.tool_offset + c.shaft_com)
+    model = tool_model(robot.description.tool)
     controller = HybridImpedanceController(ImpedanceConfig.from_dict(params.get("impedance", {})),
                                            model)
     safety = SafetyFilter(SafetyLimits.from_dict(params.get("safety", {})))
-    return RobotLoop(scene, controller, safety,
+    return RobotLoop(robot.hardware, controller, safety,
                      RestDetector(RestConfig.from_dict(params.get("rest", {}))),
-                     None if estimator is None else estimator(scene, model),
-                     LoopConfig.from_dict(params.get("loop", {})))
+                     None if estimator is None else estimator(robot, model),
+                     LoopConfig.from_dict(params.get("loop", {})), robot.simulation)

@@ -13,11 +13,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from sim_robot_node.core.params import config_from_dict
-from sim_robot_node.core.rotations import tilt_from_down
+from qg_common.params import config_from_dict
+from qg_common.rotations import tilt_from_down
 
 from robot_bridge_node.core.panda_model import DTAU_MAX, TAU_MAX
-from robot_bridge_node.core.types import WrenchSetpoint
+from qg_common.types import WrenchSetpoint
 
 __all__ = ["SafetyLimits", "SafetyFilter", "SetpointRejected", "HARD_LIMITS"]
 

@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 from scipy.linalg import lapack
-from sim_robot_node.core.params import config_from_dict
+from qg_common.params import config_from_dict
 
 from .panda_model import N_JOINTS, PandaModel
 

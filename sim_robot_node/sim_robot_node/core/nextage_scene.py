@@ -21,8 +21,8 @@ import numpy as np
 import pybullet as p
 from scipy.spatial.transform import Rotation
 
-from sim_robot_node.core.params import config_from_dict
-from sim_robot_node.core.types import JointState
+from qg_common.params import config_from_dict
+from qg_common.types import JointState
 
 __all__ = ["PegHoleGeometry", "PegGroundTruth", "NextageSceneConfig", "NextagePegScene",
            "nextage_urdf_path", "build_hole_block", "build_peg", "sample_start",

@@ -26,17 +26,13 @@ from xml.etree import ElementTree
 
 import numpy as np
 import pybullet as p
-# The one Panda description (URDF path, ready pose) lives with the controller's model.
-from sim_robot_node.core.panda_description import Q_READY, panda_urdf_path
+from qg_common.panda_description import Q_READY, panda_urdf_path
+from qg_common.params import config_from_dict
+from qg_common.rotations import axis_angle_matrix, rotation_log, tilt_from_down
+from qg_common.types import N_START_POSES, GroundTruth, JointState
 
-from sim_robot_node.core.params import config_from_dict
-from sim_robot_node.core.rotations import axis_angle_matrix, rotation_log, tilt_from_down
-from sim_robot_node.core.types import GroundTruth, JointState
+__all__ = ["PandaSceneConfig", "PandaShaftScene"]
 
-__all__ = ["PandaSceneConfig", "PandaShaftScene", "N_START_POSES"]
-
-#: The initial poses: shaft tilt directions k * 45 deg.
-N_START_POSES = 8
 ARM_JOINTS = tuple(f"panda_joint{i}" for i in range(1, 8))
 
 

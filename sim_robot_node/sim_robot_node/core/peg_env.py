@@ -27,9 +27,9 @@ import pybullet as p
 from sim_robot_node.core.nextage_scene import (NextagePegScene, NextageSceneConfig,
                                                PegHoleGeometry, build_hole_block, build_peg,
                                                sample_start)
-from sim_robot_node.core.params import config_from_dict
+from qg_common.params import config_from_dict
 
-__all__ = ["PegEnvConfig", "PegEnv", "JointTargetController", "toward_goal"]
+__all__ = ["PegEnvConfig", "PegEnv", "JointTargetController", "toward_goal", "make_peg_env"]
 
 
 class JointTargetController(Protocol):
@@ -271,3 +271,9 @@ def toward_goal(env: "PegEnv") -> np.ndarray:
             return np.array([0.0, 0.0, 1.0])
         return np.clip(np.r_[offset[:2], 0.0] / g.hole_radius, -1.0, 1.0)
     return np.clip(offset / g.hole_radius, -1.0, 1.0)
+
+
+def make_peg_env(params: dict[str, Any], **overrides: Any) -> PegEnv:
+    """The free peg from ``config/peg_env.yaml``'s parameters with ``overrides`` (e.g.
+    ``episode_steps``); registered as the learning environment ``peg``."""
+    return PegEnv(replace(PegEnvConfig.from_dict(params), **overrides))

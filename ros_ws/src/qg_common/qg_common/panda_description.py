@@ -1,8 +1,8 @@
 """Facts about the Franka Panda that both the simulator and the bridge's model need.
 
-They live in the simulator package because the bridge depends on it, not the reverse: the
-URDF file (``example-robot-data``'s Panda, with real inertias), joint names, limits, and the
-configuration the arm starts from.
+The URDF file (``example-robot-data``'s Panda, with real inertias), joint names, limits, and the
+configuration the arm starts from: the robot description, which in ROS 2 both the hardware and
+the controllers read, so it lives in the common package and neither side imports the other.
 """
 from __future__ import annotations
 

@@ -29,13 +29,13 @@ def config_dir() -> Path:
     env = os.environ.get("QG_CONFIG_DIR")
     if env:
         return Path(env)
-    return Path(__file__).resolve().parents[3] / "config"
+    return Path(__file__).resolve().parents[4] / "config"
 
 
 def runs_dir() -> Path:
     """Where runs are written (episode bags, checkpoints): ``$QG_RUNS_DIR``, else ``<repo>/runs``."""
     env = os.environ.get("QG_RUNS_DIR")
-    return Path(env) if env else Path(__file__).resolve().parents[3] / "runs"
+    return Path(env) if env else Path(__file__).resolve().parents[4] / "runs"
 
 
 def _merge(base: dict[str, Any], extra: dict[str, Any]) -> dict[str, Any]:

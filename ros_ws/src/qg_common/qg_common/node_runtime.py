@@ -19,7 +19,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 
-from sim_robot_node.core.params import ConfigError, config_dir, unflatten
+from qg_common.params import ConfigError, config_dir, unflatten
 
 __all__ = ["LoopThread", "RealtimePacer", "node_args", "node_params", "run_nodes"]
 

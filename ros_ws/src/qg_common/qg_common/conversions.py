@@ -3,7 +3,7 @@
 Message types stay at the edge: the loop, controller and estimator only see numpy and the core
 dataclasses, and every node converts through these functions, so a frame or a field order is
 decided once. Frames: poses and twists are in the robot base frame (``panda_link0``), wrenches in
-the tool frame (``tool``, see ``robot_bridge_node/core/types.py`` for the sign convention).
+the tool frame (``tool``, see ``qg_common/types.py`` for the sign convention).
 """
 from __future__ import annotations
 
@@ -14,15 +14,16 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Pose, PoseStamped, TwistStamped, Wrench, WrenchStamped
 from qg_interfaces.msg import AtRest
 from qg_interfaces.msg import GroundTruth as GroundTruthMsg
+from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
 from sensor_msgs.msg import JointState as JointStateMsg
 
-from sim_robot_node.core.panda_description import JOINT_NAMES
-from sim_robot_node.core.types import GroundTruth, JointState, StepResult
+from qg_common.types import GroundTruth, JointState, PoseReference, StepResult, WrenchSetpoint
 
 __all__ = ["BASE_FRAME", "TOOL_FRAME", "time_msg", "time_ns", "joint_state_msg",
            "joint_state_from_msg", "wrench_msg", "wrench_from_msg", "wrench_stamped",
            "ground_truth_msg", "ground_truth_from_msg", "quaternion_from_matrix",
-           "matrix_from_quaternion", "pose_msg", "pose_stamped", "twist_stamped", "at_rest_msg"]
+           "matrix_from_quaternion", "pose_msg", "pose_stamped", "twist_stamped", "at_rest_msg",
+           "setpoint_from_msg", "setpoint_msg"]
 
 BASE_FRAME = "panda_link0"
 TOOL_FRAME = "tool"
@@ -40,20 +41,19 @@ def time_ns(stamp: Time) -> int:
 
 
 # --- joints -------------------------------------------------------------------------------------
-def joint_state_msg(state: JointState, stamp: Time) -> JointStateMsg:
-    """``sensor_msgs/JointState`` of the 7 arm joints; effort is the measured (applied) torque."""
-    msg = JointStateMsg(name=list(JOINT_NAMES), position=state.q.tolist(),
+def joint_state_msg(state: JointState, stamp: Time, names: tuple[str, ...]) -> JointStateMsg:
+    """``sensor_msgs/JointState`` of the arm joints ``names``; effort is the measured torque."""
+    msg = JointStateMsg(name=list(names), position=state.q.tolist(),
                         velocity=state.dq.tolist(), effort=state.tau.tolist())
     msg.header.stamp = stamp
     return msg
 
 
-def joint_state_from_msg(msg: JointStateMsg) -> JointState:
-    """The core ``JointState``; a missing effort reads as zero torque.
+def joint_state_from_msg(msg: JointStateMsg, n: int) -> JointState:
+    """The core ``JointState`` of an ``n``-joint arm; a missing effort reads as zero torque.
 
-    :raises ValueError: if position or velocity do not have 7 entries.
+    :raises ValueError: if position or velocity do not have ``n`` entries.
     """
-    n = len(JOINT_NAMES)
     if len(msg.position) != n or len(msg.velocity) != n:
         raise ValueError(f"joint state needs {n} positions and velocities, got "
                          f"{len(msg.position)} and {len(msg.velocity)}")
@@ -187,4 +187,25 @@ def at_rest_msg(seq: int, result: StepResult, position: np.ndarray, rotation: np
                  ground_truth=ground_truth_msg(result.ground_truth, stamp))
     msg.header.stamp = stamp
     msg.header.frame_id = BASE_FRAME
+    return msg
+
+
+# --- setpoints ----------------------------------------------------------------------------------
+def setpoint_from_msg(msg: WrenchSetpointMsg) -> WrenchSetpoint:
+    """The core setpoint; values are not checked here (the safety filter rejects NaN/inf)."""
+    reference = None
+    if not msg.reference_from_current:
+        p, o = msg.pose_reference.position, msg.pose_reference.orientation
+        reference = PoseReference(np.array([p.x, p.y, p.z]),
+                                  matrix_from_quaternion(o.x, o.y, o.z, o.w))
+    return WrenchSetpoint(wrench_from_msg(msg.wrench), reference)
+
+
+def setpoint_msg(seq: int, setpoint: WrenchSetpoint, stamp: Time) -> WrenchSetpointMsg:
+    """The message of a core setpoint (what the executor sends)."""
+    msg = WrenchSetpointMsg(seq=int(seq), wrench=wrench_msg(setpoint.wrench),
+                            reference_from_current=setpoint.reference is None)
+    if setpoint.reference is not None:
+        msg.pose_reference = pose_msg(setpoint.reference.position, setpoint.reference.rotation)
+    msg.header.stamp = stamp
     return msg

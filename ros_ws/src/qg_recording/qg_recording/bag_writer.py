@@ -31,7 +31,7 @@ from .schemas import normalize_type_name, schema_text
 
 __all__ = ["BagWriter", "bag_file_name"]
 
-LIBRARY = "robot_bridge_node.recording"
+LIBRARY = "qg_recording"
 _COMPRESSIONS = {"zstd": "zstd", "none": ""}
 _BATCH = 64  # queue items between two voluntary releases of the interpreter lock
 

@@ -1,0 +1,28 @@
+"""Learning environments found by name, so the learning package never imports a simulator.
+
+A package registers a factory ``make(params: dict, **overrides) -> env`` under the entry-point
+group ``qg_learning_node.environments`` (``sim_robot_node`` registers ``peg``, the free
+clearance-fit peg of experiment 5). An environment has ``state_dim``, ``action_dim``,
+``reset(seed) -> state``, ``step(action) -> (state, reward, terminal)``, ``truncated`` and
+``close()``.
+"""
+from __future__ import annotations
+
+from importlib.metadata import entry_points
+from typing import Any
+
+__all__ = ["ENVIRONMENT_GROUP", "make_environment"]
+
+ENVIRONMENT_GROUP = "qg_learning_node.environments"
+
+
+def make_environment(name: str, params: dict[str, Any], **overrides: Any) -> Any:
+    """The environment registered as ``name``, built from its parameter file's contents.
+
+    :raises ValueError: if no installed package registers ``name``.
+    """
+    found = [ep for ep in entry_points(group=ENVIRONMENT_GROUP) if ep.name == name]
+    if not found:
+        known = sorted(ep.name for ep in entry_points(group=ENVIRONMENT_GROUP))
+        raise ValueError(f"no environment named {name!r}; installed: {known}")
+    return found[0].load()(params, **overrides)

@@ -1,0 +1,166 @@
+"""The ``sim`` node: the robot's state and its simulation as ROS sees them.
+
+In the composed ``robot`` process the loop thread hands ``SimulationNode`` what it produced each
+published tick: ``joint_states`` (what any robot driver publishes), the simulation's ground truth
+and, in lockstep, ``clock``. ``serve_reset`` gives the node the ``sim/reset`` service, answered
+by whatever resets the robot (the loop runner here, the separate sim's loop in
+``sim_robot_node``). ``SimConfig`` holds the clock mode both read.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import WrenchStamped
+from qg_common import topics
+from qg_common.conversions import ground_truth_msg, joint_state_msg, wrench_stamped
+from qg_common.node_runtime import node_params
+from qg_common.params import config_from_dict
+from qg_common.types import N_START_POSES, GroundTruth, JointState
+from qg_interfaces.msg import AtRest
+from qg_interfaces.msg import GroundTruth as GroundTruthMsg
+from qg_interfaces.srv import ResetSim
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState as JointStateMsg
+
+__all__ = ["SimConfig", "SimulationNode", "Resetter", "serve_reset"]
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """The ``sim`` section of ``config/sim.yaml``: clock mode and the separate-process sim.
+
+    :param clock_mode: ``lockstep`` (the loop runs as fast as it can while a setpoint executes,
+        publishes ``/clock``) or ``realtime`` (wall-clock 1 kHz). Separate processes are always
+        realtime.
+    :param publish_rate: [Hz] rate of the 1 kHz topics; 0 picks 1000 in realtime and 100 (of
+        simulated time) in lockstep, where publishing would otherwise dominate the tick.
+    :param ground_truth_rate: [Hz] rate of ``/sim/ground_truth(_wrench)``, at most
+        ``publish_rate``: computing the ground truth costs about a third of a tick.
+    :param realtime_priority: realtime: ``SCHED_FIFO`` priority (1..99) of the 1 kHz loop
+        thread; 0 keeps the normal scheduler.
+    :param initial_pose: start pose (0..7) taken when the process starts.
+    :param command_timeout: [s] separate sim: a ``/joint_commands`` older than this is stale.
+    :param hold_damping: [Nms/rad] separate sim: joint damping added to the gravity hold.
+    :param reset_wait: [s] separate sim: wall time the bridge gets to settle after a reset
+        before ``/sim/reset`` answers.
+    """
+    clock_mode: str = "lockstep"
+    publish_rate: float = 0.0
+    ground_truth_rate: float = 100.0
+    realtime_priority: int = 0
+    initial_pose: int = 0
+    command_timeout: float = 0.02
+    hold_damping: float = 1.0
+    reset_wait: float = 0.2
+
+    def __post_init__(self) -> None:
+        if self.clock_mode not in ("lockstep", "realtime"):
+            raise ValueError(f"clock_mode must be 'lockstep' or 'realtime', got {self.clock_mode!r}")
+        if not (math.isfinite(self.publish_rate) and 0.0 <= self.publish_rate <= 1000.0):
+            raise ValueError(f"publish_rate must be in [0, 1000] Hz (0: mode default), "
+                             f"got {self.publish_rate}")
+        if not (math.isfinite(self.ground_truth_rate) and 0.0 < self.ground_truth_rate <= 1000.0):
+            raise ValueError(f"ground_truth_rate must be in (0, 1000] Hz, "
+                             f"got {self.ground_truth_rate}")
+        if not 0 <= self.realtime_priority <= 99:
+            raise ValueError(f"realtime_priority must be in 0..99 (0: normal scheduling), "
+                             f"got {self.realtime_priority}")
+        if not 0 <= self.initial_pose < N_START_POSES:
+            raise ValueError(f"initial_pose must be in 0..{N_START_POSES - 1}, "
+                             f"got {self.initial_pose}")
+        for name in ("command_timeout", "reset_wait"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"{name} must be > 0 s, got {getattr(self, name)}")
+        if self.hold_damping < 0.0:
+            raise ValueError(f"hold_damping must be >= 0, got {self.hold_damping}")
+
+    @classmethod
+    def from_dict(cls, params: dict[str, Any]) -> SimConfig:
+        """From the ``sim`` section of ``config/sim.yaml``."""
+        return config_from_dict(cls, params)
+
+    @property
+    def realtime(self) -> bool:
+        return self.clock_mode == "realtime"
+
+    def publish_every(self, dt: float) -> int:
+        """Publish the 1 kHz topics every this many ticks of ``dt`` seconds."""
+        rate = self.publish_rate or (1000.0 if self.realtime else 100.0)
+        return max(1, round(1.0 / (rate * dt)))
+
+    def ground_truth_every(self, dt: float) -> int:
+        """Publish the ground truth every this many ticks (a multiple of ``publish_every``)."""
+        every = self.publish_every(dt)
+        return every * max(1, round(1.0 / (self.ground_truth_rate * dt * every)))
+
+
+class SimulationNode(Node):
+    """Publishes the robot's joint state and the simulation's truth and clock (node ``sim``).
+
+    :param joint_names: names of the published joint vectors.
+    """
+
+    def __init__(self, joint_names: tuple[str, ...] = ()) -> None:
+        super().__init__("sim", automatically_declare_parameters_from_overrides=True)
+        self.params = node_params(self)
+        self.config = SimConfig.from_dict(self.params.get("sim", {}))
+        self.joint_names = joint_names
+        self.joint_states = self.create_publisher(JointStateMsg, topics.JOINT_STATES,
+                                                  topics.SENSOR_QOS)
+        self.ground_truth = self.create_publisher(GroundTruthMsg, topics.GROUND_TRUTH,
+                                                  topics.SENSOR_QOS)
+        self.ground_truth_wrench = self.create_publisher(
+            WrenchStamped, topics.GROUND_TRUTH_WRENCH, topics.SENSOR_QOS)
+        self.clock = self.create_publisher(Clock, topics.CLOCK, topics.SENSOR_QOS)
+
+    def publish_state(self, stamp: Time, state: JointState,
+                      truth: GroundTruth | None = None) -> None:
+        """``joint_states``, and with ``truth`` ``sim/ground_truth(_wrench)``."""
+        self.joint_states.publish(joint_state_msg(state, stamp, self.joint_names))
+        if truth is not None:
+            self.ground_truth.publish(ground_truth_msg(truth, stamp))
+            self.ground_truth_wrench.publish(wrench_stamped(truth.wrench, stamp))
+
+    def publish_clock(self, stamp: Time) -> None:
+        self.clock.publish(Clock(clock=stamp))
+
+
+class Resetter(Protocol):
+    """Resets the robot to a start pose, settles it, and returns the settled observation."""
+
+    def reset(self, initial_pose: int, housing_yaw: float = 0.0) -> AtRest: ...
+
+
+def serve_reset(node: Node, resetter: Resetter) -> None:
+    """Serve ``sim/reset`` on ``node``: validate the request, then ``resetter.reset``.
+
+    The call blocks until the robot has settled, so the service has a callback group of its own
+    and the node's other callbacks keep running meanwhile.
+    """
+    def on_reset(request: ResetSim.Request, response: ResetSim.Response) -> ResetSim.Response:
+        response.success = False
+        if not 0 <= request.initial_pose < N_START_POSES:
+            response.message = (f"initial_pose must be 0..{N_START_POSES - 1}, "
+                                f"got {request.initial_pose}")
+            return response
+        if not math.isfinite(request.housing_yaw):
+            response.message = f"housing_yaw must be finite, got {request.housing_yaw}"
+            return response
+        try:
+            response.observation = resetter.reset(request.initial_pose, request.housing_yaw)
+        except (RuntimeError, ValueError, TimeoutError) as exc:
+            node.get_logger().error(f"reset to pose {request.initial_pose} failed: {exc}")
+            response.message = f"reset failed: {exc}"
+            return response
+        response.success = True
+        response.message = (f"reset to pose {request.initial_pose}, "
+                            f"yaw {request.housing_yaw:.3f} rad")
+        return response
+
+    node.create_service(ResetSim, topics.SIM_RESET, on_reset,
+                        callback_group=MutuallyExclusiveCallbackGroup())

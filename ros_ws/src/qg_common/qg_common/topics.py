@@ -1,0 +1,50 @@
+"""Topic and service names of the stack and the QoS each one needs, decided once.
+
+Names are relative, so ``--ros-args -r __ns:=/robot1`` moves a whole stack (robot process,
+executor, learner) into a namespace and two robots can run side by side without crosstalk.
+In the default namespace they resolve to ``/joint_states``, ``/sim/reset`` and so on.
+"""
+from __future__ import annotations
+
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+__all__ = [
+    "JOINT_STATES", "JOINT_COMMANDS", "GROUND_TRUTH", "GROUND_TRUTH_WRENCH", "CLOCK",
+    "SIM_RESTARTED", "SIM_RESET", "WRENCH_ESTIMATE", "WRENCH_SETPOINT", "EE_POSE", "EE_TWIST",
+    "EE_AT_REST", "EPISODE_STATUS", "TRANSITIONS", "ACTOR_PARAMETERS", "LEARNER_DIAGNOSTICS",
+    "START_EPISODE", "STOP_EPISODE", "SENSOR_QOS", "COMMAND_QOS", "RESTARTED_QOS",
+    "RELIABLE_DEEP", "LATCHED"]
+
+# --- the robot process (1 kHz unless said otherwise) -------------------------------------------
+JOINT_STATES = "joint_states"
+JOINT_COMMANDS = "joint_commands"              # separate processes only
+GROUND_TRUTH = "sim/ground_truth"
+GROUND_TRUTH_WRENCH = "sim/ground_truth_wrench"
+CLOCK = "clock"                                # lockstep
+SIM_RESTARTED = "sim/restarted"                # separate processes only: the sim teleported
+SIM_RESET = "sim/reset"                        # service, per episode
+WRENCH_ESTIMATE = "wrench_estimate"
+WRENCH_SETPOINT = "wrench_setpoint"            # RL step
+EE_POSE = "ee_pose"
+EE_TWIST = "ee_twist"
+EE_AT_REST = "ee_at_rest"                      # RL step
+
+# --- learning ------------------------------------------------------------------------------
+EPISODE_STATUS = "episode_status"
+TRANSITIONS = "transitions"
+ACTOR_PARAMETERS = "actor_parameters"
+LEARNER_DIAGNOSTICS = "learner/diagnostics"
+START_EPISODE = "executor/start_episode"       # service
+STOP_EPISODE = "executor/stop_episode"         # service
+
+# --- QoS -----------------------------------------------------------------------------------
+#: 1 kHz state: only the newest sample matters.
+SENSOR_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+#: Commands and RL-step events: reliable, a few deep.
+COMMAND_QOS = 10
+RESTARTED_QOS = 10
+#: Transitions: none may be lost, even while the learner is busy training.
+RELIABLE_DEEP = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+#: The latest value is what a late joiner needs (episode status, actor parameters).
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
