@@ -66,11 +66,13 @@ if [[ "$(cat "$STAMPS/egg_info" 2>/dev/null)" != "$meta_hash" ]]; then
   done
   echo "$meta_hash" > "$STAMPS/egg_info"
 fi
+# `qgl` is the console script qg_learning_node declares; this is the wrapper pip would write.
 cat > "$VENV/bin/qgl" <<EOF
 #!$PY
 import sys
-from qg_learning_node.cli.main import main
-sys.exit(main())
+from importlib.metadata import entry_points
+(qgl,) = entry_points(group="console_scripts", name="qgl")
+sys.exit(qgl.load()())
 EOF
 chmod +x "$VENV/bin/qgl"
 

@@ -16,17 +16,22 @@ DEEP = rclpy.qos.QoSProfile(depth=2000, reliability=rclpy.qos.ReliabilityPolicy.
 
 
 class RobotClient:
-    """Resets the sim, sends setpoints and collects ``/ee_at_rest`` on one test node."""
+    """Resets the sim, sends setpoints and collects ``ee_at_rest`` on one test node.
 
-    def __init__(self, cli: CliNode) -> None:
+    :param namespace: the robot's namespace (``--ros-args -r __ns:=...``); "" is the root.
+    """
+
+    def __init__(self, cli: CliNode, namespace: str = "") -> None:
         self.cli = cli
+        self.namespace = namespace
         self.events: list[AtRest] = []
-        cli.node.create_subscription(AtRest, "/ee_at_rest", self.events.append, 100)
-        self.setpoints = cli.node.create_publisher(WrenchSetpoint, "/wrench_setpoint", 10)
+        cli.node.create_subscription(AtRest, f"{namespace}/ee_at_rest", self.events.append, 100)
+        self.setpoints = cli.node.create_publisher(WrenchSetpoint, f"{namespace}/wrench_setpoint",
+                                                   10)
 
     def reset(self, pose: int, timeout: float = 60.0) -> ResetSim.Response:
-        return call_service(self.cli, ResetSim, "/sim/reset", ResetSim.Request(initial_pose=pose),
-                            timeout)
+        return call_service(self.cli, ResetSim, f"{self.namespace}/sim/reset",
+                            ResetSim.Request(initial_pose=pose), timeout)
 
     def send(self, seq: int, wrench: tuple[float, ...]) -> None:
         assert self.cli.spin_until(lambda: self.setpoints.get_subscription_count() > 0, 30.0), \

@@ -31,7 +31,8 @@ def test_executables_are_where_ros2_run_looks():
     install = ROOT / "ros_ws" / "install"
     for pkg, exe in [("sim_robot_node", "sim"), ("robot_bridge_node", "bridge"),
                      ("robot_bridge_node", "wrench_estimator"), ("robot_bridge_node", "robot"),
-                     ("qg_learning_node", "executor"), ("qg_learning_node", "learner")]:
+                     ("qg_learning_node", "executor"), ("qg_learning_node", "learner"),
+                     ("qg_learning_node", "qgl")]:
         assert (install / pkg / "lib" / pkg / exe).is_file(), f"{pkg}/{exe}"
         marker = install / pkg / "share" / "ament_index" / "resource_index" / "packages" / pkg
         assert marker.is_file(), marker

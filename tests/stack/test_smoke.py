@@ -1,6 +1,7 @@
 """Every executable starts as a real process, is discovered, answers, and stops cleanly."""
 from __future__ import annotations
 
+import re
 import signal
 import subprocess
 import sys
@@ -87,3 +88,36 @@ def test_qgl_up_reports_a_dying_node_and_exits_nonzero(tmp_path):
     result = qgl("up", "--config", str(cfg), timeout=60.0)
     assert result.returncode != 0
     assert "process 'learner' exited" in result.stdout
+
+
+def test_killing_qgl_up_stops_every_node_it_started(tmp_path):
+    """SIGKILL leaves the launcher no chance to clean up: the kernel ends its children."""
+    cfg = tmp_path / "stack.yaml"
+    cfg.write_text("processes:\n"
+                   "  - {name: executor, package: qg_learning_node, executable: executor}\n"
+                   "  - {name: learner, package: qg_learning_node, executable: learner}\n")
+    up = subprocess.Popen([sys.executable, "-m", "qg_learning_node.cli.main", "up", "--config",
+                           str(cfg)], stdout=subprocess.PIPE, text=True)
+    line = up.stdout.readline()
+    while "[qgl] started" not in line:
+        assert line, "qgl up ended before starting its nodes"
+        line = up.stdout.readline()
+    pids = [int(p) for p in re.findall(r"pid (\d+)", line)]
+    assert len(pids) == 2
+    up.kill()
+    up.wait(timeout=10.0)
+    deadline = time.monotonic() + 10.0
+    alive = pids
+    while alive and time.monotonic() < deadline:
+        alive = [p for p in alive if _alive(p)]
+        time.sleep(0.1)
+    assert alive == [], f"nodes outlived qgl up: {alive}"
+
+
+def _alive(pid: int) -> bool:
+    """True while ``pid`` runs (a zombie awaiting its reaper counts as gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
