@@ -49,6 +49,19 @@ def test_same_seed_gives_identical_steps_and_training() -> None:
     assert [c["mean_q"] for c in other["cycles"]] != [c["mean_q"] for c in first["cycles"]]
 
 
+def test_a_tilted_housing_test_counts_its_own_steps() -> None:
+    """The generalisation test runs on a second robot whose housing is tilted; its steps, time
+    and timeouts are part of the run's totals."""
+    spec = RunSpec(algorithm="qgddpg", critic_lr=1e-3, iterations=1, seed=0, train_episodes=1,
+                   test_episodes=2, train_max_steps=2, test_max_steps=2, cycle_steps=50,
+                   test_housing_yaw=1.5707963267948966, test_housing_tilt=0.1745)
+    result = run_training(spec)
+    assert spec.name.endswith("_yaw1.5708_tilt0.1745_s0")
+    assert [e["mode"] for e in result["episodes"]] == ["train", "test", "test"]
+    assert result["rl_steps"] == sum(e["steps"] for e in result["episodes"])
+    assert result["sim_time"] > 0.0
+
+
 @pytest.mark.slow
 def test_tiny_suite_writes_results_figures_and_report(tmp_path) -> None:
     profile = load_profile("tiny")

@@ -78,3 +78,33 @@ def test_contact_wrench_matches_the_balance_of_the_arm(loop: RobotLoop, pose: in
     np.testing.assert_allclose(truth[:3], balance[:3], atol=0.2)
     np.testing.assert_allclose(truth[3:], balance[3:], atol=0.02)
     assert truth[2] == pytest.approx(-15.0, abs=0.5)  # the base push, in the contact convention
+
+
+def test_a_tilted_housing_moves_the_starts_the_bore_axis_and_the_goal_with_it() -> None:
+    """A fixture tilted by 10 deg: the starts are 15 deg from the tilted bore axis, tip on it,
+    and tilting the shaft back onto that axis (the tilt-back policy on ground truth) inserts it
+    along the tilted bore."""
+    tilt = math.radians(10.0)
+    loop = build_loop(load_robot("sim_panda", {"panda_scene": {"housing_tilt": tilt}}))
+    scene = loop.simulation.scene
+    try:
+        for k in (1, 6):
+            loop.reset(k, math.pi / 2)
+            gt = scene.ground_truth()
+            assert gt.tilt == pytest.approx(math.radians(15.0), abs=1e-4)
+            assert gt.lateral_offset < 1e-5
+            _, rotation = scene.tool_pose()
+            # Against the vertical the shaft leans between 15 - 10 and 15 + 10 deg.
+            assert math.radians(4.9) < math.acos(-rotation[2, 2]) < math.radians(25.1)
+            for _ in range(20):
+                back = -3.0 * scene.ground_truth().orientation_error / 0.5   # actor units
+                gt = loop.execute(WrenchSetpoint.residual(
+                    -15.0, *(3.0 * np.clip(back, -1.0, 1.0)))).ground_truth
+                if gt.success:
+                    break
+            assert gt.success and gt.lateral_offset < 1e-3
+            # Depth measured along the tilted bore: the shaft went all the way down it.
+            assert gt.insertion_depth == pytest.approx(scene.config.full_depth, abs=3e-4)
+            assert gt.position_error < 2e-3
+    finally:
+        scene.close()

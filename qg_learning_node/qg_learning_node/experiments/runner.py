@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 import torch
 from qg_common.params import config_dir, load_ros_params
+from qg_common.rotations import housing_rotation
 from qg_common.types import N_START_POSES, WrenchSetpoint
 from robot_bridge_node.core.hardware_interface import load_robot
 from robot_bridge_node.core.robot_loop import GroundTruthWrench, RobotLoop, build_loop
@@ -41,7 +42,7 @@ from qg_learning_node.learner_core import LearnerConfig, LearnerCore
 __all__ = ["ALGORITHMS", "ESTIMATORS", "StackSettings", "PandaTask", "LivePolicy", "RunSpec",
            "MonteCarloCheck",
            "algorithm_config", "run_episode", "run_training", "episode_noise_seed", "zero_policy",
-           "config_digest", "STACK_CONFIG_FILES"]
+           "config_digest", "STACK_CONFIG_FILES", "tilted_housing"]
 
 #: Learner variants compared by the experiments. Vanilla DDPG as in the thesis: no bounds and no
 #: zero-action loops (its replay holds executed steps only); QG-DDPG: graph + a-priori bounds with
@@ -193,6 +194,9 @@ class RunSpec:
         ``executor.yaml``'s.
     :param test_housing_yaw: [rad] housing rotation about the vertical in the test episodes
         (training always runs at 0): the generalisation test.
+    :param test_housing_tilt: [rad] the housing's fixture tilt in the test episodes (about its x
+        axis, after the yaw); the test then observes the tilt against the tilted bore axis,
+        ``task.push_axis`` as a real cell would set it from its fixture.
     :param graph_resolution: Q-Graph state merging (``LearnerConfig.graph_resolution``).
     :param schedule: the learner's schedule, ``cycle`` | ``async`` (``learner_core``); with
         ``async``, ``updates_per_step`` and ``publish_every`` apply.
@@ -216,6 +220,7 @@ class RunSpec:
     experiment: str = "grid"
     observation: str | None = None
     test_housing_yaw: float = 0.0
+    test_housing_tilt: float = 0.0
     graph_resolution: float = 0.0
     schedule: str = "cycle"
     updates_per_step: float = 10.0
@@ -238,6 +243,7 @@ class RunSpec:
         extra += f"_cap{self.replay_capacity}" if self.replay_capacity else ""
         extra += f"_{self.observation}" if self.observation else ""
         extra += f"_yaw{self.test_housing_yaw:g}" if self.test_housing_yaw else ""
+        extra += f"_tilt{self.test_housing_tilt:g}" if self.test_housing_tilt else ""
         extra += f"_res{self.graph_resolution:g}" if self.graph_resolution else ""
         extra += (f"_async{self.updates_per_step:g}x{self.publish_every}"
                   if self.schedule == "async" else "")
@@ -326,9 +332,9 @@ def run_training(spec: RunSpec) -> dict[str, Any]:
             cycles.append({k: float(v) for k, v in diagnostics.items()})
             policy.update(learner.agent)
 
-    def test_phase(tag: str) -> list[dict[str, Any]]:
-        return [run_episode(env, Episode(f"{tag}{index:03d}", "test", index % N_START_POSES,
-                                         spec.reward, env.residual), policy)
+    def test_phase(tag: str, on: PandaTask) -> list[dict[str, Any]]:
+        return [run_episode(on, Episode(f"{tag}{index:03d}", "test", index % N_START_POSES,
+                                        spec.reward, on.residual), policy)
                 for index in range(spec.test_episodes)]
 
     episodes, evaluations = [], []
@@ -338,18 +344,33 @@ def run_training(spec: RunSpec) -> dict[str, Any]:
                           env.residual, noise)
         episodes.append(run_episode(env, episode, policy, learn))
         if spec.eval_every and (index + 1) % spec.eval_every == 0:
-            tests = test_phase(f"eval{index + 1:03d}_")
+            tests = test_phase(f"eval{index + 1:03d}_", env)
             evaluations.append({"train_episodes": index + 1, "sim_time": env.sim_time,
                                 "rl_steps": env.steps,
                                 "successes": sum(e["success"] for e in tests),
                                 "mean_steps": float(np.mean([e["steps"] for e in tests]))})
             if evaluations[-1]["successes"] == spec.test_episodes:
                 break
-    env.housing_yaw = spec.test_housing_yaw
+    test_env = env if not spec.test_housing_tilt else PandaTask(
+        tilted_housing(settings, task_config, spec.test_housing_yaw, spec.test_housing_tilt),
+        spec.estimator)
+    test_env.housing_yaw = spec.test_housing_yaw
     if not spec.eval_every:
-        episodes += test_phase("test")
+        episodes += test_phase("test", test_env)
+    envs = (env,) if test_env is env else (env, test_env)
     return {"experiment": spec.experiment, "name": spec.name, "spec": dataclasses.asdict(spec),
             "config_digest": config_digest(spec.config_dir), "episodes": episodes,
-            "evaluations": evaluations, "cycles": cycles, "rl_steps": env.steps,
-            "step_timeouts": env.step_timeouts, "sim_time": env.sim_time,
-            "wall_time": time.perf_counter() - start}
+            "evaluations": evaluations, "cycles": cycles,
+            "rl_steps": sum(e.steps for e in envs),
+            "step_timeouts": sum(e.step_timeouts for e in envs),
+            "sim_time": sum(e.sim_time for e in envs), "wall_time": time.perf_counter() - start}
+
+
+def tilted_housing(settings: StackSettings, task: TaskConfig, yaw: float,
+                   tilt: float) -> StackSettings:
+    """``settings`` with the housing's fixture tilted by ``tilt`` [rad] (after turning it by
+    ``yaw``) and the task's push axis on the tilted bore axis, tip first."""
+    scene = {**settings.robot.get("panda_scene", {}), "housing_tilt": tilt}
+    bore_axis = -housing_rotation(yaw, tilt)[:, 2]
+    return dataclasses.replace(settings, robot={**settings.robot, "panda_scene": scene},
+                               task=dataclasses.replace(task, push_axis=tuple(bore_axis.tolist())))

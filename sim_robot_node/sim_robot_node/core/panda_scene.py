@@ -28,7 +28,8 @@ import numpy as np
 import pybullet as p
 from qg_common.panda_description import Q_READY, panda_urdf_path
 from qg_common.params import config_from_dict
-from qg_common.rotations import axis_angle_matrix, rotation_log, tilt_from_down
+from qg_common.rotations import (axis_angle_matrix, housing_rotation, rotation_log,
+                                 tilt_from_down)
 from qg_common.types import N_START_POSES, GroundTruth, JointState
 
 __all__ = ["PandaSceneConfig", "PandaShaftScene"]
@@ -47,6 +48,7 @@ class PandaSceneConfig:
     hole_radius: float = 0.006
     bore_depth: float = 0.012                   # free slide before the inner ring
     bore_segments: int = 48
+    counterbore_segments: int = 32
     counterbore_depth: float = 0.006
     counterbore_extra_radius: float = 0.004
     plunger_mass: float = 2.0                   # [kg] heavy, so the friction motor stays Coulomb
@@ -61,6 +63,8 @@ class PandaSceneConfig:
     start_tilt: float = math.radians(15.0)      # [rad]
     start_clearance: float = 0.0005             # lowest rim point above the bearing face
     max_lateral_offset: float = 0.015           # episode ends if the tip leaves the axis by more
+    housing_tilt: float = 0.0                   # [rad] fixture tilt of the bore axis (about the
+                                                # housing's x axis, after its yaw)
 
     def __post_init__(self) -> None:
         if not 0.0 < self.time_step <= 0.01:
@@ -73,7 +77,8 @@ class PandaSceneConfig:
         if not 0.0 < self.grasp_height < self.shaft_length:
             raise ValueError(f"grasp_height {self.grasp_height} must be in (0, shaft_length)")
         positive = ("solver_iterations", "contact_breaking_threshold", "bore_depth",
-                    "bore_segments", "counterbore_depth", "counterbore_extra_radius",
+                    "bore_segments", "counterbore_segments", "counterbore_depth",
+                    "counterbore_extra_radius",
                     "plunger_mass", "plunger_travel", "plunger_friction", "success_tolerance",
                     "shaft_mass", "friction")
         for name in positive:
@@ -81,6 +86,9 @@ class PandaSceneConfig:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         if not 0.0 <= self.start_tilt < math.pi / 4:
             raise ValueError(f"start_tilt must be in [0, pi/4) rad, got {self.start_tilt}")
+        if not abs(self.housing_tilt) <= math.radians(20.0):
+            raise ValueError(f"housing_tilt must be within +-20 deg (the arm's reach around the "
+                             f"start poses), got {self.housing_tilt} rad")
 
     @classmethod
     def from_dict(cls, params: dict[str, Any]) -> PandaSceneConfig:
@@ -101,11 +109,6 @@ class PandaSceneConfig:
     def shaft_com(self) -> np.ndarray:
         """Shaft centre of mass in the tool frame (z towards the tip)."""
         return np.array([0.0, 0.0, self.shaft_length / 2 - (self.shaft_length - self.grasp_height)])
-
-
-def _rotation_z(angle: float) -> np.ndarray:
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def _fmt(values: Any) -> str:
@@ -141,8 +144,8 @@ class PandaShaftScene:
         self._setup_dynamics()
         self._tau = np.zeros(7)
         self._steps = 0
-        self._hole_axis_xy = np.asarray(c.hole_position[:2], float)
         self.housing_yaw = 0.0
+        self._housing = housing_rotation(0.0, c.housing_tilt)   # base frame <- housing frame
         self.reset(0)
 
     # --- construction -------------------------------------------------------------------
@@ -204,7 +207,8 @@ class PandaShaftScene:
 
         bore_thickness = c.counterbore_extra_radius + 0.002  # reaches under the counterbore wall
         ring(c.hole_radius, bore_thickness, -c.bore_depth, c.bore_depth, c.bore_segments)
-        ring(c.hole_radius + c.counterbore_extra_radius, 0.003, 0.0, c.counterbore_depth, 32)
+        ring(c.hole_radius + c.counterbore_extra_radius, 0.003, 0.0, c.counterbore_depth,
+             c.counterbore_segments)
         plunger = _fmt([2 * c.hole_radius + 0.004, 2 * c.hole_radius + 0.004, 0.01])
         # One element per line: pybullet's URDF parser fails on very long lines.
         urdf = f"""<?xml version="1.0"?>
@@ -259,15 +263,16 @@ class PandaShaftScene:
         if not 0 <= initial_pose < N_START_POSES:
             raise ValueError(f"initial_pose must be in 0..{N_START_POSES - 1}, got {initial_pose}")
         c = self.config
-        phi = initial_pose * 2.0 * math.pi / N_START_POSES + housing_yaw
+        phi = initial_pose * 2.0 * math.pi / N_START_POSES
         axis_up = np.array([math.sin(c.start_tilt) * math.cos(phi),
                             math.sin(c.start_tilt) * math.sin(phi), math.cos(c.start_tilt)])
-        tip = np.asarray(c.hole_position, float) + np.array(
-            [0.0, 0.0, c.start_clearance + c.shaft_radius * math.sin(c.start_tilt)])
+        tip = np.array([0.0, 0.0, c.start_clearance + c.shaft_radius * math.sin(c.start_tilt)])
         down = np.diag([1.0, -1.0, -1.0])  # tool z pointing down, hand x along base x
         tilt = axis_angle_matrix(np.array([-math.sin(phi), math.cos(phi), 0.0]), c.start_tilt)
-        rotation = tilt @ _rotation_z(housing_yaw) @ down
-        return tip + c.grasp_height * axis_up, rotation
+        # The start in the housing frame, then the housing's pose (yaw, fixture tilt).
+        housing = housing_rotation(housing_yaw, c.housing_tilt)
+        tip = np.asarray(c.hole_position, float) + housing @ tip
+        return tip + c.grasp_height * (housing @ axis_up), housing @ tilt @ down
 
     def reset(self, initial_pose: int, housing_yaw: float = 0.0) -> None:
         """Start an episode: housing rotated by ``housing_yaw``, arm at start ``initial_pose``.
@@ -276,11 +281,13 @@ class PandaShaftScene:
         controller. The plunger goes back to the top of its travel.
         """
         position, rotation = self.start_tool_pose(initial_pose, housing_yaw)
-        p.resetBasePositionAndOrientation(self.housing, self.config.hole_position,
-                                          p.getQuaternionFromEuler([0.0, 0.0, housing_yaw]),
-                                          physicsClientId=self.cid)
+        p.resetBasePositionAndOrientation(
+            self.housing, self.config.hole_position,
+            p.getQuaternionFromEuler([self.config.housing_tilt, 0.0, housing_yaw]),
+            physicsClientId=self.cid)
         p.resetJointState(self.housing, 0, 0.0, 0.0, physicsClientId=self.cid)
         self.housing_yaw = housing_yaw
+        self._housing = housing_rotation(housing_yaw, self.config.housing_tilt)
         q = self._inverse_kinematics(position, rotation)
         for j, qj in zip(self.arm, q):
             p.resetJointState(self.robot, j, qj, 0.0, physicsClientId=self.cid)
@@ -380,9 +387,9 @@ class PandaShaftScene:
         return np.concatenate([force, torque])
 
     def target_tool_position(self) -> np.ndarray:
-        """Tool position with the shaft vertical and fully inserted [m]."""
+        """Tool position with the shaft on the bore axis and fully inserted [m]."""
         c = self.config
-        return np.asarray(c.hole_position, float) + np.array(
+        return np.asarray(c.hole_position, float) + self._housing @ np.array(
             [0.0, 0.0, c.grasp_height - c.full_depth])
 
     def ground_truth(self) -> GroundTruth:
@@ -391,19 +398,21 @@ class PandaShaftScene:
         position, rotation = self.tool_pose()
         z_tool = rotation[:, 2]
         tip = position + c.grasp_height * z_tool
-        # The rotation turning the shaft upright, as angle-axis in the tool frame: its z part is
-        # zero, the insertion does not care about the rotation about the shaft.
-        tilt, axis = tilt_from_down(rotation)
-        error = rotation.T @ (axis * tilt)
+        # The rotation turning the shaft onto the bore axis, as angle-axis in the tool frame: its
+        # z part is zero, the insertion does not care about the rotation about the shaft.
+        housing = self._housing
+        tilt, axis = tilt_from_down(housing.T @ rotation)
+        error = rotation.T @ (housing @ axis * tilt)
+        tip_in_housing = housing.T @ (tip - np.asarray(c.hole_position, float))
         travel = self.plunger_travel()
         return GroundTruth(
             wrench=self.contact_wrench(),
-            insertion_depth=float(c.hole_position[2] - tip[2]),
+            insertion_depth=float(-tip_in_housing[2]),
             plunger_travel=travel,
             success=bool(travel >= c.plunger_travel - c.success_tolerance),
             position_error=float(np.linalg.norm(position - self.target_tool_position())),
             orientation_error=error[:2].copy(),
-            lateral_offset=float(np.linalg.norm(tip[:2] - self._hole_axis_xy)),
+            lateral_offset=float(math.hypot(tip_in_housing[0], tip_in_housing[1])),
             tilt=tilt)
 
     def close(self) -> None:

@@ -5,13 +5,22 @@ import math
 
 import numpy as np
 
-__all__ = ["axis_angle_matrix", "rotation_log", "tilt_from_down"]
+__all__ = ["axis_angle_matrix", "housing_rotation", "rotation_log", "tilt_from_down"]
 
 
 def axis_angle_matrix(axis: np.ndarray, angle: float) -> np.ndarray:
     """Rotation matrix about the unit vector ``axis`` by ``angle`` [rad] (Rodrigues)."""
     k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
     return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
+
+
+def housing_rotation(yaw: float, tilt: float = 0.0) -> np.ndarray:
+    """Orientation of the housing in the base frame: turned by ``yaw`` about the vertical, then
+    tilted by ``tilt`` about its own x axis [rad]. Its z axis points out of the bore, so the bore
+    axis, tip first, is ``-housing_rotation(yaw, tilt)[:, 2]``.
+    """
+    cy, sy, ct, st = math.cos(yaw), math.sin(yaw), math.cos(tilt), math.sin(tilt)
+    return np.array([[cy, -sy * ct, sy * st], [sy, cy * ct, -cy * st], [0.0, st, ct]])
 
 
 def rotation_log(rotation: np.ndarray) -> np.ndarray:
