@@ -11,10 +11,14 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
 from qg_common import topics
-from qg_common.node_runtime import node_params, run_nodes
+from qg_common.node_parameters import declare_parameters, on_parameter_change
+from qg_common.node_runtime import run_nodes
+from qg_common.params import POSITIVE, ParameterSection, config_from_dict
 from qg_common.topics import LATCHED, RELIABLE_DEEP
 from qg_interfaces.msg import (ActorParameters, AtRest, EpisodeStatus, LearnerDiagnostics,
                                Transition, WrenchSetpoint)
@@ -43,18 +47,62 @@ class EpisodeAborted(Exception):
     """The episode cannot go on (stop request, robot gone, reset refused)."""
 
 
+@dataclass(frozen=True)
+class ExecutorConfig:
+    """How long the executor waits for the other nodes (``config/executor.yaml``, top level).
+
+    :param step_timeout: [s] wall time to wait for the at-rest event of one step.
+    :param reset_timeout: [s] wall time to wait for ``sim/reset``.
+    :param keepalive_period: [s] re-send the running setpoint this often; 0 = never (a lockstep
+        robot). A realtime robot needs 0.005: its watchdog holds the pose after 10 ms.
+    :param learner_timeout: [s] no word from the learner this long -> degraded (zero residual).
+    """
+    step_timeout: float = 10.0
+    reset_timeout: float = 30.0
+    keepalive_period: float = 0.0
+    learner_timeout: float = 2.0
+
+    def __post_init__(self) -> None:
+        for name in ("step_timeout", "reset_timeout", "learner_timeout"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"{name} must be > 0 s, got {getattr(self, name)}")
+        if not self.keepalive_period >= 0.0:
+            raise ValueError(f"keepalive_period must be >= 0 s, got {self.keepalive_period}")
+
+    @classmethod
+    def from_dict(cls, params: dict[str, Any]) -> ExecutorConfig:
+        """From the executor's parameters (its top-level ones; the sections are skipped)."""
+        own = {f.name for f in fields(cls)}
+        return config_from_dict(cls, {k: v for k, v in params.items() if k in own})
+
+
+#: The executor's parameters. Changeable while it runs (``ros2 param set``): the timeouts, the
+#: exploration noise and the default reward; they apply from the next step or episode.
+EXECUTOR_SECTIONS = (
+    ParameterSection("", ExecutorConfig, ranges={
+        "step_timeout": (0.0, 3600.0), "reset_timeout": (0.0, 3600.0),
+        "keepalive_period": (0.0, 1.0), "learner_timeout": (0.0, 3600.0)},
+        runtime=frozenset(f.name for f in fields(ExecutorConfig))),
+    ParameterSection("noise", NoiseConfig, ranges={
+        "sigma": (0.0, 10.0), "theta": (0.0, 100.0), "dt": POSITIVE},
+        runtime=frozenset(f.name for f in fields(NoiseConfig))),
+    ParameterSection("task", TaskConfig, ranges={
+        "max_residual_torque": (0.0, 3.0), "force_range": POSITIVE, "torque_range": POSITIVE,
+        "sigma_position": POSITIVE, "sigma_orientation": POSITIVE,
+        "max_lateral_offset": POSITIVE, "train_max_steps": (1, 1000000),
+        "test_max_steps": (1, 1000000), "tilt_range": POSITIVE},
+        runtime=frozenset({"reward"})),
+)
+
+
 class ExecutorNode(Node):
     """Episodes by service call; one episode at a time, run on its own thread."""
 
     def __init__(self) -> None:
-        super().__init__("executor", automatically_declare_parameters_from_overrides=True)
-        p = node_params(self)
-        self.task = ResidualTask(TaskConfig.from_dict(p.get("task", {})))
-        self.noise_config = NoiseConfig.from_dict(p.get("noise", {}))
-        self.step_timeout = float(p.get("step_timeout", 10.0))
-        self.reset_timeout = float(p.get("reset_timeout", 30.0))
-        self.keepalive_period = float(p.get("keepalive_period", 0.0))
-        self.learner_timeout = float(p.get("learner_timeout", 2.0))
+        super().__init__("executor")
+        self._configure(declare_parameters(self, EXECUTOR_SECTIONS,
+                                           (("qg_learning_node", "executor.yaml"),)))
+        on_parameter_change(self, self._configure)
 
         self.status_pub = self.create_publisher(EpisodeStatus, topics.EPISODE_STATUS, LATCHED)
         self.transition_pub = self.create_publisher(Transition, topics.TRANSITIONS, RELIABLE_DEEP)
@@ -90,6 +138,14 @@ class ExecutorNode(Node):
         self.stop_requested = threading.Event()
         self.worker: threading.Thread | None = None
 
+    def _configure(self, params: dict[str, Any]) -> None:
+        """Build the task, noise and timing from the parameters (all validated before any is
+        applied); at start and on ``ros2 param set``. A running episode keeps its task."""
+        task = ResidualTask(TaskConfig.from_dict(params["task"]))
+        noise = NoiseConfig.from_dict(params["noise"])
+        config = ExecutorConfig.from_dict(params)
+        self.task, self.noise_config, self.config = task, noise, config
+
     # --- inputs ---------------------------------------------------------------------------
     def _on_actor(self, msg: ActorParameters) -> None:
         try:
@@ -123,7 +179,7 @@ class ExecutorNode(Node):
             time.sleep(0.01)
 
     def learner_alive(self) -> bool:
-        return time.monotonic() - self.last_learner_time < self.learner_timeout
+        return time.monotonic() - self.last_learner_time < self.config.learner_timeout
 
     # --- services -------------------------------------------------------------------------
     def _on_start(self, request: StartEpisode.Request,
@@ -167,7 +223,7 @@ class ExecutorNode(Node):
             return response
         self.stop_requested.set()
         self.at_rest_event.set()
-        self.worker.join(timeout=self.step_timeout + 1.0)
+        self.worker.join(timeout=self.config.step_timeout + 1.0)
         response.success = True
         response.episode_id = self.episode.episode_id
         response.message = f"aborted: {request.reason}" if request.reason else "aborted"
@@ -208,10 +264,11 @@ class ExecutorNode(Node):
     def _reset(self, episode: Episode) -> AtRest:
         request = ResetSim.Request(initial_pose=episode.initial_pose, housing_yaw=0.0)
         future = self.reset_client.call_async(request)
-        deadline = time.monotonic() + self.reset_timeout
+        deadline = time.monotonic() + self.config.reset_timeout
         while not future.done():
             if time.monotonic() > deadline:
-                raise EpisodeAborted(f"/sim/reset did not answer within {self.reset_timeout} s")
+                raise EpisodeAborted(
+                    f"/sim/reset did not answer within {self.config.reset_timeout} s")
             if self.stop_requested.wait(0.002):
                 raise EpisodeAborted("stop requested during reset")
         result = future.result()
@@ -231,8 +288,8 @@ class ExecutorNode(Node):
         msg = WrenchSetpoint(seq=self.seq, reference_from_current=True)
         msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = (float(v) for v in wrench[:3])
         msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z = (float(v) for v in wrench[3:])
-        deadline = time.monotonic() + self.step_timeout
-        resend = self.keepalive_period > 0.0
+        deadline = time.monotonic() + self.config.step_timeout
+        resend = self.config.keepalive_period > 0.0
 
         def send() -> None:
             msg.header.stamp = self.get_clock().now().to_msg()
@@ -240,7 +297,7 @@ class ExecutorNode(Node):
 
         send()
         while True:
-            self.at_rest_event.wait(self.keepalive_period if resend else 0.05)
+            self.at_rest_event.wait(self.config.keepalive_period if resend else 0.05)
             with self.lock:
                 self.at_rest_event.clear()
                 event = self.at_rest.pop(self.seq, None)
@@ -250,7 +307,7 @@ class ExecutorNode(Node):
             if self.stop_requested.is_set():
                 raise EpisodeAborted("stop requested")
             if time.monotonic() > deadline:
-                raise EpisodeAborted(f"no at-rest event within {self.step_timeout} s "
+                raise EpisodeAborted(f"no at-rest event within {self.config.step_timeout} s "
                                      "(is the robot process up?)")
             if resend:
                 send()
@@ -280,7 +337,7 @@ class ExecutorNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_nodes([ExecutorNode], ["executor.yaml"], args)
+    return run_nodes([ExecutorNode], args)
 
 
 if __name__ == "__main__":

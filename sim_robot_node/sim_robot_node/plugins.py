@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 from qg_common.panda_description import JOINT_NAMES
+from qg_common.params import POSITIVE, ParameterSection
 from qg_common.types import GroundTruth, JointState
 from robot_bridge_node.core.hardware_interface import (Robot, RobotDescription, RobotPlugin,
                                                        ToolDescription)
@@ -68,6 +69,13 @@ def _create_panda(params: dict[str, Any]) -> Robot:
     return Robot(hardware=sim, simulation=sim, description=_describe_panda(params))
 
 
+#: The Panda scene's parameters: every length, mass and friction positive.
+_PANDA_SCENE = ParameterSection("panda_scene", PandaSceneConfig, ranges={
+    **{name: POSITIVE for name, kind in PandaSceneConfig.__annotations__.items()
+       if kind == "float"},
+    "time_step": (0.0, 0.01), "solver_iterations": (1, 10000), "bore_segments": (8, 10000)})
+
 #: ``robot:=sim_panda``: the Panda pressing a shaft into a bearing (config/panda_scene.yaml).
-SIM_PANDA = RobotPlugin(interface="torque", config_files=("panda_scene.yaml",),
-                        describe=_describe_panda, create=_create_panda)
+SIM_PANDA = RobotPlugin(interface="torque", config_files=(("sim_robot_node", "panda_scene.yaml"),),
+                        parameters=(_PANDA_SCENE,), describe=_describe_panda,
+                        create=_create_panda)

@@ -24,7 +24,7 @@ from typing import IO, Any
 
 import yaml
 
-from qg_learning_node.cli.ros_env import install_dir
+from ament_index_python.packages import PackageNotFoundError, get_package_prefix
 
 __all__ = ["ProcessSpec", "Launcher", "load_stack_config", "StackConfigError"]
 
@@ -55,7 +55,14 @@ class ProcessSpec:
     args: tuple[str, ...] = ()
 
     def command(self) -> list[str]:
-        exe = install_dir() / self.package / "lib" / self.package / self.executable
+        """What ``ros2 run`` runs: ``lib/<package>/<executable>`` under the package's prefix in
+        the ament index (the launcher's environment is the stack's, ``ros_env.stack_env``)."""
+        try:
+            prefix = Path(get_package_prefix(self.package))
+        except (PackageNotFoundError, LookupError, EnvironmentError):
+            raise StackConfigError(f"package {self.package!r} is not installed: run "
+                                   "scripts/setup.sh") from None
+        exe = prefix / "lib" / self.package / self.executable
         if not exe.is_file():
             raise StackConfigError(f"{self.package}/{self.executable} is not built ({exe} missing): "
                                    "run scripts/setup.sh")
