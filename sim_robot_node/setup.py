@@ -31,6 +31,7 @@ setup(
         # The robots this package simulates, loaded by name by robot_bridge_node's robot process.
         'robot_bridge_node.robots': [
             'sim_panda = sim_robot_node.plugins:SIM_PANDA',
+            'sim_nextage = sim_robot_node.plugins:SIM_NEXTAGE',
         ],
         # Environments of the in-process experiments (qg_learning_node.environments).
         'qg_learning_node.environments': [

@@ -14,12 +14,13 @@ import time
 from dataclasses import dataclass, fields
 from typing import Any
 
-import numpy as np
 from qg_common import topics
 from qg_common.node_parameters import declare_parameters, on_parameter_change
 from qg_common.node_runtime import run_nodes
 from qg_common.params import POSITIVE, ParameterSection, config_from_dict
+from qg_common.conversions import setpoint_msg
 from qg_common.topics import LATCHED, RELIABLE_DEEP
+from qg_common.types import WrenchSetpoint as Setpoint
 from qg_interfaces.msg import (ActorParameters, AtRest, EpisodeStatus, LearnerDiagnostics,
                                Transition, WrenchSetpoint)
 from qg_interfaces.srv import ResetSim, StartEpisode, StopEpisode
@@ -31,7 +32,8 @@ from qg_learning_node.conversions import (actor_tensors_from_msg, observation_fr
 from qg_learning_node.core.episode import Episode
 from qg_learning_node.core.episode_request import N_POSES, EpisodeRequest
 from qg_learning_node.core.noise import ActionNoise, NoiseConfig
-from qg_learning_node.core.residual_task import ACTION_DIM, ResidualTask, TaskConfig
+from qg_learning_node.core.peg_task import PegTask, PegTaskConfig
+from qg_learning_node.core.residual_task import ResidualTask, TaskConfig
 from qg_learning_node.ddpg import ActorMLP
 
 
@@ -76,6 +78,16 @@ class ExecutorConfig:
         return config_from_dict(cls, {k: v for k, v in params.items() if k in own})
 
 
+@dataclass(frozen=True)
+class TaskChoice:
+    """Which task the executor runs.
+
+    :param kind: ``residual`` (the Panda's residual force policy, section ``task``) or ``peg``
+        (the Nextage's peg-in-hole by position offsets, section ``peg``).
+    """
+    kind: str = "residual"
+
+
 #: The executor's parameters. Changeable while it runs (``ros2 param set``): the timeouts, the
 #: exploration noise and the default reward; they apply from the next step or episode.
 EXECUTOR_SECTIONS = (
@@ -86,13 +98,24 @@ EXECUTOR_SECTIONS = (
     ParameterSection("noise", NoiseConfig, ranges={
         "sigma": (0.0, 10.0), "theta": (0.0, 100.0), "dt": POSITIVE},
         runtime=frozenset(f.name for f in fields(NoiseConfig))),
-    ParameterSection("task", TaskConfig, ranges={
+)
+
+#: Each task kind's section and how its task is built from the section's values.
+TASKS = {
+    "residual": (ParameterSection("task", TaskConfig, ranges={
         "max_residual_torque": (0.0, 3.0), "force_range": POSITIVE, "torque_range": POSITIVE,
         "sigma_position": POSITIVE, "sigma_orientation": POSITIVE,
         "max_lateral_offset": POSITIVE, "train_max_steps": (1, 1000000),
         "test_max_steps": (1, 1000000), "tilt_range": POSITIVE},
         runtime=frozenset({"reward"})),
-)
+        lambda values: ResidualTask(TaskConfig.from_dict(values))),
+    "peg": (ParameterSection("peg", PegTaskConfig, ranges={
+        "action_scale": (0.0, 0.1), "reward_length": POSITIVE, "workspace_side": POSITIVE,
+        "tool_to_tip": POSITIVE, "train_max_steps": (1, 1000000),
+        "test_max_steps": (1, 1000000)},
+        runtime=frozenset({"reward"})),
+        lambda values: PegTask(PegTaskConfig.from_dict(values))),
+}
 
 
 class ExecutorNode(Node):
@@ -100,7 +123,12 @@ class ExecutorNode(Node):
 
     def __init__(self) -> None:
         super().__init__("executor")
-        self._configure(declare_parameters(self, EXECUTOR_SECTIONS,
+        self.task_kind = declare_parameters(self, [ParameterSection("task", TaskChoice)])[
+            "task"]["kind"]
+        if self.task_kind not in TASKS:
+            raise ValueError(f"task.kind must be one of {sorted(TASKS)}, got {self.task_kind!r}")
+        self.task_section, self.make_task = TASKS[self.task_kind]
+        self._configure(declare_parameters(self, [*EXECUTOR_SECTIONS, self.task_section],
                                            (("qg_learning_node", "executor.yaml"),)))
         on_parameter_change(self, self._configure)
 
@@ -141,7 +169,9 @@ class ExecutorNode(Node):
     def _configure(self, params: dict[str, Any]) -> None:
         """Build the task, noise and timing from the parameters (all validated before any is
         applied); at start and on ``ros2 param set``. A running episode keeps its task."""
-        task = ResidualTask(TaskConfig.from_dict(params["task"]))
+        values = dict(params[self.task_section.prefix])
+        values.pop("kind", None)          # task.kind chose the section (residual: the same)
+        task = self.make_task(values)
         noise = NoiseConfig.from_dict(params["noise"])
         config = ExecutorConfig.from_dict(params)
         self.task, self.noise_config, self.config = task, noise, config
@@ -156,8 +186,8 @@ class ExecutorNode(Node):
         if actor.input_dim != self.task.state_dim:
             self.get_logger().error(
                 f"ignoring actor v{msg.version}: it takes {actor.input_dim}-D states, the "
-                f"{self.task.config.observation!r} observation is {self.task.state_dim}-D "
-                "(set the learner's `observation` to the executor's `task.observation`)")
+                f"{self.task_kind} task's are {self.task.state_dim}-D (set the learner's "
+                "`observation` to the executor's `task.observation`, or `peg`)")
             return
         with self.lock:
             self.actor, self.actor_version = actor, int(msg.version)
@@ -207,7 +237,7 @@ class ExecutorNode(Node):
         episode_id = f"{time.strftime('%Y%m%d_%H%M%S')}_{index:04d}_{req.mode}_p{pose}"
         seed = req.seed if req.seed != 0 else 1000 + index
         self.episode = Episode(episode_id, req.mode, pose, reward, self.task,
-                               ActionNoise(self.noise_config, ACTION_DIM, seed))
+                               ActionNoise(self.noise_config, self.task.action_dim, seed))
         self.stop_requested.clear()
         self._set_state("resetting", f"reset to pose {pose}")
         self.worker = threading.Thread(target=self._run_episode, args=(self.episode,),
@@ -232,7 +262,8 @@ class ExecutorNode(Node):
     # --- the episode ----------------------------------------------------------------------
     def _run_episode(self, episode: Episode) -> None:
         try:
-            episode.begin(observation_from_msg(self._reset(episode)))
+            observation = observation_from_msg(self._reset(episode))
+            episode.begin(observation)
             self._await_first_learner_contact(LEARNER_DISCOVERY_GRACE)
             self._set_state("running")
             while not episode.done:
@@ -246,8 +277,9 @@ class ExecutorNode(Node):
                 with self.lock:
                     actor = self.actor if alive else None
                 action = episode.choose_action(actor)
-                at_rest = self._execute(self.task.wrench(action))
-                record = episode.observe(action, observation_from_msg(at_rest))
+                at_rest = self._execute(episode.task.command(action, observation))
+                observation = observation_from_msg(at_rest)
+                record = episode.observe(action, observation)
                 self.transition_pub.publish(transition_to_msg(record))
                 self._publish_status()
             self._set_state("done", episode.end_reason)
@@ -276,7 +308,7 @@ class ExecutorNode(Node):
             raise EpisodeAborted(f"reset refused: {getattr(result, 'message', 'no answer')}")
         return result.observation
 
-    def _execute(self, wrench: np.ndarray) -> AtRest:
+    def _execute(self, setpoint: Setpoint) -> AtRest:
         """Send one setpoint and wait for its at-rest event.
 
         With ``keepalive_period > 0`` the setpoint is re-sent that often while waiting: a
@@ -285,17 +317,9 @@ class ExecutorNode(Node):
         compete with the 1 kHz loop for the GIL (0.8 instead of 19 RL steps per second at 5 ms).
         """
         self.seq += 1
-        msg = WrenchSetpoint(seq=self.seq, reference_from_current=True)
-        msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = (float(v) for v in wrench[:3])
-        msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z = (float(v) for v in wrench[3:])
         deadline = time.monotonic() + self.config.step_timeout
         resend = self.config.keepalive_period > 0.0
-
-        def send() -> None:
-            msg.header.stamp = self.get_clock().now().to_msg()
-            self.setpoint_pub.publish(msg)
-
-        send()
+        self._send(setpoint)
         while True:
             self.at_rest_event.wait(self.config.keepalive_period if resend else 0.05)
             with self.lock:
@@ -310,14 +334,18 @@ class ExecutorNode(Node):
                 raise EpisodeAborted(f"no at-rest event within {self.config.step_timeout} s "
                                      "(is the robot process up?)")
             if resend:
-                send()
+                self._send(setpoint)
+
+    def _send(self, setpoint: Setpoint) -> None:
+        """Publish ``setpoint`` as the command ``seq`` (stamped now)."""
+        self.setpoint_pub.publish(setpoint_msg(self.seq, setpoint,
+                                               self.get_clock().now().to_msg()))
 
     def _send_zero_residual(self) -> None:
-        """Leave the robot pushing with the base force only, from where it is."""
+        """Leave the robot safe from where it is: the task's hold command (the Panda pushes
+        with the base force only, the Nextage stays)."""
         self.seq += 1
-        msg = WrenchSetpoint(seq=self.seq, reference_from_current=True)
-        msg.wrench.force.z = float(self.task.config.base_force)
-        self.setpoint_pub.publish(msg)
+        self._send(self.task.hold())
 
     # --- status ---------------------------------------------------------------------------
     def _set_state(self, state: str, message: str = "") -> None:

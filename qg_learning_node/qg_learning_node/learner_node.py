@@ -28,6 +28,7 @@ from rclpy.node import Node
 from qg_learning_node.conversions import actor_to_msg
 from qg_learning_node.core.episode import TransitionRecord
 from qg_learning_node.core.learner_params import learner_config_from_params
+from qg_learning_node.core.peg_task import PEG_ACTION_DIM, PEG_STATE_DIM
 from qg_learning_node.core.residual_task import ACTION_DIM, state_dim
 from qg_learning_node.learner_core import LearnerConfig, LearnerCore
 
@@ -36,11 +37,19 @@ CHECKPOINT_NAME = "learner.pt"
 CHECKPOINT_GRACE = 3.0
 
 
+def task_dims(observation: str) -> tuple[int, int]:
+    """(state, action) sizes of the executor's task, from the learner's ``observation``."""
+    if observation == "peg":
+        return PEG_STATE_DIM, PEG_ACTION_DIM
+    return state_dim(observation), ACTION_DIM
+
+
 @dataclass(frozen=True)
 class LearnerNodeConfig:
     """The learner node's own parameters (``config/learner.yaml``, top level).
 
-    :param observation: the executor's ``task.observation``; sets the networks' input size.
+    :param observation: the executor's ``task.observation`` (``thesis``, ``tilt``), or ``peg``
+        for the peg task; sets the networks' input and output sizes.
     :param checkpoint_dir: folder of ``learner.pt``; "" = ``<runs>/checkpoints``.
     :param resume: restore networks, optimizers, graph and replay at start.
     """
@@ -76,7 +85,7 @@ class LearnerNode(Node):
             self.get_logger().info(f"resumed from {self.checkpoint}: {self.core.steps} "
                                    f"transitions, actor v{self.core.actor_version}")
         else:
-            self.core = LearnerCore(config, state_dim(p["observation"]), ACTION_DIM)
+            self.core = LearnerCore(config, *task_dims(p["observation"]))
         self.lock = threading.Lock()
         self.received: dict[str, int] = {}        # transitions per episode id
         self.pending_checkpoint: dict[str, tuple[int, float]] = {}  # id -> (final steps, ended at)

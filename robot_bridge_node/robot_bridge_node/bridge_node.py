@@ -227,7 +227,7 @@ class LoopRunner:
     def _take_setpoint(self, msg: WrenchSetpointMsg) -> None:
         loop = self.loop
         if msg.seq == self._seq:
-            loop.safety.feed_watchdog(loop.time)
+            loop.feed_watchdog()
             return
         try:
             loop.command(setpoint_from_msg(msg))

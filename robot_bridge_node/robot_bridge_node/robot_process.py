@@ -25,6 +25,7 @@ from qg_common.node_runtime import LoopThread, RealtimePacer, run_nodes
 from rclpy.node import Node
 
 from robot_bridge_node.bridge_node import BridgeNode, LoopRunner
+from robot_bridge_node.core.position_loop import build_position_loop
 from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from robot_bridge_node.estimator_node import WrenchEstimatorNode, build_ekf
 from robot_bridge_node.recorder_node import RecorderNode
@@ -39,6 +40,9 @@ REALTIME_SWITCH_INTERVAL = 1e-4
 
 class RobotProcess:
     """One ``RobotLoop`` (robot plugin, controller, safety, rest detector, EKF) and its nodes.
+
+    A torque robot's loop runs the hybrid force/impedance controller and the EKF; a position
+    robot's (``position_loop.PositionLoop``) the task-space IK and reads the wrist sensor.
 
     The loop is built from the nodes' parameters: the robot plugin the sim node loaded (its
     ``robot`` parameter) from the sim node's sections. ``runner.loop_observers`` is where a per-tick
@@ -57,7 +61,8 @@ class RobotProcess:
                          "loop": {**bridge.params.get("loop", {}), "realtime": config.realtime}}
         self.loop: RobotLoop = build_loop(
             robot, bridge_params,
-            estimator=lambda robot, model: build_ekf(estimator.params, model))
+            estimator=lambda robot, model: build_ekf(estimator.params, model)) \
+            if sim.plugin.interface == "torque" else build_position_loop(robot, bridge_params)
         #: Realtime: holds the wall-clock tick period (``missed`` counts dropped ticks).
         self.pacer = RealtimePacer(self.loop.config.dt) if config.realtime else None
         pace = None

@@ -79,6 +79,8 @@ def test_robots_are_plugins_found_by_name():
     from robot_bridge_node.core.hardware_interface import robot_names, robot_plugin
     assert "sim_panda" in robot_names()
     assert robot_plugin("sim_panda").interface == "torque"
+    assert "sim_nextage" in robot_names()
+    assert robot_plugin("sim_nextage").interface == "position"
     with pytest.raises(ValueError, match="no robot plugin named 'franka_typo'"):
         robot_plugin("franka_typo")
 

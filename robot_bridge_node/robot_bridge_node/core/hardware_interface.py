@@ -23,7 +23,8 @@ import numpy as np
 from qg_common.params import ParameterSection
 from qg_common.types import GroundTruth, JointState
 
-__all__ = ["TorqueInterface", "PositionInterface", "SimulationInterface", "ToolDescription",
+__all__ = ["TorqueInterface", "PositionInterface", "ForceTorqueSensor", "SimulationInterface",
+           "ToolDescription",
            "RobotDescription", "Robot", "RobotPlugin", "RobotChoice", "ROBOT_SECTION",
            "ROBOT_PLUGIN_GROUP", "robot_names", "robot_plugin", "load_robot"]
 
@@ -54,6 +55,14 @@ class PositionInterface(Protocol):
 
     def write(self, q: np.ndarray) -> None:
         """Hold joint position targets [rad] for one control period."""
+        ...
+
+
+class ForceTorqueSensor(Protocol):
+    """A wrist force-torque sensor (the Nextage's): the wrench it measures, tared."""
+
+    def read_wrench(self) -> np.ndarray:
+        """(6,) ``(Fx, Fy, Fz, Tx, Ty, Tz)`` [N, Nm] in the sensor frame (z along the tool)."""
         ...
 
 
@@ -109,10 +118,13 @@ class Robot:
 
     :param hardware: the interface the loop reads and writes every period.
     :param simulation: the simulation's extra powers; ``None`` on real hardware.
+    :param wrist_sensor: a force-torque sensor at the wrist, if the robot has one; the loop's
+        wrench then comes from it instead of an estimator.
     """
     hardware: TorqueInterface | PositionInterface
     simulation: SimulationInterface | None
     description: RobotDescription
+    wrist_sensor: ForceTorqueSensor | None = None
 
 
 @dataclass(frozen=True)
