@@ -20,7 +20,7 @@ import numpy as np
 from robot_bridge_node.core.hardware_interface import load_robot
 from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from qg_common.types import N_START_POSES, PoseReference, WrenchSetpoint
-from qg_common.params import config_dir, load_ros_params
+from qg_common.params import config_file, load_ros_params
 
 PUSH = -15.0
 UPRIGHT = np.diag([1.0, -1.0, -1.0])
@@ -115,9 +115,9 @@ def main() -> None:
     args = parser.parse_args()
     wall = time.perf_counter()
     # the stack's own numbers (config/panda_scene.yaml, config/bridge.yaml: rest.max_time & co)
-    scene = load_ros_params(config_dir() / "panda_scene.yaml")["panda_scene"]
+    scene = load_ros_params(config_file("panda_scene.yaml"))["panda_scene"]
     loop = build_loop(load_robot("sim_panda", {"panda_scene": scene}),
-                      load_ros_params(config_dir() / "bridge.yaml"))
+                      load_ros_params(config_file("bridge.yaml")))
     out: dict = {"rest_max_time": loop.rest.config.max_time}
     if args.force_only:
         out.update(force_depth(loop))

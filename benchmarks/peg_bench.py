@@ -22,7 +22,7 @@ for package in ("sim_robot_node", "robot_bridge_node"):
 from robot_bridge_node.core.position_control import (  # noqa: E402
     PositionControlConfig, TaskSpacePositionController)
 from sim_robot_node.core.nextage_scene import nextage_urdf_path  # noqa: E402
-from qg_common.params import config_dir, load_ros_params  # noqa: E402
+from qg_common.params import config_file, load_ros_params  # noqa: E402
 from sim_robot_node.core.peg_env import PegEnv, PegEnvConfig, toward_goal  # noqa: E402
 
 
@@ -57,8 +57,8 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=10, help="free-peg random episodes")
     parser.add_argument("--arm-steps", type=int, default=100, help="random steps with the arm")
     args = parser.parse_args()
-    env_params = load_ros_params(config_dir() / "peg_env.yaml")
-    nextage = load_ros_params(config_dir() / "nextage.yaml")
+    env_params = load_ros_params(config_file("peg_env.yaml"))
+    nextage = load_ros_params(config_file("nextage.yaml"))
     results = {}
 
     free = PegEnv(PegEnvConfig.from_dict(env_params))

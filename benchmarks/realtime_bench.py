@@ -35,8 +35,7 @@ from qg_common.conversions import time_msg
 from qg_common.types import WrenchSetpoint
 from robot_bridge_node.bridge_node import BridgeNode
 from robot_bridge_node.estimator_node import WrenchEstimatorNode
-from robot_bridge_node.robot_process import CONFIG_FILES, RobotProcess
-from qg_common.node_runtime import node_args
+from robot_bridge_node.robot_process import RobotProcess
 from robot_bridge_node.simulation_node import SimulationNode
 
 ON_TIME = 1.5e-3   # [s] largest tick period counted as on time
@@ -44,11 +43,12 @@ ON_TIME = 1.5e-3   # [s] largest tick period counted as on time
 
 def start_process(mode: str, publish_rate: float, priority: int = 0
                   ) -> tuple[RobotProcess, list[Node]]:
-    rclpy.init(args=node_args(CONFIG_FILES, [
+    rclpy.init(args=[
         "realtime_bench", "--ros-args", "-p", f"sim.clock_mode:={mode}",
         "-p", f"sim.publish_rate:={float(publish_rate)}",
-        "-p", f"sim.realtime_priority:={priority}"]))
-    nodes = [SimulationNode(), BridgeNode(), WrenchEstimatorNode()]
+        "-p", f"sim.realtime_priority:={priority}"])
+    sim = SimulationNode()
+    nodes = [sim, BridgeNode(sim.plugin), WrenchEstimatorNode(sim.plugin)]
     return RobotProcess(*nodes), nodes
 
 

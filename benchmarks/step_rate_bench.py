@@ -43,11 +43,11 @@ def through_ros(episodes: int) -> dict:
     from qg_learning_node.cli.demo import (DemoSettings, run_episode_by_service, start_stack,
                                            wait_for_stack)
     from qg_learning_node.cli.ros_client import CliNode
-    from qg_learning_node.cli.ros_env import repo_root
+    from qg_common.params import config_file
 
     settings = DemoSettings(train_max_steps=CAP, critic_lr=CRITIC_LR, iterations=ITERATIONS)
     launcher, env = start_stack(Path(tempfile.mkdtemp(prefix="step_rate_")), settings,
-                                repo_root() / "config" / "stack.yaml",
+                                config_file("stack.yaml"),
                                 os.environ.get("ROS_DOMAIN_ID", "77"))
     events: list[AtRest] = []
     try:

@@ -35,7 +35,7 @@ from ekf_harness import (DT, PandaTorqueHarness, Trace, descend_reference, rmse,
 
 from robot_bridge_node.core.panda_model import Q_READY, PandaModel  # noqa: E402
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig  # noqa: E402
-from qg_common.params import config_dir, load_ros_params  # noqa: E402
+from qg_common.params import config_file, load_ros_params  # noqa: E402
 
 W = np.array([5.0, -3.0, -15.0, 0.5, -0.3, 0.2])
 TOLERANCE = (0.3, 0.03)          # [N], [Nm]: the accuracy target of the issue
@@ -115,7 +115,7 @@ def run_all(harness: PandaTorqueHarness, config: WrenchEKFConfig, exact: bool
 
 
 def main() -> None:
-    params = load_ros_params(config_dir() / "wrench_estimator.yaml")
+    params = load_ros_params(config_file("wrench_estimator.yaml"))
     config = WrenchEKFConfig.from_dict(params["ekf"])
     model = PandaModel()
     result: dict[str, object] = {"config": params["ekf"], "dt": DT}

@@ -1,6 +1,13 @@
+import os
+
 from setuptools import find_packages, setup
 
 package_name = 'qg_learning_node'
+# The repository's config/ is the one source of the numbers; this package installs its
+# nodes' files from there to share/qg_learning_node/config (symlinked by --symlink-install).
+config_files = [os.path.join('..', 'config', name) for name in (
+    'executor.yaml', 'learner.yaml', 'experiments.yaml', 'stack.yaml',
+    'executor_nextage.yaml', 'learner_nextage.yaml', 'stack_nextage.yaml')]
 
 setup(
     name=package_name,
@@ -9,6 +16,7 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', config_files),
     ],
     include_package_data=True,
     install_requires=['setuptools'],

@@ -1,6 +1,12 @@
+import os
+
 from setuptools import find_packages, setup
 
 package_name = 'robot_bridge_node'
+# The repository's config/ is the one source of the numbers; this package installs its
+# nodes' files from there to share/robot_bridge_node/config (symlinked by --symlink-install).
+config_files = [os.path.join('..', 'config', name) for name in (
+    'bridge.yaml', 'wrench_estimator.yaml', 'recorder.yaml', 'sim.yaml')]
 
 setup(
     name=package_name,
@@ -9,6 +15,7 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', config_files),
     ],
     include_package_data=True,
     install_requires=['setuptools'],

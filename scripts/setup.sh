@@ -66,11 +66,14 @@ if [[ "$(cat "$STAMPS/egg_info" 2>/dev/null)" != "$meta_hash" ]]; then
   done
   echo "$meta_hash" > "$STAMPS/egg_info"
 fi
-# `qgl` is the console script qg_learning_node declares; this is the wrapper pip would write.
+# `qgl` is the console script qg_learning_node declares; this is the wrapper pip would write,
+# plus where the workspace is (a sourced shell's ament index says it too).
 cat > "$VENV/bin/qgl" <<EOF
 #!$PY
+import os
 import sys
 from importlib.metadata import entry_points
+os.environ.setdefault("QG_ROS_INSTALL", "$ROOT/ros_ws/install")
 (qgl,) = entry_points(group="console_scripts", name="qgl")
 sys.exit(qgl.load()())
 EOF

@@ -5,6 +5,7 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 bash scripts/setup.sh
+export QG_ROS_INSTALL="$ROOT/ros_ws/install"    # the workspace the Python side runs from
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_LOG_DIR="${ROS_LOG_DIR:-$ROOT/runs/ros_log}"
 eval "$(.venv/bin/python -m qg_learning_node.cli.ros_env)"

@@ -1,6 +1,12 @@
+import os
+
 from setuptools import find_packages, setup
 
 package_name = 'sim_robot_node'
+# The repository's config/ is the one source of the numbers; this package installs its
+# nodes' files from there to share/sim_robot_node/config (symlinked by --symlink-install).
+config_files = [os.path.join('..', 'config', name) for name in (
+    'panda_scene.yaml', 'nextage.yaml', 'peg_env.yaml')]
 
 setup(
     name=package_name,
@@ -9,6 +15,7 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', config_files),
     ],
     package_data={package_name: ['assets/**/*', 'assets/*/*']},
     install_requires=['setuptools'],
@@ -24,6 +31,7 @@ setup(
         # The robots this package simulates, loaded by name by robot_bridge_node's robot process.
         'robot_bridge_node.robots': [
             'sim_panda = sim_robot_node.plugins:SIM_PANDA',
+            'sim_nextage = sim_robot_node.plugins:SIM_NEXTAGE',
         ],
         # Environments of the in-process experiments (qg_learning_node.environments).
         'qg_learning_node.environments': [

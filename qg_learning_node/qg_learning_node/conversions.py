@@ -13,13 +13,15 @@ __all__ = ["observation_from_msg", "transition_to_msg",
 
 
 def observation_from_msg(msg: AtRest) -> Observation:
-    w, gt, q = msg.wrench_estimate, msg.ground_truth, msg.ee_pose.orientation
+    w, gt, q, p = (msg.wrench_estimate, msg.ground_truth, msg.ee_pose.orientation,
+                   msg.ee_pose.position)
     return Observation(
         wrench=np.array([w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y, w.torque.z]),
         success=bool(gt.success), position_error=float(gt.position_error),
         orientation_error=float(np.linalg.norm(np.asarray(gt.orientation_error, float))),
         lateral_offset=float(gt.lateral_offset),
-        tool_rotation=Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix())
+        tool_rotation=Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix(),
+        tool_position=np.array([p.x, p.y, p.z]))
 
 
 def transition_to_msg(t: TransitionRecord) -> Transition:

@@ -11,11 +11,16 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import dataclass, fields
+from typing import Any
 
-import numpy as np
 from qg_common import topics
-from qg_common.node_runtime import node_params, run_nodes
+from qg_common.node_parameters import declare_parameters, on_parameter_change
+from qg_common.node_runtime import run_nodes
+from qg_common.params import POSITIVE, ParameterSection, config_from_dict
+from qg_common.conversions import setpoint_msg
 from qg_common.topics import LATCHED, RELIABLE_DEEP
+from qg_common.types import WrenchSetpoint as Setpoint
 from qg_interfaces.msg import (ActorParameters, AtRest, EpisodeStatus, LearnerDiagnostics,
                                Transition, WrenchSetpoint)
 from qg_interfaces.srv import ResetSim, StartEpisode, StopEpisode
@@ -27,7 +32,8 @@ from qg_learning_node.conversions import (actor_tensors_from_msg, observation_fr
 from qg_learning_node.core.episode import Episode
 from qg_learning_node.core.episode_request import N_POSES, EpisodeRequest
 from qg_learning_node.core.noise import ActionNoise, NoiseConfig
-from qg_learning_node.core.residual_task import ACTION_DIM, ResidualTask, TaskConfig
+from qg_learning_node.core.peg_task import PegTask, PegTaskConfig
+from qg_learning_node.core.residual_task import ResidualTask, TaskConfig
 from qg_learning_node.ddpg import ActorMLP
 
 
@@ -43,18 +49,88 @@ class EpisodeAborted(Exception):
     """The episode cannot go on (stop request, robot gone, reset refused)."""
 
 
+@dataclass(frozen=True)
+class ExecutorConfig:
+    """How long the executor waits for the other nodes (``config/executor.yaml``, top level).
+
+    :param step_timeout: [s] wall time to wait for the at-rest event of one step.
+    :param reset_timeout: [s] wall time to wait for ``sim/reset``.
+    :param keepalive_period: [s] re-send the running setpoint this often; 0 = never (a lockstep
+        robot). A realtime robot needs 0.005: its watchdog holds the pose after 10 ms.
+    :param learner_timeout: [s] no word from the learner this long -> degraded (zero residual).
+    """
+    step_timeout: float = 10.0
+    reset_timeout: float = 30.0
+    keepalive_period: float = 0.0
+    learner_timeout: float = 2.0
+
+    def __post_init__(self) -> None:
+        for name in ("step_timeout", "reset_timeout", "learner_timeout"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"{name} must be > 0 s, got {getattr(self, name)}")
+        if not self.keepalive_period >= 0.0:
+            raise ValueError(f"keepalive_period must be >= 0 s, got {self.keepalive_period}")
+
+    @classmethod
+    def from_dict(cls, params: dict[str, Any]) -> ExecutorConfig:
+        """From the executor's parameters (its top-level ones; the sections are skipped)."""
+        own = {f.name for f in fields(cls)}
+        return config_from_dict(cls, {k: v for k, v in params.items() if k in own})
+
+
+@dataclass(frozen=True)
+class TaskChoice:
+    """Which task the executor runs.
+
+    :param kind: ``residual`` (the Panda's residual force policy, section ``task``) or ``peg``
+        (the Nextage's peg-in-hole by position offsets, section ``peg``).
+    """
+    kind: str = "residual"
+
+
+#: The executor's parameters. Changeable while it runs (``ros2 param set``): the timeouts, the
+#: exploration noise and the default reward; they apply from the next step or episode.
+EXECUTOR_SECTIONS = (
+    ParameterSection("", ExecutorConfig, ranges={
+        "step_timeout": (0.0, 3600.0), "reset_timeout": (0.0, 3600.0),
+        "keepalive_period": (0.0, 1.0), "learner_timeout": (0.0, 3600.0)},
+        runtime=frozenset(f.name for f in fields(ExecutorConfig))),
+    ParameterSection("noise", NoiseConfig, ranges={
+        "sigma": (0.0, 10.0), "theta": (0.0, 100.0), "dt": POSITIVE},
+        runtime=frozenset(f.name for f in fields(NoiseConfig))),
+)
+
+#: Each task kind's section and how its task is built from the section's values.
+TASKS = {
+    "residual": (ParameterSection("task", TaskConfig, ranges={
+        "max_residual_torque": (0.0, 3.0), "force_range": POSITIVE, "torque_range": POSITIVE,
+        "sigma_position": POSITIVE, "sigma_orientation": POSITIVE,
+        "max_lateral_offset": POSITIVE, "train_max_steps": (1, 1000000),
+        "test_max_steps": (1, 1000000), "tilt_range": POSITIVE},
+        runtime=frozenset({"reward"})),
+        lambda values: ResidualTask(TaskConfig.from_dict(values))),
+    "peg": (ParameterSection("peg", PegTaskConfig, ranges={
+        "action_scale": (0.0, 0.1), "reward_length": POSITIVE, "workspace_side": POSITIVE,
+        "tool_to_tip": POSITIVE, "train_max_steps": (1, 1000000),
+        "test_max_steps": (1, 1000000)},
+        runtime=frozenset({"reward"})),
+        lambda values: PegTask(PegTaskConfig.from_dict(values))),
+}
+
+
 class ExecutorNode(Node):
     """Episodes by service call; one episode at a time, run on its own thread."""
 
     def __init__(self) -> None:
-        super().__init__("executor", automatically_declare_parameters_from_overrides=True)
-        p = node_params(self)
-        self.task = ResidualTask(TaskConfig.from_dict(p.get("task", {})))
-        self.noise_config = NoiseConfig.from_dict(p.get("noise", {}))
-        self.step_timeout = float(p.get("step_timeout", 10.0))
-        self.reset_timeout = float(p.get("reset_timeout", 30.0))
-        self.keepalive_period = float(p.get("keepalive_period", 0.0))
-        self.learner_timeout = float(p.get("learner_timeout", 2.0))
+        super().__init__("executor")
+        self.task_kind = declare_parameters(self, [ParameterSection("task", TaskChoice)])[
+            "task"]["kind"]
+        if self.task_kind not in TASKS:
+            raise ValueError(f"task.kind must be one of {sorted(TASKS)}, got {self.task_kind!r}")
+        self.task_section, self.make_task = TASKS[self.task_kind]
+        self._configure(declare_parameters(self, [*EXECUTOR_SECTIONS, self.task_section],
+                                           (("qg_learning_node", "executor.yaml"),)))
+        on_parameter_change(self, self._configure)
 
         self.status_pub = self.create_publisher(EpisodeStatus, topics.EPISODE_STATUS, LATCHED)
         self.transition_pub = self.create_publisher(Transition, topics.TRANSITIONS, RELIABLE_DEEP)
@@ -90,6 +166,16 @@ class ExecutorNode(Node):
         self.stop_requested = threading.Event()
         self.worker: threading.Thread | None = None
 
+    def _configure(self, params: dict[str, Any]) -> None:
+        """Build the task, noise and timing from the parameters (all validated before any is
+        applied); at start and on ``ros2 param set``. A running episode keeps its task."""
+        values = dict(params[self.task_section.prefix])
+        values.pop("kind", None)          # task.kind chose the section (residual: the same)
+        task = self.make_task(values)
+        noise = NoiseConfig.from_dict(params["noise"])
+        config = ExecutorConfig.from_dict(params)
+        self.task, self.noise_config, self.config = task, noise, config
+
     # --- inputs ---------------------------------------------------------------------------
     def _on_actor(self, msg: ActorParameters) -> None:
         try:
@@ -100,8 +186,8 @@ class ExecutorNode(Node):
         if actor.input_dim != self.task.state_dim:
             self.get_logger().error(
                 f"ignoring actor v{msg.version}: it takes {actor.input_dim}-D states, the "
-                f"{self.task.config.observation!r} observation is {self.task.state_dim}-D "
-                "(set the learner's `observation` to the executor's `task.observation`)")
+                f"{self.task_kind} task's are {self.task.state_dim}-D (set the learner's "
+                "`observation` to the executor's `task.observation`, or `peg`)")
             return
         with self.lock:
             self.actor, self.actor_version = actor, int(msg.version)
@@ -123,7 +209,7 @@ class ExecutorNode(Node):
             time.sleep(0.01)
 
     def learner_alive(self) -> bool:
-        return time.monotonic() - self.last_learner_time < self.learner_timeout
+        return time.monotonic() - self.last_learner_time < self.config.learner_timeout
 
     # --- services -------------------------------------------------------------------------
     def _on_start(self, request: StartEpisode.Request,
@@ -151,7 +237,7 @@ class ExecutorNode(Node):
         episode_id = f"{time.strftime('%Y%m%d_%H%M%S')}_{index:04d}_{req.mode}_p{pose}"
         seed = req.seed if req.seed != 0 else 1000 + index
         self.episode = Episode(episode_id, req.mode, pose, reward, self.task,
-                               ActionNoise(self.noise_config, ACTION_DIM, seed))
+                               ActionNoise(self.noise_config, self.task.action_dim, seed))
         self.stop_requested.clear()
         self._set_state("resetting", f"reset to pose {pose}")
         self.worker = threading.Thread(target=self._run_episode, args=(self.episode,),
@@ -167,7 +253,7 @@ class ExecutorNode(Node):
             return response
         self.stop_requested.set()
         self.at_rest_event.set()
-        self.worker.join(timeout=self.step_timeout + 1.0)
+        self.worker.join(timeout=self.config.step_timeout + 1.0)
         response.success = True
         response.episode_id = self.episode.episode_id
         response.message = f"aborted: {request.reason}" if request.reason else "aborted"
@@ -176,7 +262,8 @@ class ExecutorNode(Node):
     # --- the episode ----------------------------------------------------------------------
     def _run_episode(self, episode: Episode) -> None:
         try:
-            episode.begin(observation_from_msg(self._reset(episode)))
+            observation = observation_from_msg(self._reset(episode))
+            episode.begin(observation)
             self._await_first_learner_contact(LEARNER_DISCOVERY_GRACE)
             self._set_state("running")
             while not episode.done:
@@ -190,8 +277,9 @@ class ExecutorNode(Node):
                 with self.lock:
                     actor = self.actor if alive else None
                 action = episode.choose_action(actor)
-                at_rest = self._execute(self.task.wrench(action))
-                record = episode.observe(action, observation_from_msg(at_rest))
+                at_rest = self._execute(episode.task.command(action, observation))
+                observation = observation_from_msg(at_rest)
+                record = episode.observe(action, observation)
                 self.transition_pub.publish(transition_to_msg(record))
                 self._publish_status()
             self._set_state("done", episode.end_reason)
@@ -208,10 +296,11 @@ class ExecutorNode(Node):
     def _reset(self, episode: Episode) -> AtRest:
         request = ResetSim.Request(initial_pose=episode.initial_pose, housing_yaw=0.0)
         future = self.reset_client.call_async(request)
-        deadline = time.monotonic() + self.reset_timeout
+        deadline = time.monotonic() + self.config.reset_timeout
         while not future.done():
             if time.monotonic() > deadline:
-                raise EpisodeAborted(f"/sim/reset did not answer within {self.reset_timeout} s")
+                raise EpisodeAborted(
+                    f"/sim/reset did not answer within {self.config.reset_timeout} s")
             if self.stop_requested.wait(0.002):
                 raise EpisodeAborted("stop requested during reset")
         result = future.result()
@@ -219,7 +308,7 @@ class ExecutorNode(Node):
             raise EpisodeAborted(f"reset refused: {getattr(result, 'message', 'no answer')}")
         return result.observation
 
-    def _execute(self, wrench: np.ndarray) -> AtRest:
+    def _execute(self, setpoint: Setpoint) -> AtRest:
         """Send one setpoint and wait for its at-rest event.
 
         With ``keepalive_period > 0`` the setpoint is re-sent that often while waiting: a
@@ -228,19 +317,11 @@ class ExecutorNode(Node):
         compete with the 1 kHz loop for the GIL (0.8 instead of 19 RL steps per second at 5 ms).
         """
         self.seq += 1
-        msg = WrenchSetpoint(seq=self.seq, reference_from_current=True)
-        msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = (float(v) for v in wrench[:3])
-        msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z = (float(v) for v in wrench[3:])
-        deadline = time.monotonic() + self.step_timeout
-        resend = self.keepalive_period > 0.0
-
-        def send() -> None:
-            msg.header.stamp = self.get_clock().now().to_msg()
-            self.setpoint_pub.publish(msg)
-
-        send()
+        deadline = time.monotonic() + self.config.step_timeout
+        resend = self.config.keepalive_period > 0.0
+        self._send(setpoint)
         while True:
-            self.at_rest_event.wait(self.keepalive_period if resend else 0.05)
+            self.at_rest_event.wait(self.config.keepalive_period if resend else 0.05)
             with self.lock:
                 self.at_rest_event.clear()
                 event = self.at_rest.pop(self.seq, None)
@@ -250,17 +331,21 @@ class ExecutorNode(Node):
             if self.stop_requested.is_set():
                 raise EpisodeAborted("stop requested")
             if time.monotonic() > deadline:
-                raise EpisodeAborted(f"no at-rest event within {self.step_timeout} s "
+                raise EpisodeAborted(f"no at-rest event within {self.config.step_timeout} s "
                                      "(is the robot process up?)")
             if resend:
-                send()
+                self._send(setpoint)
+
+    def _send(self, setpoint: Setpoint) -> None:
+        """Publish ``setpoint`` as the command ``seq`` (stamped now)."""
+        self.setpoint_pub.publish(setpoint_msg(self.seq, setpoint,
+                                               self.get_clock().now().to_msg()))
 
     def _send_zero_residual(self) -> None:
-        """Leave the robot pushing with the base force only, from where it is."""
+        """Leave the robot safe from where it is: the task's hold command (the Panda pushes
+        with the base force only, the Nextage stays)."""
         self.seq += 1
-        msg = WrenchSetpoint(seq=self.seq, reference_from_current=True)
-        msg.wrench.force.z = float(self.task.config.base_force)
-        self.setpoint_pub.publish(msg)
+        self._send(self.task.hold())
 
     # --- status ---------------------------------------------------------------------------
     def _set_state(self, state: str, message: str = "") -> None:
@@ -280,7 +365,7 @@ class ExecutorNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_nodes([ExecutorNode], ["executor.yaml"], args)
+    return run_nodes([ExecutorNode], args)
 
 
 if __name__ == "__main__":

@@ -13,11 +13,13 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 from qg_common import topics
-from qg_common.node_runtime import node_params, run_nodes
-from qg_common.params import runs_dir
+from qg_common.node_parameters import declare_parameters
+from qg_common.node_runtime import run_nodes
+from qg_common.params import POSITIVE, ParameterSection, runs_dir
 from qg_common.topics import LATCHED, RELIABLE_DEEP
 from qg_interfaces.msg import ActorParameters, EpisodeStatus, LearnerDiagnostics, Transition
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
@@ -26,29 +28,64 @@ from rclpy.node import Node
 from qg_learning_node.conversions import actor_to_msg
 from qg_learning_node.core.episode import TransitionRecord
 from qg_learning_node.core.learner_params import learner_config_from_params
+from qg_learning_node.core.peg_task import PEG_ACTION_DIM, PEG_STATE_DIM
 from qg_learning_node.core.residual_task import ACTION_DIM, state_dim
-from qg_learning_node.learner_core import LearnerCore
+from qg_learning_node.learner_core import LearnerConfig, LearnerCore
 
 CHECKPOINT_NAME = "learner.pt"
 #: [s] how long to wait for the last transitions of an ended episode before checkpointing.
 CHECKPOINT_GRACE = 3.0
 
 
+def task_dims(observation: str) -> tuple[int, int]:
+    """(state, action) sizes of the executor's task, from the learner's ``observation``."""
+    if observation == "peg":
+        return PEG_STATE_DIM, PEG_ACTION_DIM
+    return state_dim(observation), ACTION_DIM
+
+
+@dataclass(frozen=True)
+class LearnerNodeConfig:
+    """The learner node's own parameters (``config/learner.yaml``, top level).
+
+    :param observation: the executor's ``task.observation`` (``thesis``, ``tilt``), or ``peg``
+        for the peg task; sets the networks' input and output sizes.
+    :param checkpoint_dir: folder of ``learner.pt``; "" = ``<runs>/checkpoints``.
+    :param resume: restore networks, optimizers, graph and replay at start.
+    """
+    observation: str = "thesis"
+    checkpoint_dir: str = ""
+    resume: bool = False
+
+
+#: The learner's parameters, all read-only: a running learner keeps its networks' settings.
+#: (ROS parameters cannot be null: 0 / [] stand for "none", see ``core/learner_params.py``.)
+LEARNER_SECTIONS = (
+    ParameterSection("", LearnerNodeConfig),
+    ParameterSection("learner", LearnerConfig, ranges={
+        "replay_capacity": (0, 1_000_000_000), "iterations_per_cycle": (1, 1_000_000),
+        "cycle_steps": (1, 1_000_000), "batch_size": (1, 1_000_000),
+        "census_every": (1, 1_000_000), "graph_resolution": (0.0, 2.0),
+        "updates_per_step": POSITIVE, "publish_every": (1, 1_000_000),
+        "ddpg.gamma": (0.0, 1.0), "ddpg.critic_lr": (0.0, 1.0), "ddpg.actor_lr": (0.0, 1.0),
+        "ddpg.tau": (0.0, 1.0), "ddpg.he_horizon": (1, 100_000), "ddpg.he_lambda": POSITIVE}),
+)
+
+
 class LearnerNode(Node):
     """Keeps the Q-Graph and replay memory, trains every cycle, publishes the actor."""
 
     def __init__(self) -> None:
-        super().__init__("learner", automatically_declare_parameters_from_overrides=True)
-        p = node_params(self)
-        config = learner_config_from_params(p.get("learner", {}))
-        self.checkpoint = Path(p.get("checkpoint_dir") or runs_dir() / "checkpoints") / CHECKPOINT_NAME
-        if p.get("resume", False) and self.checkpoint.is_file():
+        super().__init__("learner")
+        p = declare_parameters(self, LEARNER_SECTIONS, (("qg_learning_node", "learner.yaml"),))
+        config = learner_config_from_params(p["learner"])
+        self.checkpoint = Path(p["checkpoint_dir"] or runs_dir() / "checkpoints") / CHECKPOINT_NAME
+        if p["resume"] and self.checkpoint.is_file():
             self.core = LearnerCore.load(self.checkpoint)
             self.get_logger().info(f"resumed from {self.checkpoint}: {self.core.steps} "
                                    f"transitions, actor v{self.core.actor_version}")
         else:
-            self.core = LearnerCore(config, state_dim(p.get("observation", "thesis")),
-                                    ACTION_DIM)
+            self.core = LearnerCore(config, *task_dims(p["observation"]))
         self.lock = threading.Lock()
         self.received: dict[str, int] = {}        # transitions per episode id
         self.pending_checkpoint: dict[str, tuple[int, float]] = {}  # id -> (final steps, ended at)
@@ -169,7 +206,7 @@ def _start_training_thread(nodes: list[Node]) -> Callable[[], None]:
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_nodes([LearnerNode], ["learner.yaml"], args, background=_start_training_thread)
+    return run_nodes([LearnerNode], args, background=_start_training_thread)
 
 
 if __name__ == "__main__":

@@ -222,7 +222,7 @@ def _pyplot():
 def main(out_dir: pathlib.Path | None = None) -> None:
     """Run both toys with 10 seeds and Baird's star, print the figures, save the box plots."""
     torch.set_num_threads(1)
-    out_dir = out_dir or pathlib.Path(__file__).resolve().parents[2] / 'docs' / 'figures'
+    out_dir = out_dir or pathlib.Path('docs') / 'figures'   # run from the repository root
     out_dir.mkdir(parents=True, exist_ok=True)
     pooled = transition_type_std()
     for kind, stds in pooled.items():

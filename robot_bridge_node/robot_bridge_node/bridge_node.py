@@ -21,7 +21,9 @@ from qg_common import topics
 from qg_common.conversions import (at_rest_msg, ground_truth_from_msg, joint_state_from_msg,
                                    pose_stamped, setpoint_from_msg, time_msg, time_ns,
                                    twist_stamped, wrench_from_msg)
-from qg_common.node_runtime import LoopThread, node_params, run_nodes
+from qg_common.node_parameters import declare_parameters, package_defaults
+from qg_common.node_runtime import LoopThread, run_nodes
+from qg_common.params import POSITIVE, ParameterSection
 from qg_common.types import NO_GROUND_TRUTH, GroundTruth, JointState
 from qg_interfaces.msg import AtRest, GroundTruth as GroundTruthMsg
 from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
@@ -29,24 +31,64 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState as JointStateMsg
 from std_msgs.msg import Header
 
-from robot_bridge_node.core.hardware_interface import robot_plugin
+from robot_bridge_node.core.hardware_interface import ROBOT_SECTION, RobotPlugin, robot_plugin
 from robot_bridge_node.core.impedance import HybridImpedanceController, ImpedanceConfig, ToolState
+from robot_bridge_node.core.position_control import PositionControlConfig
 from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
 from robot_bridge_node.core.robot_loop import LoopConfig, RobotLoop, tool_model
-from robot_bridge_node.core.safety import SafetyFilter, SafetyLimits, SetpointRejected
+from robot_bridge_node.core.safety import (HARD_LIMITS, SafetyFilter, SafetyLimits,
+                                           SetpointRejected)
 
-__all__ = ["BridgeNode", "LoopRunner", "LoopObserver", "RemoteRobot", "LatestWrench", "main"]
+__all__ = ["BridgeNode", "CONTROLLER_SECTIONS", "LoopRunner", "LoopObserver", "RemoteRobot",
+           "LatestWrench", "main"]
 
 #: Called after every tick with the simulated time [ns] (e.g. an MCAP recorder).
 LoopObserver = Callable[[int, RobotLoop], None]
 
 
-class BridgeNode(Node):
-    """Takes wrench setpoints (``setpoint_handler``), reports the EEF state and rest."""
+_STEP_SECTIONS = (
+    ParameterSection("rest", RestConfig, ranges={
+        "linear_threshold": (0.0, 1.0), "angular_threshold": (0.0, 10.0),
+        "hold_time": (0.0, 10.0), "min_time": (0.0, 10.0), "max_time": (0.0, 10.0)}),
+    ParameterSection("loop", LoopConfig, ranges={"dt": (0.0, 0.01), "settle_time": (0.0, 10.0)}))
 
-    def __init__(self) -> None:
-        super().__init__("bridge", automatically_declare_parameters_from_overrides=True)
-        self.params = node_params(self)
+#: The bridge's parameters by the robot's hardware interface: the controller and its limits,
+#: the rest detector that ends an RL step, the loop timing (``config/bridge.yaml``; a position
+#: robot's controller gains come with the robot's own files).
+CONTROLLER_SECTIONS: dict[str, tuple[ParameterSection, ...]] = {
+    "torque": (
+        ParameterSection("impedance", ImpedanceConfig, ranges={
+            "k_null": POSITIVE, "d_null": POSITIVE, "d_joint": POSITIVE}),
+        ParameterSection("safety", SafetyLimits, ranges={
+            **{name: (0.0, ceiling) for name, ceiling in HARD_LIMITS.items()},
+            "tilt_margin": (0.0, HARD_LIMITS["tilt_max"]), "tilt_stiffness": POSITIVE}),
+        *_STEP_SECTIONS),
+    "position": (
+        ParameterSection("position_control", PositionControlConfig, ranges={
+            "damping": (0.0, 1.0), "orientation_weight": POSITIVE, "max_iterations": (1, 10000),
+            "max_iteration_step": (0.0, 3.2), "position_tolerance": (0.0, 0.01),
+            "orientation_tolerance": (0.0, 0.1), "linear_speed_limit": (0.0, 1.0),
+            "angular_speed_limit": (0.0, 10.0), "joint_speed_limit": (0.0, 10.0),
+            "dt": (0.0, 0.01)}),
+        *_STEP_SECTIONS),
+}
+
+
+class BridgeNode(Node):
+    """Takes wrench setpoints (``setpoint_handler``), reports the EEF state and rest.
+
+    Its parameters are the controller's of the robot's interface (``CONTROLLER_SECTIONS``); the
+    robot is the plugin named by its ``robot`` parameter unless ``plugin`` is given.
+    """
+
+    def __init__(self, plugin: RobotPlugin | None = None) -> None:
+        super().__init__("bridge")
+        if plugin is None:
+            plugin = robot_plugin(declare_parameters(self, [ROBOT_SECTION])["robot"])
+        self.plugin = plugin
+        self.params = declare_parameters(self, CONTROLLER_SECTIONS[plugin.interface],
+                                         (("robot_bridge_node", "bridge.yaml"),
+                                          *plugin.config_files))
         self.ee_pose = self.create_publisher(PoseStamped, topics.EE_POSE, topics.SENSOR_QOS)
         self.ee_twist = self.create_publisher(TwistStamped, topics.EE_TWIST, topics.SENSOR_QOS)
         self.ee_at_rest = self.create_publisher(AtRest, topics.EE_AT_REST, topics.COMMAND_QOS)
@@ -185,7 +227,7 @@ class LoopRunner:
     def _take_setpoint(self, msg: WrenchSetpointMsg) -> None:
         loop = self.loop
         if msg.seq == self._seq:
-            loop.safety.feed_watchdog(loop.time)
+            loop.feed_watchdog()
             return
         try:
             loop.command(setpoint_from_msg(msg))
@@ -370,7 +412,11 @@ def _start_separate_bridge(nodes: list[Node]) -> Callable[[], None]:
         if runner is not None:
             runner.request_reset(0)
 
-    description = robot_plugin(p.get("robot", "sim_panda")).describe(p)
+    if bridge.plugin.interface != "torque":
+        raise ValueError(f"the separate bridge drives torque robots over topics; run "
+                         f"{bridge.plugin.interface} robots in the composed `robot` process")
+    # The robot's own parameters belong to the separate sim process: describe it by its defaults.
+    description = bridge.plugin.describe(package_defaults("sim", bridge.plugin.config_files))
     remote = RemoteRobot(bridge, len(description.joint_names), restart)
     loop = RobotLoop(remote,
                      HybridImpedanceController(ImpedanceConfig.from_dict(p.get("impedance", {})),
@@ -386,8 +432,7 @@ def _start_separate_bridge(nodes: list[Node]) -> Callable[[], None]:
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_nodes([BridgeNode], ["panda_scene.yaml", "bridge.yaml"], args,
-                     background=_start_separate_bridge)
+    return run_nodes([BridgeNode], args, background=_start_separate_bridge)
 
 
 if __name__ == "__main__":

@@ -15,17 +15,23 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import WrenchStamped
 from qg_common import topics
 from qg_common.conversions import joint_state_from_msg, time_ns, wrench_stamped
-from qg_common.node_runtime import node_params, run_nodes
+from qg_common.node_parameters import declare_parameters, package_defaults
+from qg_common.node_runtime import run_nodes
+from qg_common.params import POSITIVE, ParameterSection
 from rclpy.node import Node
 from sensor_msgs.msg import JointState as JointStateMsg
 from std_msgs.msg import Header
 
-from robot_bridge_node.core.hardware_interface import robot_plugin
+from robot_bridge_node.core.hardware_interface import ROBOT_SECTION, RobotPlugin, robot_plugin
 from robot_bridge_node.core.panda_model import PandaModel
 from robot_bridge_node.core.robot_loop import tool_model
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
 
-__all__ = ["WrenchEstimatorNode", "SeparateEstimator", "build_ekf", "main"]
+__all__ = ["WrenchEstimatorNode", "EKF_SECTION", "SeparateEstimator", "build_ekf", "main"]
+
+#: The EKF's noise model (``config/wrench_estimator.yaml``): a torque robot's wrench estimate.
+EKF_SECTION = ParameterSection("ekf", WrenchEKFConfig, ranges={
+    name: POSITIVE for name in WrenchEKFConfig.__dataclass_fields__})
 
 
 def build_ekf(params: dict[str, Any], model: PandaModel) -> WrenchEKF:
@@ -34,11 +40,21 @@ def build_ekf(params: dict[str, Any], model: PandaModel) -> WrenchEKF:
 
 
 class WrenchEstimatorNode(Node):
-    """Publishes the contact wrench estimate (``wrench_estimate``, tool frame)."""
+    """Publishes the contact wrench estimate (``wrench_estimate``, tool frame).
 
-    def __init__(self) -> None:
-        super().__init__("wrench_estimator", automatically_declare_parameters_from_overrides=True)
-        self.params = node_params(self)
+    A torque robot's estimate is the EKF's (parameters ``ekf.*``); a position robot's is its
+    wrist sensor's, which has no parameters here. The robot is the plugin named by the
+    ``robot`` parameter unless ``plugin`` is given.
+    """
+
+    def __init__(self, plugin: RobotPlugin | None = None) -> None:
+        super().__init__("wrench_estimator")
+        if plugin is None:
+            plugin = robot_plugin(declare_parameters(self, [ROBOT_SECTION])["robot"])
+        self.plugin = plugin
+        sections = [EKF_SECTION] if plugin.interface == "torque" else []
+        self.params = declare_parameters(self, sections,
+                                         (("robot_bridge_node", "wrench_estimator.yaml"),))
         self.wrench = self.create_publisher(WrenchStamped, topics.WRENCH_ESTIMATE,
                                             topics.SENSOR_QOS)
 
@@ -56,7 +72,10 @@ class SeparateEstimator:
 
     def __init__(self, node: WrenchEstimatorNode) -> None:
         self.node = node
-        robot = robot_plugin(node.params.get("robot", "sim_panda")).describe(node.params)
+        if node.plugin.interface != "torque":
+            raise ValueError("the separate estimator runs the EKF of torque robots only")
+        # The robot's own parameters belong to the separate sim process: its defaults.
+        robot = node.plugin.describe(package_defaults("sim", node.plugin.config_files))
         self.dt = robot.dt
         self.n_joints = len(robot.joint_names)
         self.ekf = build_ekf(node.params, tool_model(robot.tool))
@@ -91,8 +110,7 @@ def _start_separate_estimator(nodes: list[Node]) -> Callable[[], None]:
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_nodes([WrenchEstimatorNode], ["panda_scene.yaml", "wrench_estimator.yaml"], args,
-                     background=_start_separate_estimator)
+    return run_nodes([WrenchEstimatorNode], args, background=_start_separate_estimator)
 
 
 if __name__ == "__main__":

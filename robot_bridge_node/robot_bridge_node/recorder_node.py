@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from qg_common import topics
 from qg_common.conversions import quaternion_from_matrix
-from qg_common.node_runtime import node_params
-from qg_common.params import runs_dir
+from qg_common.node_parameters import declare_parameters, on_parameter_change
+from qg_common.params import ParameterSection, config_from_dict, runs_dir
 from qg_interfaces.msg import AtRest, EpisodeStatus, Transition, WrenchSetpoint
 from qg_recording.episode_recorder import EpisodeRecorder
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
@@ -23,26 +25,56 @@ from rclpy.node import Node
 
 from robot_bridge_node.core.robot_loop import RobotLoop
 
-__all__ = ["RecorderNode"]
+__all__ = ["RecorderConfig", "RECORDER_SECTION", "RecorderNode"]
 
 _FINAL = ("done", "aborted")
+
+
+@dataclass(frozen=True)
+class RecorderConfig:
+    """The recorder's parameters (``config/recorder.yaml``).
+
+    :param record: record episodes at all (changeable while running: from the next episode).
+    :param episodes_dir: folder of the episode bags; "" = ``$QG_RUNS_DIR/episodes``, else
+        ``runs/episodes`` in the current directory.
+    :param ground_truth_every: [ticks] between ground-truth samples (computing contact truth
+        costs more than the rest of a tick).
+    :param close_timeout: [s] wait this long for late transitions after the episode ended.
+    """
+    record: bool = True
+    episodes_dir: str = ""
+    ground_truth_every: int = 10
+    close_timeout: float = 2.0
+
+    def __post_init__(self) -> None:
+        if self.ground_truth_every < 1:
+            raise ValueError(f"ground_truth_every must be >= 1, got {self.ground_truth_every}")
+        if not self.close_timeout >= 0.0:
+            raise ValueError(f"close_timeout must be >= 0 s, got {self.close_timeout}")
+
+    @classmethod
+    def from_dict(cls, params: dict[str, Any]) -> RecorderConfig:
+        return config_from_dict(cls, params)
+
+
+RECORDER_SECTION = ParameterSection(
+    "", RecorderConfig, ranges={"ground_truth_every": (1, 100000), "close_timeout": (0.0, 600.0)},
+    runtime=frozenset({"record", "ground_truth_every", "close_timeout"}))
 
 
 class RecorderNode(Node):
     """Per-episode recording. ``observe`` is the loop hook, called after every tick.
 
-    Parameters: ``record`` (bool), ``episodes_dir`` ("" = default), ``ground_truth_every``
-    (ticks between ground-truth samples; computing contact truth costs more than the rest),
-    ``close_timeout`` [s] to wait for late transitions after the episode ended.
+    Parameters: ``RecorderConfig``; ``record``, ``ground_truth_every`` and ``close_timeout``
+    may be changed while it runs (``ros2 param set``).
     """
 
     def __init__(self) -> None:
-        super().__init__("recorder", automatically_declare_parameters_from_overrides=True)
-        p = node_params(self)
-        self.enabled = bool(p.get("record", True))
-        self.ground_truth_every = max(1, int(p.get("ground_truth_every", 10)))
-        self.close_timeout = float(p.get("close_timeout", 2.0))
-        self.recorder = EpisodeRecorder(Path(p.get("episodes_dir") or runs_dir() / "episodes"))
+        super().__init__("recorder")
+        self.config = RecorderConfig.from_dict(declare_parameters(
+            self, [RECORDER_SECTION], (("robot_bridge_node", "recorder.yaml"),)))
+        on_parameter_change(self, self._reconfigure)
+        self.recorder = EpisodeRecorder(Path(self.config.episodes_dir or runs_dir() / "episodes"))
         self.lock = threading.Lock()
         self.episode_id = ""
         self.transitions = 0
@@ -62,6 +94,10 @@ class RecorderNode(Node):
         self.last_t_ns = 0
         self.last_setpoint_seq = -1
 
+    def _reconfigure(self, params: dict[str, Any]) -> None:
+        """``ros2 param set``: the new values (validated) apply from now on."""
+        self.config = RecorderConfig.from_dict(params)
+
     # --- the 1 kHz hook -------------------------------------------------------------------
     def observe(self, t_ns: int, loop: RobotLoop) -> None:
         """Record one tick of the loop (does nothing between episodes)."""
@@ -79,7 +115,7 @@ class RecorderNode(Node):
             rec.record_pose(t_ns, tool.position, quaternion_from_matrix(tool.rotation))
             rec.record_twist(t_ns, tool.twist[:3], tool.twist[3:])
         self.ticks += 1
-        if self.ticks % self.ground_truth_every == 0:
+        if self.ticks % self.config.ground_truth_every == 0:
             gt = loop.ground_truth()
             rec.record_ground_truth(t_ns, gt.wrench, gt.insertion_depth, gt.plunger_travel,
                                     gt.success, gt.position_error, gt.orientation_error,
@@ -93,7 +129,7 @@ class RecorderNode(Node):
         return self.last_t_ns
 
     def _on_status(self, msg: EpisodeStatus) -> None:
-        if not self.enabled or not msg.episode_id:
+        if not self.config.record or not msg.episode_id:
             return
         if msg.episode_id != self.episode_id and msg.state not in _FINAL:
             self._close()
@@ -128,7 +164,7 @@ class RecorderNode(Node):
     def _close_if_complete(self) -> None:
         if self.final_steps is None:
             return
-        late = time.monotonic() - self.ended_at > self.close_timeout
+        late = time.monotonic() - self.ended_at > self.config.close_timeout
         if self.transitions >= self.final_steps or late:
             if late:
                 self.get_logger().warning(

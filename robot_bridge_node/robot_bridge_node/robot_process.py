@@ -25,16 +25,13 @@ from qg_common.node_runtime import LoopThread, RealtimePacer, run_nodes
 from rclpy.node import Node
 
 from robot_bridge_node.bridge_node import BridgeNode, LoopRunner
-from robot_bridge_node.core.hardware_interface import load_robot
+from robot_bridge_node.core.position_loop import build_position_loop
 from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from robot_bridge_node.estimator_node import WrenchEstimatorNode, build_ekf
 from robot_bridge_node.recorder_node import RecorderNode
 from robot_bridge_node.simulation_node import SimulationNode, serve_reset
 
-__all__ = ["CONFIG_FILES", "REALTIME_SWITCH_INTERVAL", "RobotProcess", "main"]
-
-CONFIG_FILES = ("panda_scene.yaml", "sim.yaml", "bridge.yaml", "wrench_estimator.yaml",
-                "recorder.yaml")
+__all__ = ["REALTIME_SWITCH_INTERVAL", "RobotProcess", "main"]
 
 #: [s] Python's GIL hand-over interval in realtime mode. The default 5 ms lets a ROS callback
 #: thread hold the GIL for five ticks before the loop thread gets it back.
@@ -44,8 +41,11 @@ REALTIME_SWITCH_INTERVAL = 1e-4
 class RobotProcess:
     """One ``RobotLoop`` (robot plugin, controller, safety, rest detector, EKF) and its nodes.
 
-    The loop is built from the nodes' parameters: the robot plugin named by the sim node's
-    ``robot`` parameter from its sections. ``runner.loop_observers`` is where a per-tick
+    A torque robot's loop runs the hybrid force/impedance controller and the EKF; a position
+    robot's (``position_loop.PositionLoop``) the task-space IK and reads the wrist sensor.
+
+    The loop is built from the nodes' parameters: the robot plugin the sim node loaded (its
+    ``robot`` parameter) from the sim node's sections. ``runner.loop_observers`` is where a per-tick
     recorder attaches. The start pose (``sim.initial_pose``) is taken before the loop thread
     starts, so every run has the same history (lockstep runs repeat exactly).
     """
@@ -56,13 +56,13 @@ class RobotProcess:
         self.bridge = bridge
         self.estimator = estimator
         config = sim.config
-        robot = load_robot(sim.params.get("robot", "sim_panda"), sim.params)
-        sim.joint_names = robot.description.joint_names
+        robot = sim.plugin.create(sim.params)
         bridge_params = {**bridge.params,
                          "loop": {**bridge.params.get("loop", {}), "realtime": config.realtime}}
         self.loop: RobotLoop = build_loop(
             robot, bridge_params,
-            estimator=lambda robot, model: build_ekf(estimator.params, model))
+            estimator=lambda robot, model: build_ekf(estimator.params, model)) \
+            if sim.plugin.interface == "torque" else build_position_loop(robot, bridge_params)
         #: Realtime: holds the wall-clock tick period (``missed`` counts dropped ticks).
         self.pacer = RealtimePacer(self.loop.config.dt) if config.realtime else None
         pace = None
@@ -109,7 +109,14 @@ def _start(nodes: list[Node]) -> Callable[[], None]:
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_nodes([SimulationNode, BridgeNode, WrenchEstimatorNode, RecorderNode], CONFIG_FILES, args,
+    sim: list[SimulationNode] = []   # the sim node loads the plugin its `robot` names
+
+    def make_sim() -> SimulationNode:
+        sim.append(SimulationNode())
+        return sim[0]
+
+    return run_nodes([make_sim, lambda: BridgeNode(sim[0].plugin),
+                      lambda: WrenchEstimatorNode(sim[0].plugin), RecorderNode], args,
                      background=_start)
 
 

@@ -16,8 +16,8 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import WrenchStamped
 from qg_common import topics
 from qg_common.conversions import ground_truth_msg, joint_state_msg, wrench_stamped
-from qg_common.node_runtime import node_params
-from qg_common.params import config_from_dict
+from qg_common.node_parameters import declare_parameters
+from qg_common.params import POSITIVE, ParameterSection, config_from_dict
 from qg_common.types import N_START_POSES, GroundTruth, JointState
 from qg_interfaces.msg import AtRest
 from qg_interfaces.msg import GroundTruth as GroundTruthMsg
@@ -27,7 +27,9 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState as JointStateMsg
 
-__all__ = ["SimConfig", "SimulationNode", "Resetter", "serve_reset"]
+from robot_bridge_node.core.hardware_interface import ROBOT_SECTION, RobotPlugin, robot_plugin
+
+__all__ = ["SimConfig", "SIM_SECTION", "SimulationNode", "Resetter", "serve_reset"]
 
 
 @dataclass(frozen=True)
@@ -99,17 +101,30 @@ class SimConfig:
         return every * max(1, round(1.0 / (self.ground_truth_rate * dt * every)))
 
 
+#: The ``sim.*`` parameters (``config/sim.yaml``, installed by this package).
+SIM_SECTION = ParameterSection("sim", SimConfig, ranges={
+    "publish_rate": (0.0, 1000.0), "ground_truth_rate": (0.0, 1000.0),
+    "realtime_priority": (0, 99), "initial_pose": (0, N_START_POSES - 1),
+    "command_timeout": POSITIVE, "hold_damping": POSITIVE, "reset_wait": POSITIVE})
+
+
 class SimulationNode(Node):
     """Publishes the robot's joint state and the simulation's truth and clock (node ``sim``).
 
-    :param joint_names: names of the published joint vectors.
+    Its parameters are the process's clock settings (``sim.*``) and the robot's own (the
+    plugin's sections, e.g. ``panda_scene.*``); the robot is the plugin named by its ``robot``
+    parameter unless ``plugin`` is given.
     """
 
-    def __init__(self, joint_names: tuple[str, ...] = ()) -> None:
-        super().__init__("sim", automatically_declare_parameters_from_overrides=True)
-        self.params = node_params(self)
-        self.config = SimConfig.from_dict(self.params.get("sim", {}))
-        self.joint_names = joint_names
+    def __init__(self, plugin: RobotPlugin | None = None) -> None:
+        super().__init__("sim")
+        if plugin is None:
+            plugin = robot_plugin(declare_parameters(self, [ROBOT_SECTION])["robot"])
+        self.plugin = plugin
+        self.params = declare_parameters(self, [SIM_SECTION, *plugin.parameters],
+                                         (("robot_bridge_node", "sim.yaml"), *plugin.config_files))
+        self.config = SimConfig.from_dict(self.params["sim"])
+        self.joint_names = plugin.describe(self.params).joint_names
         self.joint_states = self.create_publisher(JointStateMsg, topics.JOINT_STATES,
                                                   topics.SENSOR_QOS)
         self.ground_truth = self.create_publisher(GroundTruthMsg, topics.GROUND_TRUTH,

@@ -11,13 +11,19 @@ from typing import Any
 
 import numpy as np
 from qg_common.panda_description import JOINT_NAMES
+from qg_common.params import POSITIVE, ParameterSection
 from qg_common.types import GroundTruth, JointState
 from robot_bridge_node.core.hardware_interface import (Robot, RobotDescription, RobotPlugin,
                                                        ToolDescription)
 
+from sim_robot_node.core.nextage_scene import (NextagePegScene, NextageSceneConfig,
+                                               PegHoleGeometry, nextage_urdf_path, sample_start)
 from sim_robot_node.core.panda_scene import PandaSceneConfig, PandaShaftScene
 
-__all__ = ["SimPanda", "SIM_PANDA"]
+__all__ = ["SimPanda", "SIM_PANDA", "SimNextage", "SIM_NEXTAGE", "NEXTAGE_JOINT_NAMES"]
+
+#: The Nextage right arm's joints, as its URDF names them (the order of every joint vector).
+NEXTAGE_JOINT_NAMES = tuple(f"RARM_JOINT{i}" for i in range(6))
 
 
 class SimPanda:
@@ -68,6 +74,99 @@ def _create_panda(params: dict[str, Any]) -> Robot:
     return Robot(hardware=sim, simulation=sim, description=_describe_panda(params))
 
 
+#: The Panda scene's parameters: every length, mass and friction positive.
+_PANDA_SCENE = ParameterSection("panda_scene", PandaSceneConfig, ranges={
+    **{name: POSITIVE for name, kind in PandaSceneConfig.__annotations__.items()
+       if kind == "float"},
+    "time_step": (0.0, 0.01), "solver_iterations": (1, 10000), "bore_segments": (8, 10000)})
+
 #: ``robot:=sim_panda``: the Panda pressing a shaft into a bearing (config/panda_scene.yaml).
-SIM_PANDA = RobotPlugin(interface="torque", config_files=("panda_scene.yaml",),
-                        describe=_describe_panda, create=_create_panda)
+SIM_PANDA = RobotPlugin(interface="torque", config_files=(("sim_robot_node", "panda_scene.yaml"),),
+                        parameters=(_PANDA_SCENE,), describe=_describe_panda,
+                        create=_create_panda)
+
+
+class SimNextage:
+    """The Nextage peg scene as a position-controlled arm with a wrist force-torque sensor.
+
+    ``write`` holds the joint targets and steps the physics once. The sensor is tared in free
+    air at every reset (hand and peg weigh on it), so it reads the contact wrench. Start pose
+    ``k`` puts the peg tip at the ``k``-th seeded free position of the workspace.
+    """
+
+    #: [steps] the arm hangs this long after a reset before the sensor is tared.
+    TARE_STEPS = 50
+
+    def __init__(self, scene: NextagePegScene) -> None:
+        self.scene = scene
+        self.joint_names = scene.joint_names
+        self._tare = np.zeros(6)
+
+    # --- position interface and wrist sensor -----------------------------------------------
+    def read(self) -> JointState:
+        return self.scene.joint_state()
+
+    def write(self, q: np.ndarray) -> None:
+        self.scene.set_joint_targets(q)
+        self.scene.step()
+
+    def read_wrench(self) -> np.ndarray:
+        return self.scene.wrist_wrench() - self._tare
+
+    # --- simulation interface --------------------------------------------------------------
+    def reset(self, initial_pose: int, housing_yaw: float = 0.0) -> None:
+        if housing_yaw != 0.0:
+            raise ValueError(f"the peg's block cannot be turned: housing_yaw must be 0, "
+                             f"got {housing_yaw}")
+        self.scene.reset(start=sample_start(self.scene.geometry,
+                                            np.random.default_rng(initial_pose)))
+        for _ in range(self.TARE_STEPS):
+            self.scene.step()
+        self._tare = self.scene.wrist_wrench()
+
+    def ground_truth(self) -> GroundTruth:
+        """The peg's truth in the stack's terms: position error = tip to hole bottom."""
+        truth, g = self.scene.ground_truth(), self.scene.geometry
+        return GroundTruth(wrench=self.read_wrench(),
+                           insertion_depth=float(g.block_height - truth.tip[2]),
+                           plunger_travel=0.0, success=truth.success,
+                           position_error=truth.distance, orientation_error=np.zeros(2),
+                           lateral_offset=float(np.linalg.norm(truth.tip[:2])), tilt=0.0)
+
+    def contact_wrench(self) -> np.ndarray:
+        return self.read_wrench()
+
+
+def _nextage_config(params: dict[str, Any]) -> NextageSceneConfig:
+    return NextageSceneConfig.from_dict(params.get("scene", {}))
+
+
+def _describe_nextage(params: dict[str, Any]) -> RobotDescription:
+    """The Nextage's right arm, its tool frame at the hand holding the peg (the IK's frame)."""
+    config = _nextage_config(params)
+    tool = ToolDescription(offset=np.zeros(3), payload_mass=config.geometry.peg_mass,
+                           payload_com=np.zeros(3))
+    return RobotDescription(joint_names=NEXTAGE_JOINT_NAMES, tool=tool, dt=config.time_step,
+                            urdf=str(nextage_urdf_path()), tool_frame=NextagePegScene.TOOL_LINK)
+
+
+def _create_nextage(params: dict[str, Any]) -> Robot:
+    sim = SimNextage(NextagePegScene(_nextage_config(params)))
+    return Robot(hardware=sim, simulation=sim, description=_describe_nextage(params),
+                 wrist_sensor=sim)
+
+
+#: The Nextage scene's parameters (``scene.*``, ``scene.geometry.*``): sizes positive.
+_NEXTAGE_SCENE = ParameterSection("scene", NextageSceneConfig, ranges={
+    **{f"geometry.{name}": POSITIVE for name, kind in PegHoleGeometry.__annotations__.items()
+       if kind == "float"},
+    "geometry.ring_segments": (8, 10000), "time_step": (0.0, 0.01),
+    "position_gain": (0.0, 1.0), "velocity_gain": POSITIVE, "effort_scale": POSITIVE,
+    "solver_iterations": (1, 10000)})
+
+#: ``robot:=sim_nextage``: the Nextage arm with the clearance-fit peg (config/nextage.yaml: the
+#: scene and the task-space position controller's gains for this arm).
+SIM_NEXTAGE = RobotPlugin(interface="position",
+                          config_files=(("sim_robot_node", "nextage.yaml"),),
+                          parameters=(_NEXTAGE_SCENE,), describe=_describe_nextage,
+                          create=_create_nextage)

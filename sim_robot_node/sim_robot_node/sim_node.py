@@ -19,7 +19,6 @@ import numpy as np
 import pybullet
 from qg_common import topics
 from qg_common.node_runtime import LoopThread, RealtimePacer, run_nodes
-from qg_common.panda_description import JOINT_NAMES
 from qg_common.types import JointState
 from qg_interfaces.msg import AtRest
 from rclpy.node import Node
@@ -28,6 +27,7 @@ from sensor_msgs.msg import JointState as JointStateMsg
 from std_msgs.msg import Header
 
 from sim_robot_node.core.panda_scene import PandaSceneConfig, PandaShaftScene
+from sim_robot_node.plugins import SIM_PANDA
 
 __all__ = ["SeparateSim", "main"]
 
@@ -153,8 +153,7 @@ def _start_separate_sim(nodes: list[Node]) -> Callable[[], None]:
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_nodes([lambda: SimulationNode(JOINT_NAMES)], ["panda_scene.yaml", "sim.yaml"], args,
-                     background=_start_separate_sim)
+    return run_nodes([lambda: SimulationNode(SIM_PANDA)], args, background=_start_separate_sim)
 
 
 if __name__ == "__main__":

@@ -10,7 +10,7 @@ from robot_bridge_node.core.position_control import (PositionControlConfig,
                                                      TaskSpacePositionController)
 from sim_robot_node.core.nextage_scene import (INIT_POSE, NextagePegScene, NextageSceneConfig,
                                                PegHoleGeometry, nextage_urdf_path)
-from qg_common.params import config_dir, load_ros_params
+from qg_common.params import config_file, load_ros_params
 
 TOOL = "RARM_TOOL"
 #: Published joint limits of the right arm [deg] (the URDF comment's table).
@@ -19,7 +19,7 @@ PUBLISHED_LIMITS_DEG = [(-88, 88), (-140, 45), (-158, 0), (-165, 165), (-100, 10
 
 @pytest.fixture(scope="module")
 def nextage_params() -> dict:
-    return load_ros_params(config_dir() / "nextage.yaml")
+    return load_ros_params(config_file("nextage.yaml"))
 
 
 @pytest.fixture(scope="module")

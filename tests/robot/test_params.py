@@ -9,7 +9,7 @@ from robot_bridge_node.core.rest_detector import RestConfig
 from robot_bridge_node.core.robot_loop import LoopConfig
 from robot_bridge_node.core.safety import SafetyLimits
 from sim_robot_node.core.panda_scene import PandaSceneConfig
-from qg_common.params import ConfigError, config_dir, load_ros_params, unflatten
+from qg_common.params import ConfigError, config_file, load_ros_params, unflatten
 
 
 def test_node_section_overrides_the_wildcard(tmp_path: Path) -> None:
@@ -38,9 +38,9 @@ def test_unflatten_nests_dotted_names() -> None:
 
 def test_shipped_configs_equal_the_defaults() -> None:
     """The YAML files and the dataclass defaults must not drift apart."""
-    scene = load_ros_params(config_dir() / "panda_scene.yaml", "sim")
+    scene = load_ros_params(config_file("panda_scene.yaml"), "sim")
     assert PandaSceneConfig.from_dict(scene["panda_scene"]) == PandaSceneConfig()
-    bridge = load_ros_params(config_dir() / "bridge.yaml", "bridge")
+    bridge = load_ros_params(config_file("bridge.yaml"), "bridge")
     assert ImpedanceConfig.from_dict(bridge["impedance"]) == ImpedanceConfig()
     assert SafetyLimits.from_dict(bridge["safety"]) == SafetyLimits()
     assert RestConfig.from_dict(bridge["rest"]) == RestConfig()

@@ -7,13 +7,13 @@ import pytest
 from robot_bridge_node.core.position_control import (PositionControlConfig,
                                                      TaskSpacePositionController)
 from sim_robot_node.core.nextage_scene import NextageSceneConfig, nextage_urdf_path
-from qg_common.params import config_dir, load_ros_params
+from qg_common.params import config_file, load_ros_params
 from sim_robot_node.core.peg_env import PegEnv, PegEnvConfig, toward_goal
 
 
 @pytest.fixture(scope="module")
 def config() -> PegEnvConfig:
-    return PegEnvConfig.from_dict(load_ros_params(config_dir() / "peg_env.yaml"))
+    return PegEnvConfig.from_dict(load_ros_params(config_file("peg_env.yaml")))
 
 
 @pytest.fixture
@@ -102,12 +102,12 @@ def test_bad_configs_fail_loudly():
 
 
 def test_the_arm_option_inserts_too(config: PegEnvConfig):
-    params = load_ros_params(config_dir() / "nextage.yaml")
+    params = load_ros_params(config_file("nextage.yaml"))
     controller = TaskSpacePositionController(
         nextage_urdf_path(), "RARM_TOOL",
         PositionControlConfig.from_dict(params["position_control"]))
     arm_config = PegEnvConfig.from_dict({
-        **load_ros_params(config_dir() / "peg_env.yaml"), "use_arm": True,
+        **load_ros_params(config_file("peg_env.yaml")), "use_arm": True,
         "arm": params["scene"]})
     assert arm_config.arm == NextageSceneConfig.from_dict(params["scene"])
     env = PegEnv(arm_config, controller)

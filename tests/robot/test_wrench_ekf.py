@@ -15,7 +15,7 @@ from ekf_harness import (PandaTorqueHarness, descend_reference, rmse, settling_t
 
 from robot_bridge_node.core.panda_model import Q_READY, PandaModel
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
-from qg_common.params import config_dir, load_ros_params
+from qg_common.params import config_file, load_ros_params
 
 W = np.array([5.0, -3.0, -15.0, 0.5, -0.3, 0.2])     # tool frame [N, Nm]
 NOISE = (1e-5, 1e-3)                                 # [rad, rad/s]
@@ -48,7 +48,7 @@ def errors(trace, start: float) -> tuple[float, float]:
 
 # --- config -------------------------------------------------------------------------------------
 def test_yaml_config_is_the_default_config() -> None:
-    params = load_ros_params(config_dir() / "wrench_estimator.yaml")
+    params = load_ros_params(config_file("wrench_estimator.yaml"))
     assert WrenchEKFConfig.from_dict(params["ekf"]) == WrenchEKFConfig()
 
 

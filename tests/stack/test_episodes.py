@@ -96,7 +96,7 @@ def test_train_episode_is_recorded_and_replays_into_the_same_graph(stack, tmp_pa
     from qg_learning_node.core.learner_params import learner_config_from_params
     from qg_learning_node.learner_core import LearnerCore
     from qg_learning_node.offline import rebuild_from_bags
-    from qg_common.params import config_dir, load_ros_params
+    from qg_common.params import config_file, load_ros_params
 
     checkpoints = tmp_path / "checkpoints"
     stack.start(ROBOT, learner_spec(checkpoints), executor_spec(max_steps=25))
@@ -129,7 +129,7 @@ def test_train_episode_is_recorded_and_replays_into_the_same_graph(stack, tmp_pa
     assert counts["/joint_states"] > 10 * final.step   # 1 kHz data: many ticks per RL step
 
     online = LearnerCore.load(wait_for_file(checkpoints / "learner.pt"))
-    params = load_ros_params(config_dir() / "learner.yaml", "learner")["learner"]
+    params = load_ros_params(config_file("learner.yaml"), "learner")["learner"]
     params["cycle_steps"] = 10
     offline = rebuild_from_bags([bag], config=learner_config_from_params(params))
     kinds = ("directly_connected", "connected", "disconnected", "loose_end")
@@ -245,7 +245,7 @@ def test_in_process_runner_repeats_the_ros_stack_episode(stack, tmp_path):
     from qg_learning_node.learner_core import LearnerCore
     from qg_learning_node.core.residual_task import ACTION_DIM
     from qg_learning_node.offline import iter_transitions
-    from qg_common.params import config_dir, load_ros_params
+    from qg_common.params import config_file, load_ros_params
 
     steps, pose = 4, 3
     executor = ("executor", "qg_learning_node", "executor",
@@ -264,11 +264,11 @@ def test_in_process_runner_repeats_the_ros_stack_episode(stack, tmp_path):
     settings = StackSettings.load()
     settings = dataclasses.replace(
         settings, task=dataclasses.replace(settings.task, test_max_steps=steps))
-    params = load_ros_params(config_dir() / "learner.yaml", "learner")["learner"]
+    params = load_ros_params(config_file("learner.yaml"), "learner")["learner"]
     env = PandaTask(settings, "ekf")
     # The robot process settles its start pose (sim.initial_pose, 0) when it starts, and
     # pybullet keeps contact state across resets: give the twin the same history.
-    env.reset(load_ros_params(config_dir() / "sim.yaml")["sim"]["initial_pose"])
+    env.reset(load_ros_params(config_file("sim.yaml"))["sim"]["initial_pose"])
     learner = LearnerCore(learner_config_from_params(params), env.residual.state_dim, ACTION_DIM)
     local: list = []
     episode = Episode("local", "test", pose, "dense", env.residual)

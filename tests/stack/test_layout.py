@@ -12,7 +12,7 @@ ROOT = Path(__file__).resolve().parents[2]
 CORE_FILES = [
     *ROOT.glob("sim_robot_node/sim_robot_node/core/**/*.py"),
     *(p for p in ROOT.glob("ros_ws/src/qg_common/qg_common/*.py")
-      if p.name not in ("conversions.py", "node_runtime.py", "topics.py")),
+      if p.name not in ("conversions.py", "node_parameters.py", "node_runtime.py", "topics.py")),
     *ROOT.glob("robot_bridge_node/robot_bridge_node/core/**/*.py"),
     *ROOT.glob("qg_learning_node/qg_learning_node/core/**/*.py"),
     *(ROOT / "qg_learning_node/qg_learning_node" / f for f in
@@ -79,5 +79,43 @@ def test_robots_are_plugins_found_by_name():
     from robot_bridge_node.core.hardware_interface import robot_names, robot_plugin
     assert "sim_panda" in robot_names()
     assert robot_plugin("sim_panda").interface == "torque"
+    assert "sim_nextage" in robot_names()
+    assert robot_plugin("sim_nextage").interface == "position"
     with pytest.raises(ValueError, match="no robot plugin named 'franka_typo'"):
         robot_plugin("franka_typo")
+
+
+#: The sources of the packages the stack installs (build scripts excepted).
+PACKAGE_SOURCES = [p for d in ("ros_ws/src/qg_common", "ros_ws/src/qg_recording", "sim_robot_node",
+                               "robot_bridge_node", "qg_learning_node")
+                   for p in (ROOT / d).rglob("*.py") if p.name != "setup.py"]
+
+
+def test_no_package_finds_files_by_walking_up_from_its_own_source():
+    assert len(PACKAGE_SOURCES) >= 50
+    offenders = [str(p.relative_to(ROOT)) for p in PACKAGE_SOURCES if "__file__" in p.read_text()]
+    assert offenders == []
+
+
+@pytest.mark.ros
+def test_config_files_are_installed_to_share_and_found_through_the_ament_index(monkeypatch):
+    from qg_common.params import config_file, package_config
+    monkeypatch.delenv("QG_CONFIG_DIR", raising=False)
+    for package, name in [("robot_bridge_node", "bridge.yaml"), ("robot_bridge_node", "sim.yaml"),
+                          ("sim_robot_node", "panda_scene.yaml"),
+                          ("qg_learning_node", "executor.yaml"), ("qg_learning_node", "stack.yaml")]:
+        path = package_config(package, name)
+        assert path.parent.parts[-3:] == ("share", package, "config"), path
+        assert "install" in path.parts
+        # symlink-installed from the repository's config/, the one source of the numbers
+        assert path.resolve() == (ROOT / "config" / name).resolve()
+        assert config_file(name) == path
+
+
+def test_runs_go_to_qg_runs_dir_or_the_current_directory(monkeypatch, tmp_path):
+    from qg_common.params import runs_dir
+    monkeypatch.setenv("QG_RUNS_DIR", str(tmp_path / "elsewhere"))
+    assert runs_dir() == tmp_path / "elsewhere"
+    monkeypatch.delenv("QG_RUNS_DIR")
+    monkeypatch.chdir(tmp_path)
+    assert runs_dir() == tmp_path / "runs"

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import yaml
 
-from qg_learning_node.cli.ros_env import repo_root
+from qg_common.params import config_file
 from qg_recording.bag_reader import BagInfo, NotABagError, bag_files, bag_info
 from qg_recording.rosbag2_metadata import METADATA_FILE
 
@@ -102,7 +102,7 @@ def _into_learner(args: argparse.Namespace, paths: list[Path]) -> int:
     from qg_learning_node.offline import rebuild_from_bags
 
     try:
-        config = _learner_config(args.learner_config)
+        config = _learner_config(args.learner_config or str(config_file("learner.yaml")))
         result = rebuild_from_bags(paths, config=config, train_iterations=args.train_iterations)
     except (ValueError, FileNotFoundError) as exc:
         return _fail("replay", str(exc))
@@ -172,9 +172,9 @@ def add_parsers(subparsers: argparse._SubParsersAction) -> None:
                         help="rebuild replay memory and Q-Graph from /transitions instead of publishing")
     replay.add_argument("--train-iterations", type=int, default=0,
                         help="with --into-learner: train steps after the rebuild (whole cycles)")
-    replay.add_argument("--learner-config", default=str(repo_root() / "config" / "learner.yaml"),
-                        help="with --into-learner: the learner's parameter file (default: "
-                             "config/learner.yaml, as the learner node uses)")
+    replay.add_argument("--learner-config", default=None,
+                        help="with --into-learner: the learner's parameter file (default: the "
+                             "learner.yaml qg_learning_node installs, as the learner node uses)")
     replay.add_argument("--save-checkpoint", default=None,
                         help="with --into-learner: write a learner checkpoint here")
     replay.set_defaults(func=cmd_replay)

@@ -14,8 +14,10 @@ import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
+from qg_common.params import config_file, runs_dir
+
 from qg_learning_node.cli.launcher import Launcher, ProcessSpec, load_stack_config
-from qg_learning_node.cli.ros_env import repo_root, stack_env
+from qg_learning_node.cli.ros_env import stack_env
 from qg_learning_node.training_log import TrainingLog
 
 __all__ = ["add_parser", "DemoSettings", "EpisodeOutcome", "StepMonitor",
@@ -236,12 +238,13 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from qg_learning_node.cli.ros_client import CliNode
-    run_dir = Path(args.runs_dir) / time.strftime("demo_%Y%m%d_%H%M%S")
+    run_dir = Path(args.runs_dir or runs_dir()) / time.strftime("demo_%Y%m%d_%H%M%S")
     run_dir.mkdir(parents=True, exist_ok=True)
     settings = DemoSettings(train_max_steps=args.train_max_steps, critic_lr=args.critic_lr,
                             iterations=args.iterations, schedule=args.schedule,
                             updates_per_step=args.updates_per_step)
-    launcher, env = start_stack(run_dir, settings, Path(args.config))
+    launcher, env = start_stack(run_dir, settings,
+                                Path(args.config) if args.config else config_file("stack.yaml"))
     schedule = [("train", -1)] * args.train_episodes + [("test", p) for p in range(args.test_poses)]
     outcomes: list[EpisodeOutcome] = []
     log = TrainingLog(run_dir / "tensorboard")
@@ -281,8 +284,10 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     demo = sub.add_parser("demo", help="the main job: train on the ROS stack, test, plot")
-    demo.add_argument("--config", default=str(repo_root() / "config" / "stack.yaml"))
-    demo.add_argument("--runs-dir", default=str(repo_root() / "runs"))
+    demo.add_argument("--config", default=None,
+                      help="stack file (default: the stack.yaml qg_learning_node installs)")
+    demo.add_argument("--runs-dir", default=None,
+                      help="parent of the run folder (default: $QG_RUNS_DIR, else ./runs)")
     demo.add_argument("--train-episodes", type=int, default=40, help="(thesis: 40)")
     demo.add_argument("--test-poses", type=int, default=8)
     demo.add_argument("--train-max-steps", type=int, default=DemoSettings.train_max_steps,

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -24,7 +25,8 @@ from typing import IO, Any
 
 import yaml
 
-from qg_learning_node.cli.ros_env import install_dir
+from ament_index_python.packages import (PackageNotFoundError, get_package_prefix,
+                                         get_package_share_directory)
 
 __all__ = ["ProcessSpec", "Launcher", "load_stack_config", "StackConfigError"]
 
@@ -55,15 +57,38 @@ class ProcessSpec:
     args: tuple[str, ...] = ()
 
     def command(self) -> list[str]:
-        exe = install_dir() / self.package / "lib" / self.package / self.executable
+        """What ``ros2 run`` runs: ``lib/<package>/<executable>`` under the package's prefix in
+        the ament index (the launcher's environment is the stack's, ``ros_env.stack_env``)."""
+        try:
+            prefix = Path(get_package_prefix(self.package))
+        except (PackageNotFoundError, LookupError, EnvironmentError):
+            raise StackConfigError(f"package {self.package!r} is not installed: run "
+                                   "scripts/setup.sh") from None
+        exe = prefix / "lib" / self.package / self.executable
         if not exe.is_file():
             raise StackConfigError(f"{self.package}/{self.executable} is not built ({exe} missing): "
                                    "run scripts/setup.sh")
         return [str(exe), *self.args]
 
 
+#: ``$(find-pkg-share <package>)`` in an argument, as in a ROS 2 launch file.
+_FIND_PKG_SHARE = re.compile(r"\$\(find-pkg-share ([A-Za-z0-9_]+)\)")
+
+
+def _substitute(arg: str) -> str:
+    """``arg`` with every ``$(find-pkg-share pkg)`` replaced by the package's share folder."""
+    def share(match: re.Match) -> str:
+        try:
+            return get_package_share_directory(match.group(1))
+        except (PackageNotFoundError, LookupError, EnvironmentError):
+            raise StackConfigError(f"$(find-pkg-share {match.group(1)}): no such package "
+                                   "installed") from None
+    return _FIND_PKG_SHARE.sub(share, arg)
+
+
 def load_stack_config(path: Path) -> list[ProcessSpec]:
-    """The ``processes:`` list of a stack file such as ``config/stack.yaml``."""
+    """The ``processes:`` list of a stack file such as ``config/stack.yaml``; arguments may
+    name installed files as ``$(find-pkg-share <package>)/config/<file>``."""
     if not path.is_file():
         raise StackConfigError(f"config file not found: {path}")
     try:
@@ -84,7 +109,8 @@ def load_stack_config(path: Path) -> list[ProcessSpec]:
         if not isinstance(args, list):
             raise StackConfigError(f"{path}: processes[{i}].args must be a list")
         specs.append(ProcessSpec(str(entry["name"]), str(entry["package"]),
-                                 str(entry["executable"]), tuple(str(a) for a in args)))
+                                 str(entry["executable"]),
+                                 tuple(_substitute(str(a)) for a in args)))
     names = [s.name for s in specs]
     if len(set(names)) != len(names):
         raise StackConfigError(f"{path}: process names must be unique, got {names}")

@@ -11,14 +11,16 @@ import signal
 import sys
 from pathlib import Path
 
+from qg_common.params import ConfigError, config_file
+
 from qg_learning_node.cli.launcher import Launcher, StackConfigError, load_stack_config
-from qg_learning_node.cli.ros_env import repo_root, stack_env
+from qg_learning_node.cli.ros_env import exports, stack_env
 
 __all__ = ["main", "build_parser"]
 
 
 def _cmd_up(args: argparse.Namespace) -> int:
-    specs = load_stack_config(Path(args.config))
+    specs = load_stack_config(Path(args.config) if args.config else config_file("stack.yaml"))
     launcher = Launcher(env=stack_env(), log_dir=Path(args.log_dir) if args.log_dir else None)
     stopping = False
 
@@ -93,8 +95,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     up = sub.add_parser("up", help="start the stack's processes; Ctrl-C stops all")
-    up.add_argument("--config", default=str(repo_root() / "config" / "stack.yaml"),
-                    help="stack file listing the processes (default: config/stack.yaml)")
+    up.add_argument("--config", default=None,
+                    help="stack file listing the processes (default: the stack.yaml that "
+                         "qg_learning_node installs, share/qg_learning_node/config)")
     up.add_argument("--log-dir", default=None, help="also write each process's output here")
     up.set_defaults(func=_cmd_up)
 
@@ -117,6 +120,9 @@ def build_parser() -> argparse.ArgumentParser:
     nodes.add_argument("--wait", type=float, default=2.0, help="discovery time [s]")
     nodes.set_defaults(func=_cmd_nodes)
 
+    # (answered before qgl enters the stack's environment, see main())
+    sub.add_parser("env", help='print the stack\'s environment as exports: eval "$(qgl env)"')
+
     from qg_learning_node.cli import demo
     demo.add_parser(sub)
     try:
@@ -130,6 +136,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    if argv == ["env"]:      # what a shell lacks to run the stack's Python (benchmarks, nodes)
+        try:
+            print(exports())
+        except FileNotFoundError as exc:
+            print(f"qgl: {exc}", file=sys.stderr)
+            return 2
+        return 0
     if os.environ.get("QG_STACK_ENV") != "1":
         # Type support of our interfaces needs LD_LIBRARY_PATH before Python starts.
         try:
@@ -141,7 +154,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (StackConfigError, TimeoutError, FileNotFoundError, RuntimeError) as exc:
+    except (StackConfigError, ConfigError, TimeoutError, FileNotFoundError, RuntimeError) as exc:
         print(f"qgl: {exc}", file=sys.stderr)
         return 2
 

@@ -2,7 +2,9 @@
 
 The interface package's type support is a set of shared libraries: ``LD_LIBRARY_PATH`` must name
 them before Python starts, so ``qgl`` and the test fixture build this environment for the
-processes they start, and ``qgl`` re-executes itself in it once.
+processes they start, and ``qgl`` re-executes itself in it once. The workspace is the one named
+by ``$QG_ROS_INSTALL`` (``scripts/*.sh`` and the ``.venv/bin/qgl`` that ``scripts/setup.sh``
+writes set it) or, in a shell that sourced ``install/setup.bash``, the one the ament index names.
 """
 from __future__ import annotations
 
@@ -13,7 +15,10 @@ import sysconfig
 from collections.abc import Mapping
 from pathlib import Path
 
-__all__ = ["repo_root", "install_dir", "stack_env", "PACKAGES", "DEFAULT_DOMAIN_ID"]
+from ament_index_python.packages import PackageNotFoundError, get_package_prefix
+from qg_common.params import runs_dir
+
+__all__ = ["install_dir", "stack_env", "exports", "PACKAGES", "DEFAULT_DOMAIN_ID"]
 
 PACKAGES = ("qg_interfaces", "qg_common", "qg_recording", "sim_robot_node", "robot_bridge_node",
             "qg_learning_node")
@@ -21,13 +26,22 @@ PACKAGES = ("qg_interfaces", "qg_common", "qg_recording", "sim_robot_node", "rob
 DEFAULT_DOMAIN_ID = "42"
 
 
-def repo_root() -> Path:
-    # <repo>/qg_learning_node/qg_learning_node/cli/ros_env.py
-    return Path(__file__).resolve().parents[3]
-
-
 def install_dir() -> Path:
-    return repo_root() / "ros_ws" / "install"
+    """The colcon install folder of the stack's workspace (the one with ``setup.bash``).
+
+    :raises FileNotFoundError: if neither ``$QG_ROS_INSTALL`` nor the ament index names one.
+    """
+    env = os.environ.get("QG_ROS_INSTALL")
+    if env:
+        return Path(env)
+    try:   # sourced: isolated installs live in <install>/<package>
+        prefix = Path(get_package_prefix("qg_interfaces"))
+    except (PackageNotFoundError, LookupError, EnvironmentError):
+        raise FileNotFoundError("the stack's workspace is unknown: run scripts/setup.sh and use "
+                                ".venv/bin/qgl, or set QG_ROS_INSTALL=<repo>/ros_ws/install") \
+            from None
+    return next((p for p in (prefix, prefix.parent) if (p / "setup.bash").is_file()),
+                prefix.parent)
 
 
 def _prepend(env: dict[str, str], key: str, paths: list[str]) -> None:
@@ -65,15 +79,22 @@ def stack_env(base: Mapping[str, str] | None = None, domain_id: str | None = Non
     env.setdefault("ROS_DOMAIN_ID", DEFAULT_DOMAIN_ID)
     if log_dir is not None:
         env["ROS_LOG_DIR"] = str(log_dir)
-    env.setdefault("ROS_LOG_DIR", str(repo_root() / "runs" / "ros_log"))
+    env.setdefault("ROS_LOG_DIR", str(runs_dir() / "ros_log"))
     env.setdefault("PYTHONUNBUFFERED", "1")
     env["QG_STACK_ENV"] = "1"
+    env["QG_ROS_INSTALL"] = str(install)
     return env
+
+
+def exports(base: Mapping[str, str] | None = None) -> str:
+    """Shell ``export`` lines that give a shell the stack's environment (what ``base`` lacks)."""
+    import shlex
+    base = os.environ if base is None else base
+    return "\n".join(f"export {key}={shlex.quote(value)}"
+                     for key, value in sorted(stack_env(base).items())
+                     if key.isidentifier() and base.get(key) != value)
 
 
 if __name__ == "__main__":
     # `eval "$(python -m qg_learning_node.cli.ros_env)"` gives a shell the stack's environment.
-    import shlex
-    for key, value in sorted(stack_env().items()):
-        if key.isidentifier() and os.environ.get(key) != value:
-            print(f"export {key}={shlex.quote(value)}")
+    print(exports())

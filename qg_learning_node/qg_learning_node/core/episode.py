@@ -12,11 +12,12 @@ from typing import Any
 import numpy as np
 
 from qg_learning_node.core.noise import ActionNoise
+from qg_learning_node.core.peg_task import PegTask
 from qg_learning_node.core.residual_task import Observation, ResidualTask
 
 __all__ = ["Episode", "TransitionRecord", "Actor"]
 
-#: The local policy: scaled state -> actor output in [-1, 1]^2.
+#: The local policy: scaled state -> actor output in [-1, 1]^action_dim.
 Actor = Callable[[np.ndarray], np.ndarray]
 
 
@@ -50,7 +51,7 @@ class Episode:
     """
 
     def __init__(self, episode_id: str, mode: str, initial_pose: int, reward_kind: str,
-                 task: ResidualTask, noise: ActionNoise | None = None) -> None:
+                 task: ResidualTask | PegTask, noise: ActionNoise | None = None) -> None:
         self.episode_id = episode_id
         self.mode = mode
         self.initial_pose = initial_pose
@@ -81,9 +82,10 @@ class Episode:
         A non-finite actor output is replaced by the zero residual, never sent to the robot.
         """
         assert self.state is not None, "begin() first"
-        action = np.zeros(2) if actor is None else np.asarray(actor(self.state), dtype=np.float64)
+        zero = np.zeros(self.task.action_dim)
+        action = zero if actor is None else np.asarray(actor(self.state), dtype=np.float64)
         if not np.all(np.isfinite(action)):
-            action = np.zeros(2)
+            action = zero
         if self.mode == "train" and self.noise is not None and actor is not None:
             action = self.noise.perturb(action)
         return np.clip(action, -1.0, 1.0)

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from qg_common.types import WrenchSetpoint
 
 __all__ = ["TaskConfig", "Observation", "ResidualTask", "OBSERVATIONS", "STATE_DIM", "ACTION_DIM",
            "state_dim", "tilt_from_push_axis"]
@@ -115,10 +116,13 @@ class Observation:
     orientation_error: float      # [rad] norm of the x/y angle-axis error
     lateral_offset: float         # [m] tip from the hole axis
     tool_rotation: np.ndarray | None = None  # (3, 3) tool orientation, base frame, from measured joints
+    tool_position: np.ndarray | None = None  # (3,) tool position, base frame, from measured joints
 
 
 class ResidualTask:
     """Maps observations to states and rewards, and actions to feed-forward wrenches."""
+
+    action_dim = ACTION_DIM
 
     def __init__(self, config: TaskConfig) -> None:
         self.config = config
@@ -151,6 +155,15 @@ class ResidualTask:
             raise ValueError(f"action must be {ACTION_DIM} finite numbers, got {action!r}")
         tx, ty = np.clip(a, -1.0, 1.0) * self.config.max_residual_torque
         return np.array([0.0, 0.0, self.config.base_force, tx, ty, 0.0])
+
+    def command(self, action: np.ndarray, obs: Observation) -> WrenchSetpoint:
+        """The setpoint of ``action``: its feed-forward wrench from the pose at rest now."""
+        del obs
+        return WrenchSetpoint(self.wrench(action))
+
+    def hold(self) -> WrenchSetpoint:
+        """The zero residual: the base push only, from where the tool is (the safe command)."""
+        return WrenchSetpoint.residual(self.config.base_force, 0.0, 0.0)
 
     def reward(self, obs: Observation, kind: str) -> float:
         """Sparse: -1 per step, 0 at the goal. Dense: 0.5 (exp(-dR/sR) + exp(-dP/sP)) - 1."""

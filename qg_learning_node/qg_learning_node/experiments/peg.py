@@ -13,13 +13,11 @@ import dataclasses
 import itertools
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
-from qg_common.params import config_dir as default_config_dir
-from qg_common.params import load_ros_params
+from qg_common.params import config_file, load_ros_params
 
 from qg_learning_node.core.learner_params import learner_config_from_params
 from qg_learning_node.core.noise import ActionNoise, NoiseConfig
@@ -82,10 +80,13 @@ def run_peg(spec: PegRunSpec) -> dict[str, Any]:
     """Train for ``spec.episodes`` episodes; per-episode records and the final Q on the grid."""
     torch.set_num_threads(1)
     start = time.perf_counter()
-    d = Path(spec.config_dir) if spec.config_dir else default_config_dir()
-    env = make_environment("peg", load_ros_params(d / "peg_env.yaml"),
+
+    def params(name: str) -> dict[str, Any]:
+        return load_ros_params(config_file(name, spec.config_dir))
+
+    env = make_environment("peg", params("peg_env.yaml"),
                            episode_steps=spec.episode_steps)
-    base = learner_config_from_params(load_ros_params(d / "learner.yaml")["learner"])
+    base = learner_config_from_params(params("learner.yaml")["learner"])
     config = algorithm_config(base, spec.algorithm, env.action_dim)
     config = dataclasses.replace(
         config, seed=spec.seed, iterations_per_cycle=spec.train_iterations,
@@ -93,7 +94,7 @@ def run_peg(spec: PegRunSpec) -> dict[str, Any]:
         ddpg=dataclasses.replace(config.ddpg, actor_hidden=(200, 200, 200),
                                  critic_hidden=(200, 200, 200), critic_lr=spec.lr,
                                  actor_lr=spec.lr, seed=spec.seed))
-    noise_config = NoiseConfig.from_dict(load_ros_params(d / "executor.yaml").get("noise", {}))
+    noise_config = NoiseConfig.from_dict(params("executor.yaml").get("noise", {}))
     learner = LearnerCore(config, env.state_dim, env.action_dim)
     episodes = []
     try:

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from qg_common.params import config_dir
+from qg_common.params import config_file
 
 from qg_learning_node.core.residual_task import state_dim
 from qg_learning_node.experiments.runner import ALGORITHMS, ESTIMATORS
@@ -103,7 +103,7 @@ class Profile:
 
 def load_profile(name: str, path: Path | None = None, estimator: str | None = None) -> Profile:
     """Profile ``name`` of ``config/experiments.yaml`` (or ``path``)."""
-    data = yaml.safe_load((Path(path) if path else config_dir() / "experiments.yaml").read_text())
+    data = yaml.safe_load((Path(path) if path else config_file("experiments.yaml")).read_text())
     profiles = data["profiles"]
     if name not in profiles:
         raise ValueError(f"unknown profile {name!r}; known: {sorted(profiles)}")

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 import torch
-from qg_common.params import config_dir, load_ros_params
+from qg_common.params import config_file, load_ros_params
 from qg_common.rotations import housing_rotation
 from qg_common.types import N_START_POSES, WrenchSetpoint
 from robot_bridge_node.core.hardware_interface import load_robot
@@ -69,10 +69,9 @@ STACK_CONFIG_FILES = ("panda_scene.yaml", "bridge.yaml", "wrench_estimator.yaml"
 
 def config_digest(directory: str | Path | None = None) -> str:
     """Short hash of the stack's config files: a saved run is reused only under the same one."""
-    d = Path(directory) if directory else config_dir()
     digest = hashlib.sha256()
     for name in STACK_CONFIG_FILES:
-        digest.update(name.encode() + b"\0" + (d / name).read_bytes())
+        digest.update(name.encode() + b"\0" + config_file(name, directory).read_bytes())
     return digest.hexdigest()[:12]
 
 
@@ -98,15 +97,14 @@ class StackSettings:
 
     @classmethod
     def load(cls, directory: Path | None = None) -> StackSettings:
-        d = Path(directory) if directory else config_dir()
-        executor = load_ros_params(d / "executor.yaml")
-        return cls(robot=load_ros_params(d / "panda_scene.yaml"),
-                   bridge=load_ros_params(d / "bridge.yaml"),
-                   ekf=load_ros_params(d / "wrench_estimator.yaml")["ekf"],
+        executor = load_ros_params(config_file("executor.yaml", directory))
+        return cls(robot=load_ros_params(config_file("panda_scene.yaml", directory)),
+                   bridge=load_ros_params(config_file("bridge.yaml", directory)),
+                   ekf=load_ros_params(config_file("wrench_estimator.yaml", directory))["ekf"],
                    task=TaskConfig.from_dict(executor["task"]),
                    noise=NoiseConfig.from_dict(executor.get("noise", {})),
                    learner=learner_config_from_params(
-                       load_ros_params(d / "learner.yaml")["learner"]))
+                       load_ros_params(config_file("learner.yaml", directory))["learner"]))
 
 
 class PandaTask:

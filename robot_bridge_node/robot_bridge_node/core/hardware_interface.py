@@ -20,11 +20,13 @@ from importlib.metadata import entry_points
 from typing import Any, Literal, Protocol
 
 import numpy as np
+from qg_common.params import ParameterSection
 from qg_common.types import GroundTruth, JointState
 
-__all__ = ["TorqueInterface", "PositionInterface", "SimulationInterface", "ToolDescription",
-           "RobotDescription", "Robot", "RobotPlugin", "ROBOT_PLUGIN_GROUP", "robot_names", "robot_plugin",
-           "load_robot"]
+__all__ = ["TorqueInterface", "PositionInterface", "ForceTorqueSensor", "SimulationInterface",
+           "ToolDescription",
+           "RobotDescription", "Robot", "RobotPlugin", "RobotChoice", "ROBOT_SECTION",
+           "ROBOT_PLUGIN_GROUP", "robot_names", "robot_plugin", "load_robot"]
 
 #: The entry-point group robots register under (``name = module:RobotPlugin instance``).
 ROBOT_PLUGIN_GROUP = "robot_bridge_node.robots"
@@ -53,6 +55,14 @@ class PositionInterface(Protocol):
 
     def write(self, q: np.ndarray) -> None:
         """Hold joint position targets [rad] for one control period."""
+        ...
+
+
+class ForceTorqueSensor(Protocol):
+    """A wrist force-torque sensor (the Nextage's): the wrench it measures, tared."""
+
+    def read_wrench(self) -> np.ndarray:
+        """(6,) ``(Fx, Fy, Fz, Tx, Ty, Tz)`` [N, Nm] in the sensor frame (z along the tool)."""
         ...
 
 
@@ -92,10 +102,14 @@ class RobotDescription:
     :param joint_names: the arm's joints, in the order of every joint vector.
     :param tool: the held tool, for the controller's and the estimator's model.
     :param dt: [s] the control period the hardware runs at.
+    :param urdf: the arm's URDF, for a position robot's task-space controller ("" if unused).
+    :param tool_frame: the controlled frame of that URDF.
     """
     joint_names: tuple[str, ...]
     tool: ToolDescription
     dt: float
+    urdf: str = ""
+    tool_frame: str = ""
 
 
 @dataclass
@@ -104,26 +118,47 @@ class Robot:
 
     :param hardware: the interface the loop reads and writes every period.
     :param simulation: the simulation's extra powers; ``None`` on real hardware.
+    :param wrist_sensor: a force-torque sensor at the wrist, if the robot has one; the loop's
+        wrench then comes from it instead of an estimator.
     """
     hardware: TorqueInterface | PositionInterface
     simulation: SimulationInterface | None
     description: RobotDescription
+    wrist_sensor: ForceTorqueSensor | None = None
 
 
 @dataclass(frozen=True)
 class RobotPlugin:
     """How a robot package makes its robot: registered as an entry point, loaded by name.
 
-    :param interface: which hardware interface it implements.
-    :param config_files: parameter files under ``config/`` the robot's sections come from.
-    :param describe: the description from the robot process's parameters, without building the
+    :param interface: which hardware interface it implements; it decides the bridge's
+        controller (``torque``: hybrid force/impedance, ``position``: task-space IK).
+    :param config_files: ``(package, file)`` in ``share/<package>/config`` with the defaults of
+        the robot's own parameters and of its controller's gains for this robot.
+    :param parameters: the robot's own parameters, declared by the ``sim`` node.
+    :param describe: the description from those parameters (nested dict), without building the
         robot (the separate bridge and estimator processes need only this).
-    :param create: builds the robot from the robot process's parameters (nested dict).
+    :param create: builds the robot from those parameters.
     """
     interface: Literal["torque", "position"]
-    config_files: tuple[str, ...]
+    config_files: tuple[tuple[str, str], ...]
+    parameters: tuple[ParameterSection, ...]
     describe: Callable[[dict[str, Any]], RobotDescription]
     create: Callable[[dict[str, Any]], Robot]
+
+
+@dataclass(frozen=True)
+class RobotChoice:
+    """Which robot a process runs.
+
+    :param robot: the robot plugin to load, by its entry-point name in the group
+        ``robot_bridge_node.robots`` (``sim_panda``, ``sim_nextage``, ...).
+    """
+    robot: str = "sim_panda"
+
+
+#: The ``robot`` parameter (declared by the node that loads the plugin).
+ROBOT_SECTION = ParameterSection("", RobotChoice)
 
 
 def robot_names() -> list[str]:

@@ -22,6 +22,8 @@ import pinocchio as pin
 
 from qg_common.params import config_from_dict
 
+from robot_bridge_node.core.impedance import ToolState
+
 __all__ = ["PositionControlConfig", "IKResult", "TaskSpacePositionController", "pose_matrix"]
 
 
@@ -126,6 +128,8 @@ class TaskSpacePositionController:
         self._pose_command: np.ndarray | None = None
         self._reference: np.ndarray | None = None
         self.rejected_references = 0
+        #: The tool's state at the last ``measure`` (None before the first).
+        self.tool: ToolState | None = None
 
     @property
     def nq(self) -> int:
@@ -136,6 +140,17 @@ class TaskSpacePositionController:
         """Tool pose (4x4) at configuration ``q``."""
         pin.framesForwardKinematics(self.model, self.data, np.asarray(q, float))
         return self.data.oMf[self._frame].homogeneous.copy()
+
+    def measure(self, q: np.ndarray, dq: np.ndarray) -> ToolState:
+        """The tool's pose and twist (base frame) at the measured joints, kept as ``tool``:
+        what the rest detector watches and the bridge publishes."""
+        q, dq = np.asarray(q, float), np.asarray(dq, float)
+        pin.forwardKinematics(self.model, self.data, q, dq)
+        pose = pin.updateFramePlacement(self.model, self.data, self._frame)
+        twist = pin.getFrameVelocity(self.model, self.data, self._frame, pin.LOCAL_WORLD_ALIGNED)
+        self.tool = ToolState(pose.translation.copy(), pose.rotation.copy(),
+                              np.concatenate((twist.linear, twist.angular)))
+        return self.tool
 
     def solve(self, q0: np.ndarray, pose: np.ndarray) -> IKResult:
         """Damped-least-squares IK for ``pose`` from ``q0``, within the joint limits."""

@@ -14,7 +14,7 @@ from typing import Any, Protocol
 
 import numpy as np
 from qg_common.params import config_from_dict
-from qg_common.types import NO_GROUND_TRUTH, GroundTruth, StepResult, WrenchSetpoint
+from qg_common.types import NO_GROUND_TRUTH, GroundTruth, JointState, StepResult, WrenchSetpoint
 
 from robot_bridge_node.core.hardware_interface import (Robot, SimulationInterface,
                                                        ToolDescription, TorqueInterface)
@@ -113,20 +113,29 @@ class RobotLoop:
 
         :raises RuntimeError: without a simulation (a real arm is not teleported).
         """
+        state = self._restart(initial_pose, housing_yaw)
+        self.controller.reset(state.q)
+        self.safety.reset(self.controller.model.gravity(state.q))
+        self.setpoint = _HOLD
+        self.holding = False
+        self._settle()
+        self.controller.set_reference_to_current(self.hardware.read().q)
+
+    def _restart(self, initial_pose: int, housing_yaw: float) -> JointState:
+        """Teleport the simulation to the start, restart the clock and the estimator."""
         if self.simulation is None:
             raise RuntimeError("this robot has no simulation: it cannot be reset to a start pose")
         self.simulation.reset(initial_pose, housing_yaw)
         self.ticks = 0
         state = self.hardware.read()
-        self.controller.reset(state.q)
-        self.safety.reset(self.controller.model.gravity(state.q))
         if self.estimator is not None:
             self.estimator.reset(state.q)
-        self.setpoint = _HOLD
-        self.holding = False
+        return state
+
+    def _settle(self) -> None:
+        """Hold the start for ``settle_time``."""
         for _ in range(round(self.config.settle_time / self.config.dt)):
             self.tick()
-        self.controller.set_reference_to_current(self.hardware.read().q)
 
     def command(self, setpoint: WrenchSetpoint) -> None:
         """Start executing ``setpoint`` (the residual policy's reference is the current pose).
@@ -140,6 +149,10 @@ class RobotLoop:
         self.holding = False
         self.safety.feed_watchdog(self.time)
         self.rest.reset()
+
+    def feed_watchdog(self) -> None:
+        """The running setpoint was repeated: the realtime watchdog keeps it (no new step)."""
+        self.safety.feed_watchdog(self.time)
 
     def tick(self) -> bool:
         """One millisecond. True when the current step has come to rest or timed out."""

@@ -14,6 +14,7 @@ of side ``workspace_side`` standing on that floor.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
+from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
@@ -43,8 +44,8 @@ def _quaternion(rotation: np.ndarray) -> list[float]:
 
 
 def nextage_urdf_path() -> Path:
-    """Path of our Nextage Open arm URDF."""
-    return Path(__file__).resolve().parents[1] / "assets" / "nextage" / "nextage_arm.urdf"
+    """Path of our Nextage Open arm URDF (package data of ``sim_robot_node``)."""
+    return Path(str(files("sim_robot_node") / "assets" / "nextage" / "nextage_arm.urdf"))
 
 
 @dataclass(frozen=True)

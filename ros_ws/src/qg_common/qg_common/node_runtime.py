@@ -1,9 +1,12 @@
-"""What every node executable of the stack shares: parameters from ``config/``, spin, clean exit.
+"""What every node executable of the stack shares: spin, refuse unknown parameters, clean exit.
 
-``ros2 run`` and ``qgl up`` both call a node's ``main()``. Without a ``--params-file`` on the
-command line the node reads its YAML from the project's ``config/`` folder, so a bare
-``ros2 run sim_robot_node sim`` behaves like the configured stack. SIGINT and SIGTERM end the
-process with exit code 0 after the nodes are destroyed (rclpy turns both into a shutdown).
+``ros2 run`` and ``qgl up`` both call a node's ``main()``. Each node declares its own parameters
+(``node_parameters.declare_parameters``) with its package's YAML as the defaults, so a bare
+``ros2 run robot_bridge_node robot`` behaves like the configured stack and a ``--params-file``
+or ``-p`` overrides only what it names. A given parameter that no node of the process declares
+(a misspelt name) stops the start with exit code 2, as does a value of the wrong type or out of
+range. SIGINT and SIGTERM end the process with exit code 0 after the nodes are destroyed (rclpy
+turns both into a shutdown).
 """
 from __future__ import annotations
 
@@ -13,64 +16,39 @@ import threading
 import time
 import traceback
 from collections.abc import Callable, Sequence
-from typing import Any
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 
-from qg_common.params import ConfigError, config_dir, unflatten
+from qg_common.node_parameters import unknown_overrides
+from qg_common.params import ConfigError
 
-__all__ = ["LoopThread", "RealtimePacer", "node_args", "node_params", "run_nodes"]
-
-
-def node_args(config_files: Sequence[str], argv: Sequence[str] | None = None) -> list[str]:
-    """``argv`` with ``--params-file config/<f>`` added for each file unless one is given."""
-    args = list(sys.argv if argv is None else argv)
-    if "--params-file" in args:
-        return args
-    extra: list[str] = []
-    for name in config_files:
-        path = config_dir() / name
-        if not path.is_file():
-            raise ConfigError(f"config file not found: {path}")
-        extra += ["--params-file", str(path)]
-    if "--ros-args" in args:
-        i = args.index("--ros-args") + 1
-        return args[:i] + extra + args[i:]
-    return args + ["--ros-args"] + extra
+__all__ = ["LoopThread", "RealtimePacer", "run_nodes"]
 
 
-def node_params(node: Node) -> dict[str, Any]:
-    """All parameters of ``node`` (declared from the params file) as a nested dict."""
-    flat = {name: p.value for name, p in node.get_parameters_by_prefix("").items()
-            if name != "use_sim_time"}
-    return unflatten(flat)
-
-
-def run_nodes(factories: Sequence[Callable[[], Node]], config_files: Sequence[str],
-              argv: Sequence[str] | None = None,
+def run_nodes(factories: Sequence[Callable[[], Node]], argv: Sequence[str] | None = None,
               background: Callable[[list[Node]], Callable[[], None]] | None = None) -> int:
     """Create the nodes, spin them until SIGINT/SIGTERM, and tear down cleanly.
 
-    :param factories: callables returning the nodes to run in this process (composition).
-    :param config_files: YAML files under ``config/`` read when no ``--params-file`` is given.
+    :param factories: callables returning the nodes to run in this process (composition), called
+        in order (a later one may use what an earlier node declared).
+    :param argv: the command line (default ``sys.argv``), ``--ros-args`` included.
     :param background: optional; given the nodes, starts extra work (e.g. the 1 kHz loop
         thread) and returns a function that stops it; that function raises ``RuntimeError``
         if the work failed, which makes the exit code 1.
-    :returns: never: the process exits with the code (0 on SIGINT/SIGTERM).
+    :returns: never: the process exits with the code (0 on SIGINT/SIGTERM, 2 on bad parameters).
     """
-    try:
-        args = node_args(config_files, argv)
-    except ConfigError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    rclpy.init(args=args)
+    rclpy.init(args=list(sys.argv if argv is None else argv))
     nodes: list[Node] = []
     stop_background: Callable[[], None] | None = None
     code = 0
     try:
-        nodes = [make() for make in factories]
+        for make in factories:
+            nodes.append(make())
+        unknown = unknown_overrides(nodes)
+        if unknown:
+            raise ConfigError("; ".join(unknown))
         executor = MultiThreadedExecutor(num_threads=max(2, len(nodes)))
         for node in nodes:
             executor.add_node(node)

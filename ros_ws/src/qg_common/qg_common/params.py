@@ -1,41 +1,98 @@
-"""Parameters from ROS 2 YAML files, readable without rclpy.
+"""Parameters from ROS 2 YAML files, readable without rclpy, and where those files are.
 
-The same ``config/*.yaml`` files feed ``ros2 run`` (via ``--params-file``) and the pure cores
-(tests, benchmarks), so the numbers live in one place. A file holds sections keyed by node name
-(or ``/**`` for every node), each with a ``ros__parameters`` dict; nested keys appear to ROS as
-dotted names, which ``unflatten`` turns back into nested dicts.
+The same YAML files feed the nodes (their parameter defaults) and the pure cores (tests,
+benchmarks, the fast runner), so the numbers live in one place: the repository's ``config/``,
+installed by each package's ``setup.py`` to ``share/<package>/config`` and found through the
+ament index, like any ROS package's config. A file holds sections keyed by node name (or ``/**``
+for every node), each with a ``ros__parameters`` dict; nested keys appear to ROS as dotted names,
+which ``unflatten`` turns back into nested dicts (``flatten`` the other way).
 """
 from __future__ import annotations
 
+import math
 import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
 from pathlib import Path
-from dataclasses import fields
 from typing import Any, TypeVar
 
 T = TypeVar("T")
 
 import yaml
+from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
 
-__all__ = ["ConfigError", "config_dir", "config_from_dict", "load_ros_params", "runs_dir",
-           "unflatten"]
+__all__ = ["ConfigError", "ParameterSection", "POSITIVE", "CONFIG_PACKAGES", "config_file", "config_from_dict", "flatten",
+           "load_ros_params", "package_config", "runs_dir", "unflatten"]
+
+#: The packages that install config files (``share/<package>/config``), searched in this order.
+CONFIG_PACKAGES = ("robot_bridge_node", "sim_robot_node", "qg_learning_node")
 
 
 class ConfigError(ValueError):
     """A parameter file is missing or malformed."""
 
 
-def config_dir() -> Path:
-    """The project's ``config/`` folder (``$QG_CONFIG_DIR`` overrides it, e.g. when installed)."""
-    env = os.environ.get("QG_CONFIG_DIR")
-    if env:
-        return Path(env)
-    return Path(__file__).resolve().parents[4] / "config"
+#: The range of a quantity that only has to be positive (``__post_init__`` checks the rest).
+POSITIVE = (0.0, math.inf)
+
+
+@dataclass(frozen=True)
+class ParameterSection:
+    """One config dataclass as a block of a node's ROS parameters (``node_parameters``).
+
+    :param prefix: the parameters' common prefix (``impedance``), "" for top-level names.
+    :param config: the frozen config dataclass; its ``__post_init__`` stays the validator.
+    :param ranges: field name (dotted below the prefix) -> ``(lowest, highest)`` allowed.
+    :param runtime: field names whose change the node applies while it runs; all others are
+        read-only.
+    """
+    prefix: str
+    config: type
+    ranges: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    runtime: frozenset[str] = frozenset()
+
+
+def package_config(package: str, name: str) -> Path:
+    """``share/<package>/config/<name>`` of an installed package (found through the ament index).
+
+    :raises ConfigError: if the package is not on ``AMENT_PREFIX_PATH`` or lacks the file.
+    """
+    try:
+        path = Path(get_package_share_directory(package)) / "config" / name
+    except (PackageNotFoundError, LookupError, EnvironmentError) as exc:
+        raise ConfigError(f"package {package!r} is not installed where the ament index looks "
+                          f"({exc}); run scripts/setup.sh and source ros_ws/install/setup.bash "
+                          "(qgl and scripts/*.sh do that themselves)") from None
+    if not path.is_file():
+        raise ConfigError(f"config file not found: {path}")
+    return path
+
+
+def config_file(name: str, directory: str | Path | None = None) -> Path:
+    """The stack's config file ``name``: ``<directory>/<name>`` if a folder of edited copies is
+    given (or ``$QG_CONFIG_DIR`` names one), else the one an installed package ships
+    (``CONFIG_PACKAGES``).
+
+    :raises ConfigError: if no package ships it.
+    """
+    directory = directory or os.environ.get("QG_CONFIG_DIR")
+    if directory:
+        return Path(directory) / name
+    problems = []
+    for package in CONFIG_PACKAGES:
+        try:
+            return package_config(package, name)
+        except ConfigError as exc:
+            problems.append(str(exc))
+    raise ConfigError(f"no package of {CONFIG_PACKAGES} ships config/{name}: "
+                      + "; ".join(problems))
 
 
 def runs_dir() -> Path:
-    """Where runs are written (episode bags, checkpoints): ``$QG_RUNS_DIR``, else ``<repo>/runs``."""
+    """Where runs are written (episode bags, checkpoints, ROS logs): ``$QG_RUNS_DIR``, else
+    ``runs/`` in the current directory."""
     env = os.environ.get("QG_RUNS_DIR")
-    return Path(env) if env else Path(__file__).resolve().parents[4] / "runs"
+    return Path(env) if env else Path.cwd() / "runs"
 
 
 def _merge(base: dict[str, Any], extra: dict[str, Any]) -> dict[str, Any]:
@@ -60,6 +117,18 @@ def unflatten(flat: dict[str, Any]) -> dict[str, Any]:
                 raise ConfigError(f"parameter {name!r} clashes with a scalar at {part!r}")
         node[parts[-1]] = value
     return nested
+
+
+def flatten(nested: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """``{"a": {"b": 1}}`` -> ``{"a.b": 1}``: the names ROS gives nested keys."""
+    flat: dict[str, Any] = {}
+    for key, value in nested.items():
+        name = f"{prefix}.{key}" if prefix else key
+        if isinstance(value, dict):
+            flat.update(flatten(value, name))
+        else:
+            flat[name] = value
+    return flat
 
 
 def load_ros_params(path: Path, node_name: str | None = None) -> dict[str, Any]:

@@ -4,9 +4,9 @@ A bag must carry the full definition of every recorded type so that any reader (
 Foxglove, `ros2 bag`) can decode it without our interface package installed. rosbag2 builds the
 text from the installed `.msg` files: the root definition verbatim, then every dependency once
 (depth first, in sorted order), each preceded by an 80-character `=` line and `MSG: pkg/Type`.
-We reproduce that here from the same `.msg` files, found on AMENT_PREFIX_PATH, in this
-interpreter's prefix (the venv ships the standard interfaces) and, for `qg_interfaces` before the
-colcon build, in the workspace sources.
+We reproduce that here from the same `.msg` files, found on AMENT_PREFIX_PATH (our
+`qg_interfaces` once built) and in this interpreter's prefix (the venv ships the standard
+interfaces).
 """
 
 from __future__ import annotations
@@ -31,7 +31,6 @@ _FIELD_TYPE = re.compile(r"(?:^|\n)\s*([a-zA-Z0-9_/]+)(?:\[[^\]]*\])?\s+")
 _TYPE_NAME = re.compile(r"^([a-zA-Z0-9_]+)/(?:msg/)?([a-zA-Z0-9_]+)$")
 # A field type token: base type, optional string bound, optional array suffix.
 _FIELD_TOKEN = re.compile(r"^([a-zA-Z0-9_/]+)(?:<=\d+)?(?:\[(<=)?(\d*)\])?$")
-_WORKSPACE_SRC = Path(__file__).resolve().parents[3] / "ros_ws" / "src"
 
 
 class MsgNotFoundError(LookupError):
@@ -62,7 +61,6 @@ def find_msg_file(type_name: str) -> Path:
     """
     pkg, name = normalize_type_name(type_name)
     candidates = [root / pkg / "msg" / f"{name}.msg" for root in _search_roots()]
-    candidates.append(_WORKSPACE_SRC / pkg / "msg" / f"{name}.msg")
     for candidate in candidates:
         if candidate.is_file():
             return candidate

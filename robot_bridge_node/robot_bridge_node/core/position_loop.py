@@ -1,0 +1,115 @@
+"""The 1 kHz loop of a position-controlled robot (the Nextage): read, sense, IK, write.
+
+The same bookkeeping as the torque robot's ``RobotLoop`` (robot time, resets, the rest detector
+that ends an RL step, the one ``StepResult``), with another tick: the setpoint's pose reference
+goes through the task-space position controller (``position_control``) to joint targets, and the
+wrench is what the wrist force-torque sensor measures, not an estimate. A position robot has no
+feed-forward wrench: the setpoint's wrench is ignored, its reference is the command.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from qg_common.types import WrenchSetpoint
+
+from robot_bridge_node.core.hardware_interface import (ForceTorqueSensor, PositionInterface,
+                                                       Robot, SimulationInterface)
+from robot_bridge_node.core.position_control import (PositionControlConfig,
+                                                     TaskSpacePositionController, pose_matrix)
+from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
+from robot_bridge_node.core.robot_loop import LoopConfig, RobotLoop
+from robot_bridge_node.core.safety import SetpointRejected
+
+__all__ = ["PositionLoop", "WristSensor", "build_position_loop"]
+
+
+class WristSensor:
+    """The loop's wrench source on a robot with a wrist force-torque sensor: its reading."""
+
+    def __init__(self, sensor: ForceTorqueSensor) -> None:
+        self.sensor = sensor
+
+    def reset(self, q: np.ndarray) -> None:
+        del q
+
+    def update(self, q: np.ndarray, dq: np.ndarray, tau_cmd: np.ndarray,
+               dt: float) -> np.ndarray:
+        del q, dq, tau_cmd, dt
+        return self.sensor.read_wrench()
+
+
+class PositionLoop(RobotLoop):
+    """One episode's 1 kHz control of a position-controlled robot.
+
+    :param controller: pose reference in, joint targets out (clamped to its workspace box and
+        rate-limited: the position robot's safety).
+    :param estimator: the wrench source, usually ``WristSensor``; ``None`` runs without one.
+    """
+
+    def __init__(self, hardware: PositionInterface, controller: TaskSpacePositionController,
+                 rest_detector: RestDetector, estimator: WristSensor | None = None,
+                 config: LoopConfig | None = None,
+                 simulation: SimulationInterface | None = None) -> None:
+        # No torque safety filter: the controller clamps and rate-limits its own targets.
+        super().__init__(hardware, controller, None, rest_detector, estimator,  # type: ignore
+                         config, simulation)
+        self.reference = np.eye(4)
+
+    def reset(self, initial_pose: int, housing_yaw: float = 0.0) -> None:
+        """New episode: the simulation at start ``initial_pose``, then settle holding that pose.
+
+        :raises RuntimeError: without a simulation (a real arm is not teleported).
+        """
+        state = self._restart(initial_pose, housing_yaw)
+        self.controller.reset(state.q)
+        self.controller.measure(state.q, state.dq)
+        self.reference = self.controller.pose_command
+        self._settle()
+
+    def command(self, setpoint: WrenchSetpoint) -> None:
+        """Move toward the setpoint's pose reference (none: hold the current pose).
+
+        :raises SetpointRejected: for a non-finite reference; the previous command stays.
+        """
+        if setpoint.reference is None:
+            tool = self.controller.tool
+            reference = pose_matrix(tool.position, tool.rotation)
+        else:
+            reference = pose_matrix(setpoint.reference.position, setpoint.reference.rotation)
+            if not np.all(np.isfinite(reference)):
+                raise SetpointRejected(f"pose reference is not finite: {reference.tolist()}")
+        self.reference = reference
+        self.rest.reset()
+
+    def feed_watchdog(self) -> None:
+        """Nothing to feed: a position robot holds its last target by itself."""
+
+    def tick(self) -> bool:
+        """One millisecond. True when the current step has come to rest or timed out."""
+        dt = self.config.dt
+        state = self.hardware.read()
+        if self.estimator is not None:
+            self.wrench_estimate = self.estimator.update(state.q, state.dq, state.tau, dt)
+        self.hardware.write(self.controller.step(state.q, self.reference))
+        self.ticks += 1
+        state = self.hardware.read()
+        tool = self.controller.measure(state.q, state.dq)
+        return self.rest.update(tool.linear_speed, tool.angular_speed, dt)
+
+
+def build_position_loop(robot: Robot, bridge_params: dict[str, Any] | None = None) -> PositionLoop:
+    """The loop of a position-controlled robot from a plugin (``interface="position"``).
+
+    :param bridge_params: the bridge node's parameters (sections ``position_control``, ``rest``,
+        ``loop``); missing sections keep the defaults.
+    """
+    params = bridge_params or {}
+    description = robot.description
+    controller = TaskSpacePositionController(
+        description.urdf, description.tool_frame,
+        PositionControlConfig.from_dict(params.get("position_control", {})))
+    sensor = None if robot.wrist_sensor is None else WristSensor(robot.wrist_sensor)
+    return PositionLoop(robot.hardware, controller,
+                        RestDetector(RestConfig.from_dict(params.get("rest", {}))), sensor,
+                        LoopConfig.from_dict(params.get("loop", {})), robot.simulation)
