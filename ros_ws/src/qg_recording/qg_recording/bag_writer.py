@@ -7,8 +7,13 @@ safe). A writer thread, asleep otherwise, encodes the blocks and drains everythi
 MCAP file, closes a zstd chunk every `chunk_size` bytes or `flush_interval_s` seconds and then
 rewrites metadata.yaml. A chunk is flushed to the kernel as soon as it is complete, so a SIGKILL
 loses at most the chunk in progress; `close()` (also run at interpreter exit, e.g. after Ctrl-C)
-drains the queue and writes the MCAP summary. With a long backlog the writer thread gives up
-the interpreter lock between batches, so the loop thread never waits long for it.
+drains the queue and writes, as rosbag2's MCAP storage plugin does when it closes, the `rosbag2`
+metadata record (`serialized_metadata`, `ROS_DISTRO`) and the MCAP summary. With a long backlog
+the writer thread gives up the interpreter lock between batches, so the loop thread never waits
+long for it.
+
+Each channel carries what rosbag2 records for a topic: the publisher's offered QoS and the
+type's RIHS01 hash (`topic_type_hash`), read from the installed type description.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ from __future__ import annotations
 import atexit
 import threading
 import time
+import warnings
 from collections import deque
 from collections.abc import Mapping
 from pathlib import Path
@@ -26,8 +32,8 @@ import numpy as np
 
 from .cdr import FixedLayout
 from .mcap_stream import ChunkStats, McapStream
-from .rosbag2_metadata import QOS_RELIABILITIES, BagMetadata, TopicRecord, qos_profiles_yaml, write_metadata
-from .schemas import normalize_type_name, schema_text
+from .rosbag2_metadata import ROS_DISTRO, BagMetadata, TopicRecord, check_qos, qos_profiles_yaml, write_metadata
+from .schemas import TypeHashNotFoundError, normalize_type_name, schema_text, type_hash
 
 __all__ = ["BagWriter", "bag_file_name"]
 
@@ -49,7 +55,8 @@ class BagWriter:
     :param compression: chunk compression, "zstd" or "none".
     :param flush_interval_s: also close a chunk this long after its first message, so slow
         topics reach the disk too.
-    :param custom_data: strings stored in metadata.yaml `custom_data` and as MCAP metadata.
+    :param custom_data: strings stored in rosbag2's `custom_data` (metadata.yaml and the MCAP
+        `rosbag2` record).
     """
 
     def __init__(
@@ -78,8 +85,6 @@ class BagWriter:
 
         self._stream = open(self.path, "wb")
         self._mcap = McapStream(self._stream, LIBRARY, _COMPRESSIONS[compression])
-        if custom:
-            self._mcap.add_metadata("rosbag2", custom)
         self._stream.flush()  # a bag killed before its first chunk still starts with MCAP magic
         self._metadata = BagMetadata(relative_path=file_name, custom_data=custom)
         write_metadata(self.directory, self._metadata)
@@ -102,15 +107,17 @@ class BagWriter:
 
     # -- producer side -------------------------------------------------------------------------
 
-    def add_topic(self, name: str, type_name: str, qos: str = "reliable", depth: int = 10) -> None:
+    def add_topic(
+        self, name: str, type_name: str, qos: str = "reliable", depth: int = 10, durability: str = "volatile",
+    ) -> None:
         """Register a topic before writing to it; repeating a registration is a no-op.
 
         :param type_name: `pkg/msg/Type`; its `.msg` definition must be findable.
-        :param qos: "reliable" or "best_effort", the offered QoS replay will use.
+        :param qos, depth, durability: the publisher's offered QoS ("reliable" or "best_effort",
+            history depth, "volatile" or "transient_local"), which replay offers again.
         :raises ValueError: on an invalid qos or a topic re-registered with another type.
         """
-        if qos not in QOS_RELIABILITIES:
-            raise ValueError(f"qos must be one of {QOS_RELIABILITIES}, got {qos!r}")
+        check_qos(qos, durability)
         pkg, msg = normalize_type_name(type_name)
         type_name = f"{pkg}/msg/{msg}"
         if name in self._channels:
@@ -119,14 +126,20 @@ class BagWriter:
                 raise ValueError(f"topic {name} is recorded as {known}, not {type_name}")
             return
         schema = schema_text(type_name).encode()
+        try:
+            hash_string = type_hash(type_name)
+        except TypeHashNotFoundError as exc:  # recordable all the same: rosbag2 then writes ""
+            warnings.warn(f"{exc}; recording {name} without a type hash", stacklevel=2)
+            hash_string = ""
         with self._lock:
             schema_id = self._schemas.get(type_name)
             if schema_id is None:
                 schema_id = self._mcap.add_schema(type_name, "ros2msg", schema)
                 self._schemas[type_name] = schema_id
-            metadata = {"offered_qos_profiles": qos_profiles_yaml(qos, depth) + "\n", "topic_type_hash": ""}
+            metadata = {"offered_qos_profiles": qos_profiles_yaml(qos, depth, durability=durability) + "\n",
+                        "topic_type_hash": hash_string}
             channel_id = self._mcap.add_channel(name, "cdr", schema_id, metadata)
-            record = TopicRecord(name, type_name, qos, depth)
+            record = TopicRecord(name, type_name, qos, depth, durability=durability, type_hash=hash_string)
             self._metadata.topics.append(record)
             self._topics[channel_id] = record
             self._channels[name] = channel_id
@@ -207,7 +220,10 @@ class BagWriter:
                 if self._mcap.chunk_bytes and time.monotonic() - self._chunk_opened >= self._flush_interval_s:
                     self._close_chunk()
             with self._lock:
-                self._count(self._mcap.finish())
+                self._count(self._mcap.close_chunk())
+                self._mcap.add_metadata("rosbag2", {"serialized_metadata": self._metadata.serialized(),
+                                                    "ROS_DISTRO": ROS_DISTRO})
+                self._mcap.finish()
                 self._stream.close()
                 write_metadata(self.directory, self._metadata)
         except BaseException as exc:  # noqa: BLE001 - reported to the producer by write()/close()

@@ -31,11 +31,13 @@ __all__ = ["TOPICS", "EpisodeRecorder", "TopicSpec"]
 
 @dataclass(frozen=True)
 class TopicSpec:
-    """A recorded topic's type and the QoS its publisher offers (design.md, topic table)."""
+    """A recorded topic's type and the QoS its publisher offers (`qg_common.topics`; a stack
+    test compares them with what the live graph reports), so replay offers the same QoS."""
 
     type_name: str
     qos: str
     depth: int
+    durability: str = "volatile"
 
 
 TOPICS: dict[str, TopicSpec] = {
@@ -48,7 +50,7 @@ TOPICS: dict[str, TopicSpec] = {
     "/wrench_setpoint": TopicSpec("qg_interfaces/msg/WrenchSetpoint", "reliable", 10),
     "/ee_at_rest": TopicSpec("qg_interfaces/msg/AtRest", "reliable", 10),
     "/transitions": TopicSpec("qg_interfaces/msg/Transition", "reliable", 1000),
-    "/episode_status": TopicSpec("qg_interfaces/msg/EpisodeStatus", "reliable", 10),
+    "/episode_status": TopicSpec("qg_interfaces/msg/EpisodeStatus", "reliable", 1, "transient_local"),
 }
 _EPISODE_ID = re.compile(r"^[A-Za-z0-9_.\-]+$")
 ROWS = 200  # messages of a 1 kHz topic handed to the writer thread at once (0.2 s)
@@ -132,7 +134,7 @@ class EpisodeRecorder:
             custom[str(key)] = value if isinstance(value, str) else json.dumps(value)
         writer = BagWriter(self.runs_dir / episode_id, custom_data=custom, **self._writer_options)
         for topic, spec in TOPICS.items():  # all up front: no registration check per message
-            writer.add_topic(topic, spec.type_name, spec.qos, spec.depth)
+            writer.add_topic(topic, spec.type_name, spec.qos, spec.depth, spec.durability)
         with self._lock:
             self._writer, self.episode_id = writer, episode_id
         atexit.register(self.stop)  # Ctrl-C: hand the buffered rows over before the bag closes
