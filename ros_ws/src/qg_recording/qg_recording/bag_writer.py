@@ -4,9 +4,11 @@ The 1 kHz loop must never wait for the disk or for compression, and no message m
 `write()` (one serialized message) and `write_rows()` (a block of fixed-layout messages, still
 as numbers) only append to an unbounded deque and set an event (about a microsecond, thread
 safe). A writer thread, asleep otherwise, encodes the blocks and drains everything into the
-MCAP file, closes a zstd chunk every `chunk_size` bytes or `flush_interval_s` seconds and then
-rewrites metadata.yaml. A chunk is flushed to the kernel as soon as it is complete, so a SIGKILL
-loses at most the chunk in progress; `close()` (also run at interpreter exit, e.g. after Ctrl-C)
+MCAP file, closes a zstd chunk every `chunk_size` bytes and then rewrites metadata.yaml. Every
+`flush_interval_s` it also collects what the producer still buffers (the `collect` hook: the
+recorder's row buffers), writes everything produced until then and closes the chunk. A chunk
+is flushed to the kernel as soon as it is complete, so a SIGKILL loses at most the chunk in
+progress: at most about `flush_interval_s` seconds of every topic. `close()` (also run at interpreter exit, e.g. after Ctrl-C)
 drains the queue and writes, as rosbag2's MCAP storage plugin does when it closes, the `rosbag2`
 metadata record (`serialized_metadata`, `ROS_DISTRO`) and the MCAP summary. With a long backlog
 the writer thread gives up the interpreter lock between batches, so the loop thread never waits
@@ -23,7 +25,7 @@ import threading
 import time
 import warnings
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -57,6 +59,8 @@ class BagWriter:
         topics reach the disk too.
     :param custom_data: strings stored in rosbag2's `custom_data` (metadata.yaml and the MCAP
         `rosbag2` record).
+    :param collect: called on the writer thread every `flush_interval_s`, to queue the messages
+        the producer still buffers; it must only call `write`/`write_rows`.
     """
 
     def __init__(
@@ -66,6 +70,7 @@ class BagWriter:
         compression: str = "zstd",
         flush_interval_s: float = 1.0,
         custom_data: Mapping[str, str] | None = None,
+        collect: Callable[[], None] | None = None,
     ) -> None:
         if chunk_size < 1024:
             raise ValueError(f"chunk_size must be at least 1024 bytes, got {chunk_size}")
@@ -95,7 +100,8 @@ class BagWriter:
         self._channels: dict[str, int] = {}
         self._topics: dict[int, TopicRecord] = {}
         self._schemas: dict[str, int] = {}
-        self._chunk_opened = 0.0
+        self._collect = collect
+        self._flushed_at = time.monotonic()  # the last `_flush`
         self.messages_written = 0  # handed to the MCAP file so far (by the writer thread)
         self._accepting = True
         self._error: BaseException | None = None
@@ -211,14 +217,13 @@ class BagWriter:
     def _run(self) -> None:
         try:
             while True:
-                idle = time.monotonic() - self._chunk_opened if self._mcap.chunk_bytes else 0.0
-                self._wake.wait(max(1e-3, self._flush_interval_s - idle))
+                self._wake.wait(max(1e-3, self._flush_interval_s - (time.monotonic() - self._flushed_at)))
                 self._wake.clear()
                 self._drain()
                 if self._closing.is_set() and not self._queue:
                     break
-                if self._mcap.chunk_bytes and time.monotonic() - self._chunk_opened >= self._flush_interval_s:
-                    self._close_chunk()
+                if time.monotonic() - self._flushed_at >= self._flush_interval_s:
+                    self._flush()
             with self._lock:
                 self._count(self._mcap.close_chunk())
                 self._mcap.add_metadata("rosbag2", {"serialized_metadata": self._metadata.serialized(),
@@ -233,8 +238,6 @@ class BagWriter:
     def _drain(self) -> None:
         queue, mcap = self._queue, self._mcap
         while queue:
-            if not mcap.chunk_bytes:
-                self._chunk_opened = time.monotonic()
             for _ in range(min(_BATCH, len(queue))):
                 channel, t_ns, payload = queue.popleft()
                 if payload.__class__ is bytes:
@@ -246,9 +249,17 @@ class BagWriter:
                     self.messages_written += len(t_ns)
                 if mcap.chunk_bytes >= self._chunk_size:
                     self._close_chunk()
-                    self._chunk_opened = time.monotonic()
             if queue:
                 time.sleep(0)  # a long backlog: let the loop thread take the interpreter lock
+
+    def _flush(self) -> None:
+        """Every `flush_interval_s`: write everything produced until now, the producer's
+        buffers included, and close the chunk (so a SIGKILL loses at most what came since)."""
+        if self._collect is not None:
+            self._collect()
+        self._drain()
+        self._close_chunk()
+        self._flushed_at = time.monotonic()
 
     def _close_chunk(self) -> None:
         with self._lock:

@@ -18,12 +18,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from .bag_reader import bag_info, read_raw
+from .rosbag2_metadata import parse_qos_profiles
 
 __all__ = ["PlayResult", "message_class", "offered_qos", "play"]
 
@@ -55,17 +55,12 @@ def offered_qos(offered_yaml: str) -> QoSProfile:
     A volatile topic gets at least depth 10, so a burst of replayed messages is not cut short;
     a transient-local one keeps its recorded depth, which is what a late joiner receives live.
     """
-    try:
-        profile = (yaml.safe_load(offered_yaml) or [{}])[0]
-    except yaml.YAMLError:
-        profile = {}
-    best_effort = profile.get("reliability") in ("best_effort", 2)  # name (v9+) or rmw enum value
-    latched = profile.get("durability") in ("transient_local", 1)
-    depth = max(1, int(profile.get("depth", 10) or 10))
+    reliability, durability, depth = parse_qos_profiles(offered_yaml)
+    latched = durability == "transient_local"
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST,
         depth=depth if latched else max(10, depth),
-        reliability=ReliabilityPolicy.BEST_EFFORT if best_effort else ReliabilityPolicy.RELIABLE,
+        reliability=ReliabilityPolicy.BEST_EFFORT if reliability == "best_effort" else ReliabilityPolicy.RELIABLE,
         durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
 
 

@@ -28,6 +28,7 @@ __all__ = [
     "ROS_DISTRO",
     "BagMetadata",
     "TopicRecord",
+    "parse_qos_profiles",
     "qos_profiles_yaml",
     "read_metadata",
     "write_metadata",
@@ -69,6 +70,25 @@ def qos_profiles_yaml(reliability: str, depth: int, indent: str = "", durability
         "  avoid_ros_namespace_conventions: false",
     ]
     return "\n".join(indent + line for line in lines)
+
+
+def parse_qos_profiles(offered_yaml: str) -> tuple[str, str, int]:
+    """(reliability, durability, depth) of the first profile of a recorded offered-QoS YAML list,
+    by name (version 9) or rmw enum value (older bags); reliable, volatile, 10 where missing,
+    unreadable or 0 (rosbag2 records the graph's depth, which is 0)."""
+    try:
+        profiles = yaml.safe_load(offered_yaml) or [{}]
+        profile = profiles[0] if isinstance(profiles, list) and isinstance(profiles[0], dict) else {}
+    except yaml.YAMLError:
+        profile = {}
+    best_effort = profile.get("reliability") in ("best_effort", 2)
+    latched = profile.get("durability") in ("transient_local", 1)
+    try:
+        depth = int(profile.get("depth") or 10)
+    except (TypeError, ValueError):
+        depth = 10
+    return ("best_effort" if best_effort else "reliable", "transient_local" if latched else "volatile",
+            depth if depth > 0 else 10)
 
 
 @dataclass
