@@ -149,7 +149,8 @@ class LoopRunner:
         self.pace = pace
         self.publish_every = max(1, publish_every)
         self.publish = publish
-        #: The per-tick hook: each is called after every tick with the simulated time [ns].
+        #: The per-tick hook: each is called after every tick (and once a reset has settled)
+        #: with its stamp [ns] (``now_ns``), the one its published messages carry.
         self.loop_observers: list[LoopObserver] = []
         self._dt_ns = round(loop.config.dt * 1e9)
         self._settle_ticks = round(loop.config.settle_time / loop.config.dt)
@@ -250,7 +251,9 @@ class LoopRunner:
         self._seq = None
         self._step_start = None
         self.clock_ns += self._settle_ticks * self._dt_ns
-        stamp = self._stamp()
+        t_ns = self.now_ns()
+        self._observe(t_ns)  # the settled start state is published: it is recorded too
+        stamp = time_msg(t_ns)
         job.observation = self._event(0, self.loop.time - self.loop.config.settle_time, stamp)
         self.publish_sample(stamp)
         self.bridge.ee_at_rest.publish(job.observation)
@@ -259,19 +262,25 @@ class LoopRunner:
     def _after_tick(self, at_rest: bool) -> None:
         self.ticks += 1
         self.clock_ns += self._dt_ns
-        for observer in self.loop_observers:
-            observer(self.clock_ns, self.loop)
+        t_ns = self.now_ns()  # the tick's one stamp: observers record what is published
+        self._observe(t_ns)
         stamp: Time | None = None
         if self.ticks % self.publish_every == 0:
-            stamp = self._stamp()
+            stamp = time_msg(t_ns)
             self.publish_sample(stamp)
         if at_rest and self._step_start is not None:
-            event = self._event(self._seq or 0, self._step_start, stamp or self._stamp())
+            event = self._event(self._seq or 0, self._step_start, stamp or time_msg(t_ns))
             self._step_start = None
             self.bridge.ee_at_rest.publish(event)
 
-    def _stamp(self) -> Time:
-        return time_msg(self.clock_ns) if self.lockstep else self.bridge.get_clock().now().to_msg()
+    def _observe(self, t_ns: int) -> None:
+        for observer in self.loop_observers:
+            observer(t_ns, self.loop)
+
+    def now_ns(self) -> int:
+        """The loop's clock [ns], which stamps its messages: simulated time in lockstep (it
+        stands still between steps), the bridge node's clock (wall clock) otherwise."""
+        return self.clock_ns if self.lockstep else self.bridge.get_clock().now().nanoseconds
 
     def publish_sample(self, stamp: Time) -> None:
         """Publish the loop's current state on the 1 kHz topics."""

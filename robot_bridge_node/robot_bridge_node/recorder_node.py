@@ -2,32 +2,44 @@
 
 The 1 kHz data (joint states, wrench estimate, EEF pose/twist, ground truth) is taken straight
 from the loop after each tick, so it never crosses a process boundary and no sample is dropped;
-the RL-rate topics (setpoints, at-rest events, transitions, episode status) arrive by
-subscription and are stamped with the loop's clock (simulated time in lockstep). Episode boundaries come from ``/episode_status``: a bag opens when an episode starts
-resetting and closes once the episode has ended and all of its transitions have arrived.
+it is stamped with the tick's stamp, the one the live messages of that tick carry. The RL-rate
+topics (setpoints, at-rest events, transitions, episode status) arrive by subscription and are
+logged at their arrival on the same clock, the loop's (``LoopRunner.now_ns``: simulated time in
+lockstep, the wall clock in realtime), as rosbag2 logs receive times: one time base per bag, and
+a bag starts with its first message. Episode boundaries come from ``/episode_status``: a bag
+opens when an episode starts resetting and closes once the episode has ended and all of its
+transitions have arrived.
 """
 from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from qg_common import topics
-from qg_common.conversions import quaternion_from_matrix
+from qg_common.conversions import BASE_FRAME, TOOL_FRAME, quaternion_from_matrix
 from qg_common.node_parameters import declare_parameters, on_parameter_change
 from qg_common.params import ParameterSection, config_from_dict, runs_dir
 from qg_interfaces.msg import AtRest, EpisodeStatus, Transition, WrenchSetpoint
 from qg_recording.episode_recorder import EpisodeRecorder
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message
 
 from robot_bridge_node.core.robot_loop import RobotLoop
 
 __all__ = ["RecorderConfig", "RECORDER_SECTION", "RecorderNode"]
 
 _FINAL = ("done", "aborted")
+#: ``/episode_status`` as its publisher offers it (transient local: a late recorder still gets
+#: the episode's state), but deep: the executor may publish several statuses back to back (the
+#: last step's ``running`` and ``done``), and a depth of 1 would keep only the last of them.
+_STATUS_QOS = QoSProfile(depth=100, reliability=topics.LATCHED.reliability,
+                         durability=topics.LATCHED.durability)
 
 
 @dataclass(frozen=True)
@@ -82,16 +94,13 @@ class RecorderNode(Node):
         self.ended_at = 0.0
         self.ticks = 0
         group = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(EpisodeStatus, topics.EPISODE_STATUS, self._on_status,
-                                 topics.LATCHED, callback_group=group)
-        self.create_subscription(Transition, topics.TRANSITIONS, self._on_transition,
-                                 topics.RELIABLE_DEEP, callback_group=group)
-        self.create_subscription(WrenchSetpoint, topics.WRENCH_SETPOINT, self._on_setpoint,
-                                 topics.COMMAND_QOS, callback_group=group)
-        self.create_subscription(AtRest, topics.EE_AT_REST, self._on_at_rest,
-                                 topics.COMMAND_QOS, callback_group=group)
+        self._subscribe(EpisodeStatus, topics.EPISODE_STATUS, self._on_status, _STATUS_QOS, group)
+        self._subscribe(Transition, topics.TRANSITIONS, self._on_transition, topics.RELIABLE_DEEP, group)
+        self._subscribe(WrenchSetpoint, topics.WRENCH_SETPOINT, self._on_setpoint, topics.COMMAND_QOS, group)
+        self._subscribe(AtRest, topics.EE_AT_REST, self._on_at_rest, topics.COMMAND_QOS, group)
         self.create_timer(0.2, self._close_if_complete, callback_group=group)
-        self.last_t_ns = 0
+        #: The clock RL-rate messages are logged on; the robot process sets the loop's.
+        self.clock_ns: Callable[[], int] = lambda: self.get_clock().now().nanoseconds
         self.last_setpoint_seq = -1
 
     def _reconfigure(self, params: dict[str, Any]) -> None:
@@ -103,32 +112,36 @@ class RecorderNode(Node):
         """Record one tick of the loop (does nothing between episodes)."""
         if not self.episode_id:
             return
-        self.last_t_ns = t_ns
         rec = self.recorder
         state = loop.hardware.read()
         rec.record_joint_state(t_ns, loop.hardware.joint_names, state.q, state.dq, state.tau)
         if loop.wrench_estimate is not None:
             w = loop.wrench_estimate
-            rec.record_wrench(t_ns, w[:3], w[3:])
+            rec.record_wrench(t_ns, w[:3], w[3:], TOOL_FRAME)
         tool = loop.controller.tool
         if tool is not None:
-            rec.record_pose(t_ns, tool.position, quaternion_from_matrix(tool.rotation))
-            rec.record_twist(t_ns, tool.twist[:3], tool.twist[3:])
+            rec.record_pose(t_ns, tool.position, quaternion_from_matrix(tool.rotation), BASE_FRAME)
+            rec.record_twist(t_ns, tool.twist[:3], tool.twist[3:], BASE_FRAME)
         self.ticks += 1
         if self.ticks % self.config.ground_truth_every == 0:
             gt = loop.ground_truth()
             rec.record_ground_truth(t_ns, gt.wrench, gt.insertion_depth, gt.plunger_travel,
                                     gt.success, gt.position_error, gt.orientation_error,
-                                    gt.lateral_offset, gt.tilt)
-            rec.record_wrench(t_ns, gt.wrench[:3], gt.wrench[3:],
+                                    gt.lateral_offset, gt.tilt, TOOL_FRAME)
+            rec.record_wrench(t_ns, gt.wrench[:3], gt.wrench[3:], TOOL_FRAME,
                               topic="/sim/ground_truth_wrench")
 
     # --- RL-rate topics -------------------------------------------------------------------
-    def _stamp(self) -> int:
-        """RL-rate messages are stamped on the loop's clock too, so a bag has one time base."""
-        return self.last_t_ns
+    def _subscribe(self, msg_type: type, topic: str, handler: Callable[[int, bytes, Any], None],
+                   qos: Any, group: MutuallyExclusiveCallbackGroup) -> None:
+        """Subscribe serialized, as rosbag2 does: the bag gets the bytes as published (padding
+        included), ``handler`` the arrival time on the loop's clock, the bytes and the message."""
+        def on_message(data: bytes) -> None:
+            t_ns = self.clock_ns()  # one time base per bag: the loop's
+            handler(t_ns, data, deserialize_message(data, msg_type))
+        self.create_subscription(msg_type, topic, on_message, qos, callback_group=group, raw=True)
 
-    def _on_status(self, msg: EpisodeStatus) -> None:
+    def _on_status(self, t_ns: int, data: bytes, msg: EpisodeStatus) -> None:
         if not self.config.record or not msg.episode_id:
             return
         if msg.episode_id != self.episode_id and msg.state not in _FINAL:
@@ -139,27 +152,27 @@ class RecorderNode(Node):
                                                      "reward": msg.reward_type})
                 self.episode_id, self.transitions, self.final_steps = msg.episode_id, 0, None
         if msg.episode_id == self.episode_id:
-            self.recorder.record_message("/episode_status", self._stamp(), msg)
+            self.recorder.record_raw("/episode_status", t_ns, data)
             if msg.state in _FINAL and self.final_steps is None:
                 self.final_steps, self.ended_at = int(msg.step), time.monotonic()
                 self._close_if_complete()
 
-    def _on_transition(self, msg: Transition) -> None:
+    def _on_transition(self, t_ns: int, data: bytes, msg: Transition) -> None:
         if msg.episode_id == self.episode_id:
-            self.recorder.record_message("/transitions", self._stamp(), msg)
+            self.recorder.record_raw("/transitions", t_ns, data)
             self.transitions += 1
             self._close_if_complete()
 
-    def _on_setpoint(self, msg: WrenchSetpoint) -> None:
+    def _on_setpoint(self, t_ns: int, data: bytes, msg: WrenchSetpoint) -> None:
         # The executor re-sends the running setpoint every few ms as a watchdog keep-alive;
         # the bag keeps the first message of each seq, the command itself.
         if self.episode_id and msg.seq != self.last_setpoint_seq:
             self.last_setpoint_seq = msg.seq
-            self.recorder.record_message("/wrench_setpoint", self._stamp(), msg)
+            self.recorder.record_raw("/wrench_setpoint", t_ns, data)
 
-    def _on_at_rest(self, msg: AtRest) -> None:
+    def _on_at_rest(self, t_ns: int, data: bytes, msg: AtRest) -> None:
         if self.episode_id:
-            self.recorder.record_message("/ee_at_rest", self._stamp(), msg)
+            self.recorder.record_raw("/ee_at_rest", t_ns, data)
 
     def _close_if_complete(self) -> None:
         if self.final_steps is None:

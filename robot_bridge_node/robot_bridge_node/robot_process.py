@@ -105,6 +105,7 @@ def _start(nodes: list[Node]) -> Callable[[], None]:
         and isinstance(estimator, WrenchEstimatorNode) and isinstance(recorder, RecorderNode)
     process = RobotProcess(sim, bridge, estimator)
     process.runner.loop_observers.append(recorder.observe)
+    recorder.clock_ns = process.runner.now_ns
     return process.start()
 
 

@@ -9,7 +9,11 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 import yaml
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rosbags.highlevel import AnyReader, AnyReaderError
 
 from qg_recording.bag_reader import bag_info, read_bag
 from qg_recording.episode_recorder import ROWS, EpisodeRecorder
@@ -19,9 +23,9 @@ CHUNK = 8 * 1024  # about 80 WrenchStamped messages per chunk
 PER_CHUNK = CHUNK // 100 + 1  # a message record is more than 100 bytes
 
 
-def run_child_until(runs: Path, produced: int) -> tuple[subprocess.Popen, int]:
+def run_child_until(runs: Path, produced: int, *options: str) -> tuple[subprocess.Popen, int]:
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    child = subprocess.Popen([sys.executable, str(CHILD), str(runs), str(CHUNK)], stdout=subprocess.PIPE,
+    child = subprocess.Popen([sys.executable, str(CHILD), str(runs), str(CHUNK), *options], stdout=subprocess.PIPE,
                              text=True, env=env)
     last, deadline = 0, time.monotonic() + 60.0
     while last < produced and time.monotonic() < deadline:
@@ -33,15 +37,23 @@ def run_child_until(runs: Path, produced: int) -> tuple[subprocess.Popen, int]:
     return child, last
 
 
-def indices(bag: Path) -> list[int]:
-    return [int(m.wrench.force.x) for _, _, _, m in read_bag(bag)]
+def killed_bag(runs: Path, produced: int, *options: str) -> tuple[Path, int]:
+    """The bag of a child SIGKILLed once it reported `produced` messages, and its last report."""
+    child, last = run_child_until(runs, produced, *options)
+    child.send_signal(signal.SIGKILL)
+    child.wait(10)
+    return runs / "killed", last
+
+
+def indices(bag: Path, topic: str = "/wrench_estimate") -> list[int]:
+    """The recorded message indices of `topic` (force.x, or the ground truth's tick / 10)."""
+    if topic == "/sim/ground_truth":
+        return [int(m.insertion_depth) // 10 for _, _, _, m in read_bag(bag, [topic])]
+    return [int(m.wrench.force.x) for _, _, _, m in read_bag(bag, [topic])]
 
 
 def test_sigkill_loses_at_most_the_last_chunk(tmp_path: Path) -> None:
-    child, produced = run_child_until(tmp_path, 1500)
-    child.send_signal(signal.SIGKILL)
-    child.wait(10)
-    bag = tmp_path / "killed"
+    bag, produced = killed_bag(tmp_path, 1500)
     got = indices(bag)
     assert got == list(range(len(got)))  # a gap-free prefix: nothing dropped before the cut
     # Lost: the rows not yet handed to the writer, the chunk being filled, what the writer had not
@@ -51,6 +63,50 @@ def test_sigkill_loses_at_most_the_last_chunk(tmp_path: Path) -> None:
     assert not info.complete and info.count("/wrench_estimate") == len(got)
     meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert len(got) - PER_CHUNK <= meta["message_count"] <= len(got)  # rewritten after every chunk
+
+
+def test_sigkill_loses_at_most_the_chunk_in_progress_of_every_topic(tmp_path: Path) -> None:
+    """Chunks close every 0.2 s with everything produced by then, the 100 Hz ground truth too,
+    whose row buffer alone holds 2 s: a SIGKILL costs about the last 0.2 s of each topic."""
+    bag, produced = killed_bag(tmp_path, 3500, "0.2", "truth")
+    wrench, truth = indices(bag), indices(bag, "/sim/ground_truth")
+    assert wrench == list(range(len(wrench))) and truth == list(range(len(truth)))  # gap-free prefixes
+    lost_ms = 600  # the chunk in progress (0.2 s), the writer's wake-up on a loaded host, margin
+    assert produced - lost_ms <= len(wrench) <= produced + 60, (produced, len(wrench))
+    assert produced // 10 - lost_ms // 10 <= len(truth) <= produced // 10 + 6, (produced, len(truth))
+
+
+def test_reindex_makes_a_killed_bag_readable_by_stock_readers(tmp_path: Path) -> None:
+    bag, _ = killed_bag(tmp_path, 1500)
+    ours = indices(bag)
+    assert len(ours) > 1000
+    with pytest.raises(AnyReaderError, match="end magic"):  # what a stock reader says before
+        with AnyReader([bag]):
+            pass
+    out = subprocess.run([sys.executable, "-m", "qg_learning_node.cli.main", "bag", "reindex", str(bag)],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and "killed_0.mcap: repaired" in out.stdout, out.stdout + out.stderr
+    with AnyReader([bag]) as reader:  # rosbags, with the bag's own type definitions
+        got = [int(reader.deserialize(data, c.msgtype).wrench.force.x) for c, _, data in reader.messages()]
+        assert reader.message_count == len(ours)
+    assert got == ours  # nothing that our reader saw was lost by the repair
+    with open(bag / "killed_0.mcap", "rb") as stream:  # the mcap library, through the summary
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        assert reader.get_summary().statistics.message_count == len(ours)
+        assert [int(m.wrench.force.x) for _, _, _, m in reader.iter_decoded_messages()] == ours
+        (record,) = [m for m in reader.iter_metadata() if m.name == "rosbag2"]
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert meta["message_count"] == len(ours) and meta["custom_data"] == {"episode_id": "killed"}
+    assert yaml.safe_load(record.metadata["serialized_metadata"]) == meta
+    assert bag_info(bag).complete
+    before = (bag / "killed_0.mcap").read_bytes()
+    again = subprocess.run([sys.executable, "-m", "qg_learning_node.cli.main", "bag", "reindex", str(bag)],
+                           capture_output=True, text=True, timeout=60)
+    assert again.returncode == 0 and "killed_0.mcap: complete" in again.stdout
+    assert (bag / "killed_0.mcap").read_bytes() == before  # a complete file is left alone
+    missing = subprocess.run([sys.executable, "-m", "qg_learning_node.cli.main", "bag", "reindex",
+                              str(tmp_path / "nothing")], capture_output=True, text=True, timeout=60)
+    assert missing.returncode == 2 and "no such bag" in missing.stderr
 
 
 def test_sigint_closes_the_bag_cleanly(tmp_path: Path) -> None:

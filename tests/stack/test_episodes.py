@@ -3,11 +3,14 @@ from __future__ import annotations
 
 import dataclasses
 import signal
+import subprocess
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from live_capture import RL_TOPICS, SENSOR_TOPICS, LiveCapture, offered_qos, stamp_ns
 
 pytestmark = pytest.mark.ros
 
@@ -68,15 +71,15 @@ class Episodes:
 
 
 def wait_for_bag(episodes_dir: Path, episode_id: str, timeout: float = 15.0) -> Path:
+    """The episode's bag once the recorder has closed it (its MCAP summary is written)."""
     from qg_recording.bag_reader import bag_info
     bag = episodes_dir / episode_id
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         try:
-            info = bag_info(bag)
-            if info.topics.get("/transitions") is not None:
+            if bag_info(bag).complete:
                 return bag
-        except Exception:  # noqa: BLE001 - not written yet
+        except (FileNotFoundError, ValueError):  # not written yet
             pass
         time.sleep(0.2)
     return bag
@@ -101,8 +104,11 @@ def test_train_episode_is_recorded_and_replays_into_the_same_graph(stack, tmp_pa
     checkpoints = tmp_path / "checkpoints"
     stack.start(ROBOT, learner_spec(checkpoints), executor_spec(max_steps=25))
     with stack.client() as cli:
+        live = LiveCapture(cli)
         episodes = Episodes(cli)
         episodes.wait_for_learner()
+        assert cli.spin_until(lambda: all(offered_qos(cli, t) for t in live.received), 30.0)
+        graph = {topic: offered_qos(cli, topic) for topic in live.received}
         response = episodes.start(mode="train", initial_pose=2, seed=7, reward="dense")
         assert response.success, response.message + stack.logs()
         final = episodes.final(response.episode_id, timeout=240.0)
@@ -110,8 +116,10 @@ def test_train_episode_is_recorded_and_replays_into_the_same_graph(stack, tmp_pa
         assert 1 <= final.step <= 25
         states = [s.state for s in episodes.statuses if s.episode_id == response.episode_id]
         assert states.index("resetting") < states.index("running") < states.index("done")
+        cli.spin_for(0.5)
 
     bag = wait_for_bag(Path(stack.env["QG_RUNS_DIR"]) / "episodes", response.episode_id)
+    recorded = check_bag_against_live(bag, live, graph, response.episode_id)
     counts: dict[str, int] = {}
     steps = []
     with open(next(bag.glob("*.mcap")), "rb") as f:
@@ -135,6 +143,86 @@ def test_train_episode_is_recorded_and_replays_into_the_same_graph(stack, tmp_pa
     kinds = ("directly_connected", "connected", "disconnected", "loose_end")
     assert online.steps == final.step
     assert {k: offline.census[k] for k in kinds} == {k: online.graph.census()[k] for k in kinds}
+
+    # Replay to subscribers with the live QoS (transient-local /episode_status included).
+    stack.stop()
+    replayed = RL_TOPICS + ("/ee_pose",)
+    with stack.client("replay_listener") as cli:
+        live = LiveCapture(cli, replayed)
+        player = subprocess.Popen(
+            [sys.executable, "-m", "qg_learning_node.cli.main", "replay", str(bag), "--rate", "4",
+             "--topics", *replayed, "--wait-for-subscribers", "20", "--start-delay", "1.0"],
+            env=stack.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            assert cli.spin_until(lambda: all(len(live.received[t]) >= len(recorded[t]) for t in RL_TOPICS),
+                                  60.0), {t: (len(live.received[t]), len(recorded[t])) for t in RL_TOPICS}
+            out, err = player.communicate(timeout=60)
+        finally:
+            player.kill()
+    assert player.returncode == 0, err
+    for topic in RL_TOPICS:  # reliable: everything, in order, byte for byte
+        assert live.received[topic] == [data for _, data in recorded[topic]], topic
+    pose_stamps = {t for t, _ in recorded["/ee_pose"]}
+    got = [stamp_ns(m) for m in live.decoded("/ee_pose")]  # best effort: a subset, in order
+    assert got and set(got) <= pose_stamps and got == sorted(got)
+
+
+def check_bag_against_live(bag: Path, live, graph: dict, episode_id: str) -> dict:
+    """Read every message of ``bag`` with rosbags (types from the bag's own definitions, type
+    hashes checked) and compare topics, QoS, type hashes, stamps and bytes with what the live
+    graph showed; returns the recorded (log time, bytes) per topic."""
+    from rclpy.serialization import deserialize_message
+    from rosbags.highlevel import AnyReader
+
+    from qg_recording.player import message_class
+
+    recorded: dict[str, list[tuple[int, bytes]]] = {}
+    with AnyReader([bag]) as reader:
+        connections = {c.topic: c for c in reader.connections}
+        for connection, t_ns, data in reader.messages():
+            recorded.setdefault(connection.topic, []).append((t_ns, bytes(data)))
+        start, end = reader.start_time, reader.end_time
+    # The recorded offered QoS and type hash are those of the live publishers.
+    for topic, publishers in graph.items():
+        (qos,) = connections[topic].ext.offered_qos_profiles
+        mine = (qos.reliability.name.lower(), qos.durability.name.lower(), connections[topic].digest)
+        assert publishers and all(p == mine for p in publishers), (topic, publishers, mine)
+
+    def messages(topic: str) -> list:
+        cls = message_class(connections[topic].msgtype)
+        return [(t, deserialize_message(data, cls)) for t, data in recorded[topic]]
+
+    # One time base: the bag starts with the episode's first status, before the first tick.
+    statuses = messages("/episode_status")
+    assert statuses[0][1].state == "resetting" and statuses[0][0] == start
+    assert start <= recorded["/joint_states"][0][0] and recorded["/joint_states"][-1][0] < end
+    # RL-rate messages are logged when they arrive, on the loop's clock that stamps the events.
+    for t_ns, event in messages("/ee_at_rest"):
+        assert 0 <= t_ns - stamp_ns(event) < 10**9, (t_ns, stamp_ns(event))
+    # Every live 1 kHz message in the bag's span is recorded with the same stamp and bytes.
+    for topic in SENSOR_TOPICS:
+        by_stamp = {stamp_ns(deserialize_message(data, message_class(connections[topic].msgtype))): data
+                    for _, data in recorded[topic]}
+        in_span = [(stamp_ns(m), data) for m, data in zip(live.decoded(topic), live.received[topic])
+                   if min(by_stamp) <= stamp_ns(m) <= max(by_stamp)]
+        assert len(in_span) >= 5, topic
+        assert all(by_stamp.get(t) == data for t, data in in_span), topic
+    # RL-rate messages: what the executor published for this episode, byte for byte (the bag
+    # closes at the end of the episode; the executor's status heartbeat goes on after it).
+    mine = [(data, m.state) for data, m in zip(live.received["/episode_status"], live.decoded("/episode_status"))
+            if m.episode_id == episode_id]
+    ended = next(i for i, (_, state) in enumerate(mine) if state in ("done", "aborted"))
+    in_bag = [data for _, data in recorded["/episode_status"]]
+    assert len(in_bag) > ended and in_bag == [data for data, _ in mine[:len(in_bag)]]
+    assert sorted(data for _, data in recorded["/transitions"]) == sorted(live.received["/transitions"])
+    first_of_seq = {}
+    for data, m in zip(live.received["/wrench_setpoint"], live.decoded("/wrench_setpoint")):
+        first_of_seq.setdefault(m.seq, data)
+    assert [data for _, data in recorded["/wrench_setpoint"]] == list(first_of_seq.values())
+    step_events = [data for data, m in zip(live.received["/ee_at_rest"], live.decoded("/ee_at_rest"))
+                   if m.seq >= 1]
+    assert [data for _, data in recorded["/ee_at_rest"]][-len(step_events):] == step_events
+    return recorded
 
 
 def test_async_learner_trains_while_the_robot_moves(stack, tmp_path):

@@ -1,4 +1,5 @@
-"""`qgl info` and `qgl replay`: what rosbag2's `ros2 bag info/play` do, for our episode bags.
+"""`qgl info`, `qgl replay` and `qgl bag reindex`: what rosbag2's `ros2 bag info/play/reindex`
+do, for our episode bags.
 
 `replay --into-learner` does not publish: it rebuilds replay memory and Q-Graph from the
 recorded transitions (see `qg_learning_node.offline`), prints the graph census and can train and save
@@ -19,7 +20,7 @@ from qg_common.params import config_file
 from qg_recording.bag_reader import BagInfo, NotABagError, bag_files, bag_info
 from qg_recording.rosbag2_metadata import METADATA_FILE
 
-__all__ = ["add_parsers", "cmd_info", "cmd_replay", "expand_bag_paths", "format_info"]
+__all__ = ["add_parsers", "cmd_info", "cmd_reindex", "cmd_replay", "expand_bag_paths", "format_info"]
 
 
 def _fail(command: str, message: str) -> int:
@@ -68,7 +69,8 @@ def format_info(info: BagInfo) -> str:
     if info.complete:
         lines.append("Closed cleanly:    yes")
     else:
-        lines.append("Closed cleanly:    no (no MCAP summary: the recorder was killed; counted by scanning)")
+        lines.append("Closed cleanly:    no (no MCAP summary: the recorder was killed; counted by scanning;"
+                     " `qgl bag reindex` repairs it for other readers)")
     if not info.has_metadata and info.path.is_dir():
         lines.append(f"Warning:           no {METADATA_FILE} (ros2 bag will not open this directory)")
     return "\n".join(lines)
@@ -80,6 +82,21 @@ def cmd_info(args: argparse.Namespace) -> int:
     except (FileNotFoundError, NotABagError) as exc:
         return _fail("info", str(exc))
     print(format_info(info))
+    return 0
+
+
+def cmd_reindex(args: argparse.Namespace) -> int:
+    from qg_recording.reindex import reindex
+
+    try:
+        result = reindex(Path(args.path))
+    except (FileNotFoundError, NotABagError) as exc:
+        return _fail("bag reindex", str(exc))
+    for file in result.files:
+        state = "repaired (had no summary)" if file in result.repaired else "complete"
+        print(f"{file}: {state}")
+    print(f"{result.messages} messages; {METADATA_FILE} regenerated" if Path(args.path).is_dir()
+          else f"{result.messages} messages")
     return 0
 
 
@@ -153,10 +170,21 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def add_parsers(subparsers: argparse._SubParsersAction) -> None:
-    """Register `info` and `replay` on the `qgl` subcommand parser."""
+    """Register `info`, `replay` and `bag` on the `qgl` subcommand parser."""
     info = subparsers.add_parser("info", help="topics, message counts and duration of a bag")
     info.add_argument("path", help="bag directory or .mcap file")
     info.set_defaults(func=cmd_info)
+
+    bag = subparsers.add_parser("bag", help="bag tools, as `ros2 bag` (info, reindex)")
+    bag_sub = bag.add_subparsers(dest="bag_command", required=True)
+    bag_info_parser = bag_sub.add_parser("info", help="the same as `qgl info`")
+    bag_info_parser.add_argument("path", help="bag directory or .mcap file")
+    bag_info_parser.set_defaults(func=cmd_info)
+    reindex = bag_sub.add_parser(
+        "reindex", help="repair a bag whose recorder was killed (adds the MCAP summary) and "
+                        "regenerate its metadata.yaml, so stock readers open it")
+    reindex.add_argument("path", help="bag directory or .mcap file")
+    reindex.set_defaults(func=cmd_reindex)
 
     replay = subparsers.add_parser(
         "replay", help="republish bags with their original timing, or rebuild the learner from them")

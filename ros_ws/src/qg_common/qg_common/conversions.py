@@ -7,8 +7,6 @@ the tool frame (``tool``, see ``qg_common/types.py`` for the sign convention).
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Pose, PoseStamped, TwistStamped, Wrench, WrenchStamped
@@ -17,6 +15,7 @@ from qg_interfaces.msg import GroundTruth as GroundTruthMsg
 from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
 from sensor_msgs.msg import JointState as JointStateMsg
 
+from qg_common.rotations import matrix_from_quaternion, quaternion_from_matrix
 from qg_common.types import GroundTruth, JointState, PoseReference, StepResult, WrenchSetpoint
 
 __all__ = ["BASE_FRAME", "TOOL_FRAME", "time_msg", "time_ns", "joint_state_msg",
@@ -109,41 +108,7 @@ def ground_truth_from_msg(msg: GroundTruthMsg) -> GroundTruth:
                        lateral_offset=msg.lateral_offset, tilt=msg.tilt)
 
 
-# --- poses --------------------------------------------------------------------------------------
-def quaternion_from_matrix(rotation: np.ndarray) -> tuple[float, float, float, float]:
-    """Unit quaternion ``(x, y, z, w)`` with ``w >= 0`` of a rotation matrix (Shepperd)."""
-    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = np.asarray(rotation, float).tolist()
-    trace = r00 + r11 + r22
-    if trace > max(r00, r11, r22):
-        s = 2.0 * math.sqrt(1.0 + trace)
-        q = ((r21 - r12) / s, (r02 - r20) / s, (r10 - r01) / s, 0.25 * s)
-    elif r00 >= r11 and r00 >= r22:
-        s = 2.0 * math.sqrt(1.0 + r00 - r11 - r22)
-        q = (0.25 * s, (r01 + r10) / s, (r02 + r20) / s, (r21 - r12) / s)
-    elif r11 >= r22:
-        s = 2.0 * math.sqrt(1.0 + r11 - r00 - r22)
-        q = ((r01 + r10) / s, 0.25 * s, (r12 + r21) / s, (r02 - r20) / s)
-    else:
-        s = 2.0 * math.sqrt(1.0 + r22 - r00 - r11)
-        q = ((r02 + r20) / s, (r12 + r21) / s, 0.25 * s, (r10 - r01) / s)
-    return q if q[3] >= 0.0 else (-q[0], -q[1], -q[2], -q[3])
-
-
-def matrix_from_quaternion(x: float, y: float, z: float, w: float) -> np.ndarray:
-    """Rotation matrix of the quaternion ``(x, y, z, w)``, normalised first.
-
-    A zero or non-finite quaternion gives a NaN matrix, which the safety filter rejects.
-    """
-    norm = math.sqrt(x * x + y * y + z * z + w * w)
-    if not (math.isfinite(norm) and norm > 0.0):
-        return np.full((3, 3), math.nan)
-    x, y, z, w = x / norm, y / norm, z / norm, w / norm
-    return np.array([
-        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
-        [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
-        [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)]])
-
-
+# --- poses (quaternions: ``qg_common.rotations``) ---------------------------------------------
 def pose_msg(position: np.ndarray, rotation: np.ndarray) -> Pose:
     """``geometry_msgs/Pose`` from a position and a rotation matrix."""
     msg = Pose()

@@ -1,17 +1,28 @@
-"""Rotation helpers shared by the simulator and the controller (no other dependencies)."""
+"""Rotation helpers shared by the simulator, the controller and the message conversions.
+
+Thin names over Pinocchio's SO(3) maps, which the controller already uses (`pin.log3` in the
+impedance law): `exp3` (Rodrigues), `log3` (right up to and at pi, where a formula through
+``acos`` and the skew part loses the axis' signs) and Eigen's quaternion of a matrix. Eigen picks
+the sign by the matrix (``w > 0`` if the trace is positive, else the component of the largest
+diagonal entry), so the quaternion is continuous around the tool pointing down (a half turn,
+w close to 0, x chosen positive), where a ``w >= 0`` rule flips every sign whenever the tool
+tilts across it. tests/robot/test_rotations.py holds them
+against scipy's ``Rotation`` near 0, pi/2 and pi.
+"""
 from __future__ import annotations
 
 import math
 
 import numpy as np
+import pinocchio as pin
 
-__all__ = ["axis_angle_matrix", "housing_rotation", "rotation_log", "tilt_from_down"]
+__all__ = ["axis_angle_matrix", "housing_rotation", "matrix_from_quaternion",
+           "quaternion_from_matrix", "rotation_log", "tilt_from_down"]
 
 
 def axis_angle_matrix(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rotation matrix about the unit vector ``axis`` by ``angle`` [rad] (Rodrigues)."""
-    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
-    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
+    """Rotation matrix about the unit vector ``axis`` by ``angle`` [rad]."""
+    return pin.exp3(np.asarray(axis, float) * float(angle))
 
 
 def housing_rotation(yaw: float, tilt: float = 0.0) -> np.ndarray:
@@ -24,17 +35,25 @@ def housing_rotation(yaw: float, tilt: float = 0.0) -> np.ndarray:
 
 
 def rotation_log(rotation: np.ndarray) -> np.ndarray:
-    """Angle-axis vector of a rotation matrix (for angles up to pi)."""
-    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation.tolist()
-    cos = max(-1.0, min(1.0, (r00 + r11 + r22 - 1.0) / 2.0))
-    angle = math.acos(cos)
-    w = np.array([r21 - r12, r02 - r20, r10 - r01])
-    if angle < 1e-9:
-        return w / 2.0
-    if angle > math.pi - 1e-6:  # the skew part vanishes at 180 deg: axis from the diagonal
-        axis = np.sqrt(np.maximum(np.diag(rotation) + 1.0, 0.0) / 2.0)
-        return axis * angle
-    return w * angle / (2.0 * math.sin(angle))
+    """Angle-axis vector (angle in [0, pi]) of a rotation matrix."""
+    return pin.log3(np.asarray(rotation, float))
+
+
+def quaternion_from_matrix(rotation: np.ndarray) -> tuple[float, float, float, float]:
+    """Unit quaternion ``(x, y, z, w)`` of a rotation matrix, with Eigen's sign (see above)."""
+    x, y, z, w = pin.Quaternion(np.asarray(rotation, float)).coeffs().tolist()
+    return x, y, z, w
+
+
+def matrix_from_quaternion(x: float, y: float, z: float, w: float) -> np.ndarray:
+    """Rotation matrix of the quaternion ``(x, y, z, w)``, normalised first.
+
+    A zero or non-finite quaternion gives a NaN matrix, which the safety filter rejects.
+    """
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if not (math.isfinite(norm) and norm > 0.0):
+        return np.full((3, 3), math.nan)
+    return pin.Quaternion(w / norm, x / norm, y / norm, z / norm).toRotationMatrix()
 
 
 def tilt_from_down(rotation: np.ndarray) -> tuple[float, np.ndarray]:

@@ -26,9 +26,21 @@ from mcap_ros2.decoder import DecoderFactory
 
 from .rosbag2_metadata import METADATA_FILE, read_metadata
 
-__all__ = ["BagInfo", "NotABagError", "RawMessage", "TopicInfo", "bag_files", "bag_info", "read_bag", "read_raw"]
+__all__ = [
+    "READ_ERRORS",
+    "BagInfo",
+    "NotABagError",
+    "RawMessage",
+    "TopicInfo",
+    "bag_files",
+    "bag_info",
+    "read_bag",
+    "read_raw",
+    "top_level_records",
+]
 
-_READ_ERRORS = (McapError, struct.error, zstandard.ZstdError, ValueError, EOFError, OSError)
+#: What reading a cut or damaged MCAP file raises.
+READ_ERRORS = (McapError, struct.error, zstandard.ZstdError, ValueError, EOFError, OSError)
 
 
 class NotABagError(ValueError):
@@ -48,6 +60,7 @@ class TopicInfo:
     type_name: str
     message_count: int
     qos: str  # the channel's offered_qos_profiles YAML, as recorded
+    type_hash: str = ""  # the channel's topic_type_hash (RIHS01)
 
 
 @dataclass(frozen=True)
@@ -102,7 +115,7 @@ def bag_files(path: Path) -> list[Path]:
     return files
 
 
-def _top_level_records(file: Path) -> Iterator[object]:
+def top_level_records(file: Path) -> Iterator[object]:
     """Records of one file (chunks unopened), up to the first unreadable one."""
     with open(file, "rb") as stream:
         records = StreamReader(stream, emit_chunks=True).records
@@ -111,7 +124,7 @@ def _top_level_records(file: Path) -> Iterator[object]:
                 record = next(records)
             except StopIteration:
                 return
-            except _READ_ERRORS:
+            except READ_ERRORS:
                 return  # truncated tail (killed recorder): keep what was complete
             yield record
 
@@ -143,7 +156,7 @@ def _iter_file(file: Path, topics: set[str] | None) -> Iterator[tuple[Schema | N
         elif isinstance(record, Schema):
             schemas[record.id] = record
 
-    for position, record in enumerate(_top_level_records(file)):
+    for position, record in enumerate(top_level_records(file)):
         if isinstance(record, Chunk):
             chunks[position] = record
             heapq.heappush(heap, (record.message_start_time, position, -1, None))
@@ -156,7 +169,7 @@ def _iter_file(file: Path, topics: set[str] | None) -> Iterator[tuple[Schema | N
             continue
         try:
             inner = breakup_chunk(chunks.pop(position))
-        except _READ_ERRORS:
+        except READ_ERRORS:
             continue  # a chunk damaged on disk: skip it
         for i, record in enumerate(inner):
             accept(record, position, i)
@@ -185,28 +198,36 @@ def read_bag(path: Path, topics: Iterable[str] | None = None) -> Iterator[tuple[
             yield channel.topic, schema.name, message.log_time, decode(message.data)
 
 
-def _summary_info(file: Path) -> tuple[dict[tuple[str, str, str], int], int, int] | None:
+_TopicKey = tuple[str, str, str, str]  # topic, type, offered QoS YAML, type hash
+
+
+def _key(schema: Schema | None, channel: Channel) -> _TopicKey:
+    metadata = channel.metadata
+    return (channel.topic, schema.name if schema else "", metadata.get("offered_qos_profiles", ""),
+            metadata.get("topic_type_hash", ""))
+
+
+def _summary_info(file: Path) -> tuple[dict[_TopicKey, int], int, int] | None:
     try:
         with open(file, "rb") as stream:
             summary = make_reader(stream).get_summary()
-    except _READ_ERRORS:
+    except READ_ERRORS:
         return None
     if summary is None or summary.statistics is None:
         return None
     stats = summary.statistics
-    counts: dict[tuple[str, str, str], int] = {}
+    counts: dict[_TopicKey, int] = {}
     for channel_id, channel in summary.channels.items():
-        schema = summary.schemas.get(channel.schema_id)
-        key = (channel.topic, schema.name if schema else "", channel.metadata.get("offered_qos_profiles", ""))
+        key = _key(summary.schemas.get(channel.schema_id), channel)
         counts[key] = counts.get(key, 0) + stats.channel_message_counts.get(channel_id, 0)
     return counts, stats.message_start_time, stats.message_end_time
 
 
-def _scanned_info(file: Path) -> tuple[dict[tuple[str, str, str], int], int, int]:
-    counts: dict[tuple[str, str, str], int] = {}
+def _scanned_info(file: Path) -> tuple[dict[_TopicKey, int], int, int]:
+    counts: dict[_TopicKey, int] = {}
     start, end = None, 0
     for schema, channel, message in _iter_file(file, None):
-        key = (channel.topic, schema.name if schema else "", channel.metadata.get("offered_qos_profiles", ""))
+        key = _key(schema, channel)
         counts[key] = counts.get(key, 0) + 1
         start = message.log_time if start is None else min(start, message.log_time)
         end = max(end, message.log_time)
@@ -220,7 +241,7 @@ def bag_info(path: Path) -> BagInfo:
     """
     path = Path(path)
     files = bag_files(path)
-    counts: dict[tuple[str, str, str], int] = {}
+    counts: dict[_TopicKey, int] = {}
     starts, ends, complete = [], [], True
     for file in files:
         found = _summary_info(file)
@@ -233,7 +254,8 @@ def bag_info(path: Path) -> BagInfo:
         if any(file_counts.values()):
             starts.append(start)
             ends.append(end)
-    topics = tuple(TopicInfo(name, type_name, n, qos) for (name, type_name, qos), n in sorted(counts.items()))
+    topics = tuple(TopicInfo(name, type_name, n, qos, hash_string)
+                   for (name, type_name, qos, hash_string), n in sorted(counts.items()))
     return BagInfo(
         path=path,
         files=tuple(files),

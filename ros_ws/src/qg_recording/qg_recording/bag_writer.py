@@ -4,11 +4,18 @@ The 1 kHz loop must never wait for the disk or for compression, and no message m
 `write()` (one serialized message) and `write_rows()` (a block of fixed-layout messages, still
 as numbers) only append to an unbounded deque and set an event (about a microsecond, thread
 safe). A writer thread, asleep otherwise, encodes the blocks and drains everything into the
-MCAP file, closes a zstd chunk every `chunk_size` bytes or `flush_interval_s` seconds and then
-rewrites metadata.yaml. A chunk is flushed to the kernel as soon as it is complete, so a SIGKILL
-loses at most the chunk in progress; `close()` (also run at interpreter exit, e.g. after Ctrl-C)
-drains the queue and writes the MCAP summary. With a long backlog the writer thread gives up
-the interpreter lock between batches, so the loop thread never waits long for it.
+MCAP file, closes a zstd chunk every `chunk_size` bytes and then rewrites metadata.yaml. Every
+`flush_interval_s` it also collects what the producer still buffers (the `collect` hook: the
+recorder's row buffers), writes everything produced until then and closes the chunk. A chunk
+is flushed to the kernel as soon as it is complete, so a SIGKILL loses at most the chunk in
+progress: at most about `flush_interval_s` seconds of every topic. `close()` (also run at interpreter exit, e.g. after Ctrl-C)
+drains the queue and writes, as rosbag2's MCAP storage plugin does when it closes, the `rosbag2`
+metadata record (`serialized_metadata`, `ROS_DISTRO`) and the MCAP summary. With a long backlog
+the writer thread gives up the interpreter lock between batches, so the loop thread never waits
+long for it.
+
+Each channel carries what rosbag2 records for a topic: the publisher's offered QoS and the
+type's RIHS01 hash (`topic_type_hash`), read from the installed type description.
 """
 
 from __future__ import annotations
@@ -16,8 +23,9 @@ from __future__ import annotations
 import atexit
 import threading
 import time
+import warnings
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -26,8 +34,8 @@ import numpy as np
 
 from .cdr import FixedLayout
 from .mcap_stream import ChunkStats, McapStream
-from .rosbag2_metadata import QOS_RELIABILITIES, BagMetadata, TopicRecord, qos_profiles_yaml, write_metadata
-from .schemas import normalize_type_name, schema_text
+from .rosbag2_metadata import ROS_DISTRO, BagMetadata, TopicRecord, check_qos, qos_profiles_yaml, write_metadata
+from .schemas import TypeHashNotFoundError, normalize_type_name, schema_text, type_hash
 
 __all__ = ["BagWriter", "bag_file_name"]
 
@@ -49,7 +57,10 @@ class BagWriter:
     :param compression: chunk compression, "zstd" or "none".
     :param flush_interval_s: also close a chunk this long after its first message, so slow
         topics reach the disk too.
-    :param custom_data: strings stored in metadata.yaml `custom_data` and as MCAP metadata.
+    :param custom_data: strings stored in rosbag2's `custom_data` (metadata.yaml and the MCAP
+        `rosbag2` record).
+    :param collect: called on the writer thread every `flush_interval_s`, to queue the messages
+        the producer still buffers; it must only call `write`/`write_rows`.
     """
 
     def __init__(
@@ -59,6 +70,7 @@ class BagWriter:
         compression: str = "zstd",
         flush_interval_s: float = 1.0,
         custom_data: Mapping[str, str] | None = None,
+        collect: Callable[[], None] | None = None,
     ) -> None:
         if chunk_size < 1024:
             raise ValueError(f"chunk_size must be at least 1024 bytes, got {chunk_size}")
@@ -78,8 +90,6 @@ class BagWriter:
 
         self._stream = open(self.path, "wb")
         self._mcap = McapStream(self._stream, LIBRARY, _COMPRESSIONS[compression])
-        if custom:
-            self._mcap.add_metadata("rosbag2", custom)
         self._stream.flush()  # a bag killed before its first chunk still starts with MCAP magic
         self._metadata = BagMetadata(relative_path=file_name, custom_data=custom)
         write_metadata(self.directory, self._metadata)
@@ -90,7 +100,8 @@ class BagWriter:
         self._channels: dict[str, int] = {}
         self._topics: dict[int, TopicRecord] = {}
         self._schemas: dict[str, int] = {}
-        self._chunk_opened = 0.0
+        self._collect = collect
+        self._flushed_at = time.monotonic()  # the last `_flush`
         self.messages_written = 0  # handed to the MCAP file so far (by the writer thread)
         self._accepting = True
         self._error: BaseException | None = None
@@ -102,15 +113,17 @@ class BagWriter:
 
     # -- producer side -------------------------------------------------------------------------
 
-    def add_topic(self, name: str, type_name: str, qos: str = "reliable", depth: int = 10) -> None:
+    def add_topic(
+        self, name: str, type_name: str, qos: str = "reliable", depth: int = 10, durability: str = "volatile",
+    ) -> None:
         """Register a topic before writing to it; repeating a registration is a no-op.
 
         :param type_name: `pkg/msg/Type`; its `.msg` definition must be findable.
-        :param qos: "reliable" or "best_effort", the offered QoS replay will use.
+        :param qos, depth, durability: the publisher's offered QoS ("reliable" or "best_effort",
+            history depth, "volatile" or "transient_local"), which replay offers again.
         :raises ValueError: on an invalid qos or a topic re-registered with another type.
         """
-        if qos not in QOS_RELIABILITIES:
-            raise ValueError(f"qos must be one of {QOS_RELIABILITIES}, got {qos!r}")
+        check_qos(qos, durability)
         pkg, msg = normalize_type_name(type_name)
         type_name = f"{pkg}/msg/{msg}"
         if name in self._channels:
@@ -119,14 +132,20 @@ class BagWriter:
                 raise ValueError(f"topic {name} is recorded as {known}, not {type_name}")
             return
         schema = schema_text(type_name).encode()
+        try:
+            hash_string = type_hash(type_name)
+        except TypeHashNotFoundError as exc:  # recordable all the same: rosbag2 then writes ""
+            warnings.warn(f"{exc}; recording {name} without a type hash", stacklevel=2)
+            hash_string = ""
         with self._lock:
             schema_id = self._schemas.get(type_name)
             if schema_id is None:
                 schema_id = self._mcap.add_schema(type_name, "ros2msg", schema)
                 self._schemas[type_name] = schema_id
-            metadata = {"offered_qos_profiles": qos_profiles_yaml(qos, depth) + "\n", "topic_type_hash": ""}
+            metadata = {"offered_qos_profiles": qos_profiles_yaml(qos, depth, durability=durability) + "\n",
+                        "topic_type_hash": hash_string}
             channel_id = self._mcap.add_channel(name, "cdr", schema_id, metadata)
-            record = TopicRecord(name, type_name, qos, depth)
+            record = TopicRecord(name, type_name, qos, depth, durability=durability, type_hash=hash_string)
             self._metadata.topics.append(record)
             self._topics[channel_id] = record
             self._channels[name] = channel_id
@@ -198,16 +217,18 @@ class BagWriter:
     def _run(self) -> None:
         try:
             while True:
-                idle = time.monotonic() - self._chunk_opened if self._mcap.chunk_bytes else 0.0
-                self._wake.wait(max(1e-3, self._flush_interval_s - idle))
+                self._wake.wait(max(1e-3, self._flush_interval_s - (time.monotonic() - self._flushed_at)))
                 self._wake.clear()
                 self._drain()
                 if self._closing.is_set() and not self._queue:
                     break
-                if self._mcap.chunk_bytes and time.monotonic() - self._chunk_opened >= self._flush_interval_s:
-                    self._close_chunk()
+                if time.monotonic() - self._flushed_at >= self._flush_interval_s:
+                    self._flush()
             with self._lock:
-                self._count(self._mcap.finish())
+                self._count(self._mcap.close_chunk())
+                self._mcap.add_metadata("rosbag2", {"serialized_metadata": self._metadata.serialized(),
+                                                    "ROS_DISTRO": ROS_DISTRO})
+                self._mcap.finish()
                 self._stream.close()
                 write_metadata(self.directory, self._metadata)
         except BaseException as exc:  # noqa: BLE001 - reported to the producer by write()/close()
@@ -217,8 +238,6 @@ class BagWriter:
     def _drain(self) -> None:
         queue, mcap = self._queue, self._mcap
         while queue:
-            if not mcap.chunk_bytes:
-                self._chunk_opened = time.monotonic()
             for _ in range(min(_BATCH, len(queue))):
                 channel, t_ns, payload = queue.popleft()
                 if payload.__class__ is bytes:
@@ -230,9 +249,17 @@ class BagWriter:
                     self.messages_written += len(t_ns)
                 if mcap.chunk_bytes >= self._chunk_size:
                     self._close_chunk()
-                    self._chunk_opened = time.monotonic()
             if queue:
                 time.sleep(0)  # a long backlog: let the loop thread take the interpreter lock
+
+    def _flush(self) -> None:
+        """Every `flush_interval_s`: write everything produced until now, the producer's
+        buffers included, and close the chunk (so a SIGKILL loses at most what came since)."""
+        if self._collect is not None:
+            self._collect()
+        self._drain()
+        self._close_chunk()
+        self._flushed_at = time.monotonic()
 
     def _close_chunk(self) -> None:
         with self._lock:

@@ -5,7 +5,9 @@ Episodes are the unit of analysis and of offline rebuilding, so each gets its ow
 no-ops, so the 1 kHz loop can call them unconditionally. A high-rate message costs the loop only
 copying its numbers into a row of a per-topic buffer; every `ROWS` messages the buffer goes to
 the writer thread, which encodes the block with `cdr.FixedLayout.encode_many` (a few numpy
-operations for hundreds of messages: see benchmarks/recording_bench.py for the cost per tick).
+operations for hundreds of messages: see benchmarks/recording_bench.py for the cost per tick),
+and every flush interval the writer thread collects the partly filled buffers too, so slow
+topics (100 Hz ground truth fills a buffer in 2 s) lose no more than the chunk in progress.
 RL-rate messages are encoded on the spot; rclpy messages go through `record_message`, which
 imports rclpy only when called.
 """
@@ -31,11 +33,13 @@ __all__ = ["TOPICS", "EpisodeRecorder", "TopicSpec"]
 
 @dataclass(frozen=True)
 class TopicSpec:
-    """A recorded topic's type and the QoS its publisher offers (design.md, topic table)."""
+    """A recorded topic's type and the QoS its publisher offers (`qg_common.topics`; a stack
+    test compares them with what the live graph reports), so replay offers the same QoS."""
 
     type_name: str
     qos: str
     depth: int
+    durability: str = "volatile"
 
 
 TOPICS: dict[str, TopicSpec] = {
@@ -48,7 +52,7 @@ TOPICS: dict[str, TopicSpec] = {
     "/wrench_setpoint": TopicSpec("qg_interfaces/msg/WrenchSetpoint", "reliable", 10),
     "/ee_at_rest": TopicSpec("qg_interfaces/msg/AtRest", "reliable", 10),
     "/transitions": TopicSpec("qg_interfaces/msg/Transition", "reliable", 1000),
-    "/episode_status": TopicSpec("qg_interfaces/msg/EpisodeStatus", "reliable", 10),
+    "/episode_status": TopicSpec("qg_interfaces/msg/EpisodeStatus", "reliable", 1, "transient_local"),
 }
 _EPISODE_ID = re.compile(r"^[A-Za-z0-9_.\-]+$")
 ROWS = 200  # messages of a 1 kHz topic handed to the writer thread at once (0.2 s)
@@ -130,13 +134,21 @@ class EpisodeRecorder:
         custom = {"episode_id": episode_id}
         for key, value in (metadata or {}).items():
             custom[str(key)] = value if isinstance(value, str) else json.dumps(value)
-        writer = BagWriter(self.runs_dir / episode_id, custom_data=custom, **self._writer_options)
+        writer = BagWriter(self.runs_dir / episode_id, custom_data=custom, collect=self._hand_off_rows,
+                           **self._writer_options)
         for topic, spec in TOPICS.items():  # all up front: no registration check per message
-            writer.add_topic(topic, spec.type_name, spec.qos, spec.depth)
+            writer.add_topic(topic, spec.type_name, spec.qos, spec.depth, spec.durability)
         with self._lock:
             self._writer, self.episode_id = writer, episode_id
         atexit.register(self.stop)  # Ctrl-C: hand the buffered rows over before the bag closes
         return writer.directory
+
+    def _hand_off_rows(self) -> None:
+        """Queue every buffered row (the writer thread calls this every flush interval, so rows
+        reach the disk with the chunk of their time: a SIGKILL loses at most that chunk)."""
+        with self._lock:
+            for rows in self._pending.values():
+                rows.hand_off()
 
     def stop(self) -> Path | None:
         """Close the current bag (drains every queued message); returns its directory.

@@ -117,10 +117,11 @@ class McapStream:
         self._emit(channel)
         return channel.id
 
-    def add_message(self, channel_id: int, t_ns: int, data: bytes) -> None:
-        """Append a message to the open chunk (log time = publish time = `t_ns`)."""
+    def add_message(self, channel_id: int, t_ns: int, data: bytes, publish_ns: int | None = None) -> None:
+        """Append a message to the open chunk (log time `t_ns`; publish time the same unless given)."""
         size = len(data)
-        self._records.append(_MESSAGE.pack(Opcode.MESSAGE, _MESSAGE_FIXED + size, channel_id, 0, t_ns, t_ns))
+        self._records.append(_MESSAGE.pack(Opcode.MESSAGE, _MESSAGE_FIXED + size, channel_id, 0, t_ns,
+                                           t_ns if publish_ns is None else publish_ns))
         self._records.append(data)
         self._index[channel_id] += (t_ns, self.chunk_bytes)
         self.chunk_bytes += _HEADER_SIZE + size

@@ -1,7 +1,9 @@
 """Republishing a bag with its original timing, like `ros2 bag play` (node side: uses rclpy).
 
 Messages are published as the recorded CDR bytes (rclpy publishes serialized messages as they
-are), on publishers of the recorded types with the recorded reliability, each at
+are), on publishers of the recorded types with the recorded offered QoS (reliability and
+durability: a transient-local subscriber such as the learner's `/episode_status` one only matches
+a transient-local publisher), each at
 `first_publish + (t - t_first) / rate` on the monotonic clock. Sleeping happens between messages
 only; a publisher that falls behind (slow machine, high rate) catches up without sleeping rather
 than drifting.
@@ -16,14 +18,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from .bag_reader import bag_info, read_raw
+from .rosbag2_metadata import parse_qos_profiles
 
-__all__ = ["PlayResult", "message_class", "play"]
+__all__ = ["PlayResult", "message_class", "offered_qos", "play"]
 
 #: [s] at the end, how long to wait for subscribers to acknowledge the last reliable messages.
 ACK_TIMEOUT_S = 5.0
@@ -47,16 +49,19 @@ def message_class(type_name: str) -> type:
     return getattr(importlib.import_module(f"{parts[0]}.msg"), parts[2])
 
 
-def _qos(offered_yaml: str) -> QoSProfile:
-    """A subscriber-compatible publisher QoS from the recorded offered profile."""
-    try:
-        profile = (yaml.safe_load(offered_yaml) or [{}])[0]
-    except yaml.YAMLError:
-        profile = {}
-    best_effort = profile.get("reliability") in ("best_effort", 2)  # name (v9+) or rmw enum value
-    reliability = ReliabilityPolicy.BEST_EFFORT if best_effort else ReliabilityPolicy.RELIABLE
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=max(10, int(profile.get("depth", 10))),
-                      reliability=reliability)
+def offered_qos(offered_yaml: str) -> QoSProfile:
+    """The publisher QoS replay offers: the recorded profile's reliability and durability.
+
+    A volatile topic gets at least depth 10, so a burst of replayed messages is not cut short;
+    a transient-local one keeps its recorded depth, which is what a late joiner receives live.
+    """
+    reliability, durability, depth = parse_qos_profiles(offered_yaml)
+    latched = durability == "transient_local"
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=depth if latched else max(10, depth),
+        reliability=ReliabilityPolicy.BEST_EFFORT if reliability == "best_effort" else ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
 
 
 def play(
@@ -90,7 +95,7 @@ def play(
         for topic in info.topics:
             if (wanted is None or topic.name in wanted) and topic.name not in publishers and topic.message_count:
                 publishers[topic.name] = node.create_publisher(
-                    message_class(topic.type_name), topic.name, _qos(topic.qos))
+                    message_class(topic.type_name), topic.name, offered_qos(topic.qos))
         deadline = time.monotonic() + wait_for_subscribers_s
         while time.monotonic() < deadline and any(p.get_subscription_count() == 0 for p in publishers.values()):
             time.sleep(0.02)

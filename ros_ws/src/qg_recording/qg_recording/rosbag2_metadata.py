@@ -5,6 +5,10 @@ bag opens and rewrites it after every chunk and at close; a killed recorder ther
 file that describes everything up to its last complete chunk. The text is rendered by hand
 (not through a YAML emitter): it is rewritten on the writer thread while the 1 kHz loop runs, and
 a pure-Python YAML dump would hold the interpreter lock for milliseconds.
+
+The same mapping, without the `rosbag2_bagfile_information` key, is what rosbag2's MCAP storage
+plugin stores as `serialized_metadata` in the file's `rosbag2` metadata record when it closes
+(`MCAPStorage::update_metadata`), so a lone `.mcap` file keeps its distro and custom data.
 """
 
 from __future__ import annotations
@@ -19,9 +23,12 @@ import yaml
 
 __all__ = [
     "METADATA_FILE",
+    "QOS_DURABILITIES",
     "QOS_RELIABILITIES",
+    "ROS_DISTRO",
     "BagMetadata",
     "TopicRecord",
+    "parse_qos_profiles",
     "qos_profiles_yaml",
     "read_metadata",
     "write_metadata",
@@ -29,7 +36,9 @@ __all__ = [
 
 METADATA_FILE = "metadata.yaml"
 VERSION = 9
+ROS_DISTRO = "jazzy"
 QOS_RELIABILITIES = ("reliable", "best_effort")
+QOS_DURABILITIES = ("volatile", "transient_local")
 _INFINITE = "{sec: 9223372036, nsec: 854775807}"
 
 
@@ -38,15 +47,22 @@ def _q(text: str) -> str:
     return json.dumps(text)
 
 
-def qos_profiles_yaml(reliability: str, depth: int, indent: str = "") -> str:
-    """The one offered QoS profile of a recorded publisher as a rosbag2 YAML list."""
+def check_qos(reliability: str, durability: str) -> None:
+    """:raises ValueError: for a reliability or durability rosbag2 would not write."""
     if reliability not in QOS_RELIABILITIES:
         raise ValueError(f"qos must be one of {QOS_RELIABILITIES}, got {reliability!r}")
+    if durability not in QOS_DURABILITIES:
+        raise ValueError(f"durability must be one of {QOS_DURABILITIES}, got {durability!r}")
+
+
+def qos_profiles_yaml(reliability: str, depth: int, indent: str = "", durability: str = "volatile") -> str:
+    """The one offered QoS profile of a recorded publisher as a rosbag2 YAML list."""
+    check_qos(reliability, durability)
     lines = [
         "- history: keep_last",
         f"  depth: {depth}",
         f"  reliability: {reliability}",
-        "  durability: volatile",
+        f"  durability: {durability}",
         f"  deadline: {_INFINITE}",
         f"  lifespan: {_INFINITE}",
         "  liveliness: automatic",
@@ -54,6 +70,25 @@ def qos_profiles_yaml(reliability: str, depth: int, indent: str = "") -> str:
         "  avoid_ros_namespace_conventions: false",
     ]
     return "\n".join(indent + line for line in lines)
+
+
+def parse_qos_profiles(offered_yaml: str) -> tuple[str, str, int]:
+    """(reliability, durability, depth) of the first profile of a recorded offered-QoS YAML list,
+    by name (version 9) or rmw enum value (older bags); reliable, volatile, 10 where missing,
+    unreadable or 0 (rosbag2 records the graph's depth, which is 0)."""
+    try:
+        profiles = yaml.safe_load(offered_yaml) or [{}]
+        profile = profiles[0] if isinstance(profiles, list) and isinstance(profiles[0], dict) else {}
+    except yaml.YAMLError:
+        profile = {}
+    best_effort = profile.get("reliability") in ("best_effort", 2)
+    latched = profile.get("durability") in ("transient_local", 1)
+    try:
+        depth = int(profile.get("depth") or 10)
+    except (TypeError, ValueError):
+        depth = 10
+    return ("best_effort" if best_effort else "reliable", "transient_local" if latched else "volatile",
+            depth if depth > 0 else 10)
 
 
 @dataclass
@@ -65,6 +100,8 @@ class TopicRecord:
     reliability: str = "reliable"
     depth: int = 10
     message_count: int = 0
+    durability: str = "volatile"
+    type_hash: str = ""  # RIHS01 of the type ("" if no type description is installed)
 
 
 @dataclass
@@ -85,48 +122,51 @@ class BagMetadata:
     def duration_ns(self) -> int:
         return max(0, self.end_ns - self.start_ns)
 
-    def render(self) -> str:
-        """The metadata.yaml text."""
+    def serialized(self) -> str:
+        """The mapping alone (rosbag2's `serialized_metadata` in the MCAP `rosbag2` record)."""
         start, duration, count = self.start_ns, self.duration_ns, self.message_count
         out = [
-            "rosbag2_bagfile_information:",
-            f"  version: {VERSION}",
-            "  storage_identifier: mcap",
-            "  duration:",
-            f"    nanoseconds: {duration}",
-            "  starting_time:",
-            f"    nanoseconds_since_epoch: {start}",
-            f"  message_count: {count}",
-            "  topics_with_message_count:" + ("" if self.topics else " []"),
+            f"version: {VERSION}",
+            "storage_identifier: mcap",
+            "duration:",
+            f"  nanoseconds: {duration}",
+            "starting_time:",
+            f"  nanoseconds_since_epoch: {start}",
+            f"message_count: {count}",
+            "topics_with_message_count:" + ("" if self.topics else " []"),
         ]
         for topic in self.topics:
             out += [
-                "    - topic_metadata:",
-                f"        name: {_q(topic.name)}",
-                f"        type: {_q(topic.type_name)}",
-                "        serialization_format: cdr",
-                "        offered_qos_profiles:",
-                qos_profiles_yaml(topic.reliability, topic.depth, indent="          "),
-                '        type_description_hash: ""',
-                f"      message_count: {topic.message_count}",
+                "  - topic_metadata:",
+                f"      name: {_q(topic.name)}",
+                f"      type: {_q(topic.type_name)}",
+                "      serialization_format: cdr",
+                "      offered_qos_profiles:",
+                qos_profiles_yaml(topic.reliability, topic.depth, "        ", topic.durability),
+                f"      type_description_hash: {_q(topic.type_hash)}",
+                f"    message_count: {topic.message_count}",
             ]
         out += [
-            '  compression_format: ""',
-            '  compression_mode: ""',
-            "  relative_file_paths:",
-            f"    - {_q(self.relative_path)}",
-            "  files:",
-            f"    - path: {_q(self.relative_path)}",
-            "      starting_time:",
-            f"        nanoseconds_since_epoch: {start}",
-            "      duration:",
-            f"        nanoseconds: {duration}",
-            f"      message_count: {count}",
-            "  custom_data:" + ("" if self.custom_data else " {}"),
+            'compression_format: ""',
+            'compression_mode: ""',
+            "relative_file_paths:",
+            f"  - {_q(self.relative_path)}",
+            "files:",
+            f"  - path: {_q(self.relative_path)}",
+            "    starting_time:",
+            f"      nanoseconds_since_epoch: {start}",
+            "    duration:",
+            f"      nanoseconds: {duration}",
+            f"    message_count: {count}",
+            "custom_data:" + ("" if self.custom_data else " {}"),
         ]
-        out += [f"    {_q(k)}: {_q(v)}" for k, v in self.custom_data.items()]
-        out.append("  ros_distro: jazzy")
+        out += [f"  {_q(k)}: {_q(v)}" for k, v in self.custom_data.items()]
+        out.append(f"ros_distro: {ROS_DISTRO}")
         return "\n".join(out) + "\n"
+
+    def render(self) -> str:
+        """The metadata.yaml text."""
+        return "rosbag2_bagfile_information:\n" + "".join(f"  {line}\n" for line in self.serialized().splitlines())
 
 
 def write_metadata(directory: Path, metadata: BagMetadata) -> None:

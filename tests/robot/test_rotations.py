@@ -1,0 +1,73 @@
+"""qg_common.rotations (Pinocchio's SO(3) maps) held against scipy's ``Rotation``, an independent
+implementation, near 0, pi/2 and pi, and the quaternion kept continuous at the operating point."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from qg_common.rotations import axis_angle_matrix, matrix_from_quaternion, quaternion_from_matrix, rotation_log
+
+_RNG = np.random.default_rng(0)
+AXES = [np.array(a, float) / np.linalg.norm(a) for a in
+        [(1, 0, 0), (0, 1, 0), (0, 0, 1), (0.3, -0.5, 0.8), (-1, -1, 0.2)] + list(_RNG.normal(size=(4, 3)))]
+PI = math.pi
+ANGLES = [0.0, 1e-9, 1e-4, 0.3, PI / 2 - 1e-6, PI / 2, PI / 2 + 1e-6, 2.0, PI - 1e-3, PI - 1e-6, PI - 1e-9, PI]
+
+
+def sign_component(matrix: np.ndarray, q: np.ndarray) -> float:
+    """The component Eigen makes positive: w if the trace is positive, else that of the largest
+    diagonal entry (x, y or z)."""
+    return q[3] if np.trace(matrix) > 0.0 else q[int(np.argmax(np.diag(matrix)))]
+
+
+def same_up_to_sign(a: np.ndarray, b: np.ndarray, atol: float) -> bool:
+    return bool(np.allclose(a, b, atol=atol) or np.allclose(a, -b, atol=atol))
+
+
+@pytest.mark.parametrize("angle", ANGLES)
+@pytest.mark.parametrize("axis", AXES, ids=lambda a: np.array2string(a, precision=2))
+def test_rotation_log_and_exp_match_scipy(axis: np.ndarray, angle: float) -> None:
+    reference = Rotation.from_rotvec(axis * angle)
+    matrix = reference.as_matrix()
+    np.testing.assert_allclose(axis_angle_matrix(axis, angle), matrix, atol=1e-14)
+    log = rotation_log(matrix)
+    expected = Rotation.from_matrix(matrix).as_rotvec()
+    if angle < PI - 1e-6:
+        np.testing.assert_allclose(log, expected, atol=1e-9)
+    else:  # at pi the axis' sign is a free choice; the rotation it stands for is not
+        assert same_up_to_sign(log, expected, atol=1e-6), (log, expected)
+        np.testing.assert_allclose(Rotation.from_rotvec(log).as_matrix(), matrix, atol=1e-9)
+    assert np.linalg.norm(log) == pytest.approx(angle, abs=1e-9)
+
+
+@pytest.mark.parametrize("angle", ANGLES)
+@pytest.mark.parametrize("axis", AXES, ids=lambda a: np.array2string(a, precision=2))
+def test_quaternion_matches_scipy_both_ways(axis: np.ndarray, angle: float) -> None:
+    reference = Rotation.from_rotvec(axis * angle)
+    q = np.array(quaternion_from_matrix(reference.as_matrix()))
+    assert np.linalg.norm(q) == pytest.approx(1.0, abs=1e-12)
+    assert same_up_to_sign(q, reference.as_quat(), atol=1e-12)
+    assert sign_component(reference.as_matrix(), q) > 0.0
+    np.testing.assert_allclose(matrix_from_quaternion(*q), reference.as_matrix(), atol=1e-12)
+    np.testing.assert_allclose(matrix_from_quaternion(*(3.0 * q)), reference.as_matrix(), atol=1e-12)
+
+
+def test_quaternion_is_continuous_through_the_tool_pointing_down() -> None:
+    """The tool frame at the operating point is a half turn about x (w = 0); tilting it either way
+    must move the quaternion a little, not flip its sign."""
+    down = Rotation.from_rotvec([PI, 0.0, 0.0])
+    path = [Rotation.from_rotvec([s, 0.02, -0.01]) * down for s in np.linspace(-0.05, 0.05, 101)]
+    qs = np.array([quaternion_from_matrix(r.as_matrix()) for r in path])
+    assert qs[:, 3].min() < 0.0 < qs[:, 3].max()  # the path crosses w = 0
+    assert np.max(np.linalg.norm(np.diff(qs, axis=0), axis=1)) < 1e-3
+    for q, r in zip(qs, path):
+        assert same_up_to_sign(q, r.as_quat(), atol=1e-12)
+
+
+def test_a_degenerate_quaternion_gives_a_matrix_the_safety_filter_rejects() -> None:
+    assert np.isnan(matrix_from_quaternion(0.0, 0.0, 0.0, 0.0)).all()
+    assert np.isnan(matrix_from_quaternion(math.nan, 0.0, 0.0, 1.0)).all()
+    assert np.isnan(matrix_from_quaternion(math.inf, 0.0, 0.0, 1.0)).all()

@@ -1,0 +1,70 @@
+"""The recorder in realtime mode: one time base per bag, the wall clock the live messages carry.
+
+Episodes are driven by hand here (a status, a reset, one step, the final status), so only the
+robot process runs.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import pytest
+from live_capture import LiveCapture, stamp_ns
+from robot_client import RobotClient
+
+pytestmark = pytest.mark.ros
+
+EPISODE = "rt_0001"
+
+
+def status(state: str):
+    from qg_interfaces.msg import EpisodeStatus
+    from qg_common.conversions import time_msg
+    return EpisodeStatus(stamp=time_msg(time.time_ns()), episode_id=EPISODE, state=state, mode="test",
+                         reward_type="sparse", initial_pose=2, step=0, max_steps=1)
+
+
+def test_realtime_bag_is_stamped_like_the_live_messages(stack) -> None:
+    from qg_interfaces.msg import EpisodeStatus
+    from rclpy.serialization import deserialize_message
+    from rosbags.highlevel import AnyReader
+
+    from qg_common.topics import LATCHED
+    from qg_recording.bag_reader import bag_info
+    from qg_recording.episode_recorder import TOPICS
+    from qg_recording.player import message_class
+
+    stack.start(("robot", "robot_bridge_node", "robot", ("--ros-args", "-p", "sim.clock_mode:=realtime")))
+    bag = Path(stack.env["QG_RUNS_DIR"]) / "episodes" / EPISODE
+    with stack.client() as cli:
+        live = LiveCapture(cli, ("/joint_states", "/ee_pose", "/ee_at_rest"))
+        statuses = cli.node.create_publisher(EpisodeStatus, "/episode_status", LATCHED)
+        robot = RobotClient(cli)
+        assert robot.reset(2).success  # the robot is up
+        statuses.publish(status("resetting"))
+        assert cli.spin_until(bag.exists, 30.0), stack.logs()
+        assert robot.reset(2).success
+        assert robot.step(1, (0.0, 0.0, -8.0, 0.2, 0.0, 0.0), timeout=10.0, resend=0.004) is not None
+        statuses.publish(status("done"))
+        assert cli.spin_until(lambda: bag_info(bag).complete, 30.0), stack.logs()
+    with AnyReader([bag]) as reader:
+        recorded: dict[str, list[tuple[int, bytes]]] = {}
+        for connection, t_ns, data in reader.messages():
+            recorded.setdefault(connection.topic, []).append((t_ns, bytes(data)))
+        start, end = reader.start_time, reader.end_time
+    assert start == recorded["/episode_status"][0][0]  # the bag starts with its first message
+    assert abs(start - time.time_ns()) < 120 * 10**9  # the wall clock, not loop time
+    assert all(start <= t < end for messages in recorded.values() for t, _ in messages)
+    for topic in ("/joint_states", "/ee_pose"):  # the live stamps, byte for byte
+        cls = message_class(TOPICS[topic].type_name)
+        by_stamp = {stamp_ns(deserialize_message(data, cls)): data for _, data in recorded[topic]}
+        assert all(t == stamp_ns(deserialize_message(data, cls)) for t, data in recorded[topic])
+        in_span = [(stamp_ns(m), data) for m, data in zip(live.decoded(topic), live.received[topic])
+                   if min(by_stamp) <= stamp_ns(m) <= max(by_stamp)]
+        assert len(in_span) >= 20, (topic, len(in_span))
+        assert all(by_stamp.get(t) == data for t, data in in_span), topic
+    events = [deserialize_message(data, message_class(TOPICS["/ee_at_rest"].type_name))
+              for _, data in recorded["/ee_at_rest"]]
+    assert [e.seq for e in events][-1] == 1
+    for (t_ns, _), event in zip(recorded["/ee_at_rest"], events):
+        assert 0 <= t_ns - stamp_ns(event) < 10**9, (t_ns, stamp_ns(event))
