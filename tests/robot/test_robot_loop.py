@@ -78,7 +78,9 @@ def test_the_last_millimetres_need_a_sustained_push_above_ten_newtons(
     assert gt.insertion_depth == pytest.approx(loop.simulation.scene.config.bore_depth, abs=0.0005)
     landed = gt.plunger_travel
     assert landed < 0.0003  # only the landing impact moved the ring
-    press_upright(loop, force, 0.6)
+    # 12 N takes 0.6-0.9 s to push the ring its 4 mm (the friction leaves 1 N to accelerate 2 kg
+    # plus the arm); below the break-away force the ring only creeps, < 0.2 mm in 1 s.
+    press_upright(loop, force, 1.0)
     gt = loop.simulation.scene.ground_truth()
     assert gt.success == finishes
     if not finishes:
