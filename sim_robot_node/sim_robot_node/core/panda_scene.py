@@ -48,7 +48,7 @@ class PandaSceneConfig:
     hole_radius: float = 0.006
     bore_depth: float = 0.012                   # free slide before the inner ring
     bore_segments: int = 48
-    counterbore_segments: int = 16
+    counterbore_segments: int = 32
     counterbore_depth: float = 0.006
     counterbore_extra_radius: float = 0.004
     plunger_mass: float = 2.0                   # [kg] heavy, so the friction motor stays Coulomb
