@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 from robot_bridge_node.core.hardware_interface import load_robot
-from robot_bridge_node.core.robot_loop import GroundTruthWrench, build_loop
+from robot_bridge_node.core.robot_loop import MeasuredWrench, build_loop
 from qg_common.types import WrenchSetpoint
 
 
@@ -26,7 +26,7 @@ def main() -> None:
     parser.add_argument("--pose", type=int, default=0, help="start pose 0..7")
     args = parser.parse_args()
     loop = build_loop(load_robot("sim_panda"),
-                      estimator=lambda robot, model: GroundTruthWrench(robot.simulation))
+                      estimator=lambda robot, model: MeasuredWrench(robot.simulation.contact_wrench))
     scene = loop.simulation.scene
     ticks = round(args.seconds / loop.config.dt)
     rng = np.random.default_rng(0)

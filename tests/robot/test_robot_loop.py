@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 from robot_bridge_node.core.hardware_interface import load_robot
-from robot_bridge_node.core.robot_loop import (GroundTruthWrench, LoopConfig, RobotLoop,
+from robot_bridge_node.core.robot_loop import (MeasuredWrench, LoopConfig, RobotLoop,
                                                build_loop)
 from robot_bridge_node.core.safety import SetpointRejected
 from qg_common.types import N_START_POSES, PoseReference, WrenchSetpoint
@@ -19,7 +19,7 @@ PUSH = -15.0  # [N] the constant base policy (contact convention: pressing in)
 @pytest.fixture(scope="module")
 def loop() -> RobotLoop:
     loop = build_loop(load_robot("sim_panda"),
-                      estimator=lambda robot, model: GroundTruthWrench(robot.simulation))
+                      estimator=lambda robot, model: MeasuredWrench(robot.simulation.contact_wrench))
     yield loop
     loop.simulation.scene.close()
 

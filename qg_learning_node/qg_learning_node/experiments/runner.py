@@ -27,7 +27,7 @@ from qg_common.params import config_file, load_ros_params
 from qg_common.rotations import housing_rotation
 from qg_common.types import N_START_POSES, WrenchSetpoint
 from robot_bridge_node.core.hardware_interface import load_robot
-from robot_bridge_node.core.robot_loop import GroundTruthWrench, RobotLoop, build_loop
+from robot_bridge_node.core.robot_loop import MeasuredWrench, RobotLoop, build_loop
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
 
 from qg_learning_node.core.episode import Actor, Episode, TransitionRecord
@@ -124,7 +124,7 @@ class PandaTask:
         self.loop: RobotLoop = build_loop(
             load_robot("sim_panda", settings.robot), settings.bridge,
             (lambda robot, model: WrenchEKF(ekf, model)) if estimator == "ekf"
-            else (lambda robot, model: GroundTruthWrench(robot.simulation)))
+            else (lambda robot, model: MeasuredWrench(robot.simulation.contact_wrench)))
         self.residual = ResidualTask(settings.task)
         self.sim_time = 0.0
         self.steps = 0

@@ -13,30 +13,15 @@ from typing import Any
 import numpy as np
 from qg_common.types import WrenchSetpoint
 
-from robot_bridge_node.core.hardware_interface import (ForceTorqueSensor, PositionInterface,
-                                                       Robot, SimulationInterface)
+from robot_bridge_node.core.hardware_interface import (PositionInterface, Robot,
+                                                       SimulationInterface)
 from robot_bridge_node.core.position_control import (PositionControlConfig,
                                                      TaskSpacePositionController, pose_matrix)
 from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
-from robot_bridge_node.core.robot_loop import LoopConfig, RobotLoop
+from robot_bridge_node.core.robot_loop import LoopConfig, MeasuredWrench, RobotLoop
 from robot_bridge_node.core.safety import SetpointRejected
 
-__all__ = ["PositionLoop", "WristSensor", "build_position_loop"]
-
-
-class WristSensor:
-    """The loop's wrench source on a robot with a wrist force-torque sensor: its reading."""
-
-    def __init__(self, sensor: ForceTorqueSensor) -> None:
-        self.sensor = sensor
-
-    def reset(self, q: np.ndarray) -> None:
-        del q
-
-    def update(self, q: np.ndarray, dq: np.ndarray, tau_cmd: np.ndarray,
-               dt: float) -> np.ndarray:
-        del q, dq, tau_cmd, dt
-        return self.sensor.read_wrench()
+__all__ = ["PositionLoop", "build_position_loop"]
 
 
 class PositionLoop(RobotLoop):
@@ -44,11 +29,11 @@ class PositionLoop(RobotLoop):
 
     :param controller: pose reference in, joint targets out (clamped to its workspace box and
         rate-limited: the position robot's safety).
-    :param estimator: the wrench source, usually ``WristSensor``; ``None`` runs without one.
+    :param estimator: the wrench source, usually the wrist sensor's ``MeasuredWrench``; ``None`` runs without one.
     """
 
     def __init__(self, hardware: PositionInterface, controller: TaskSpacePositionController,
-                 rest_detector: RestDetector, estimator: WristSensor | None = None,
+                 rest_detector: RestDetector, estimator: MeasuredWrench | None = None,
                  config: LoopConfig | None = None,
                  simulation: SimulationInterface | None = None) -> None:
         # No torque safety filter: the controller clamps and rate-limits its own targets.
@@ -109,7 +94,8 @@ def build_position_loop(robot: Robot, bridge_params: dict[str, Any] | None = Non
     controller = TaskSpacePositionController(
         description.urdf, description.tool_frame,
         PositionControlConfig.from_dict(params.get("position_control", {})))
-    sensor = None if robot.wrist_sensor is None else WristSensor(robot.wrist_sensor)
+    sensor = (None if robot.wrist_sensor is None
+              else MeasuredWrench(robot.wrist_sensor.read_wrench))
     return PositionLoop(robot.hardware, controller,
                         RestDetector(RestConfig.from_dict(params.get("rest", {}))), sensor,
                         LoopConfig.from_dict(params.get("loop", {})), robot.simulation)

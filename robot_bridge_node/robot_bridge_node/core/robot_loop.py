@@ -23,7 +23,7 @@ from robot_bridge_node.core.panda_model import PandaModel
 from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
 from robot_bridge_node.core.safety import SafetyFilter, SafetyLimits
 
-__all__ = ["WrenchEstimator", "GroundTruthWrench", "LoopConfig", "RobotLoop", "tool_model",
+__all__ = ["WrenchEstimator", "MeasuredWrench", "LoopConfig", "RobotLoop", "tool_model",
            "build_loop"]
 
 
@@ -38,14 +38,16 @@ class WrenchEstimator(Protocol):
         ...
 
 
-class GroundTruthWrench:
-    """Stand-in estimator that reads the simulator's true contact wrench: a perfect sensor.
+class MeasuredWrench:
+    """A wrench source that reads a measurement instead of estimating one: a wrist force-torque
+    sensor (``sensor.read_wrench``), or in simulation the true contact wrench
+    (``simulation.contact_wrench``), a perfect sensor for tests and for comparing with the EKF.
 
-    For tests and for comparing against the EKF; it only exists in simulation.
+    :param read: returns the (6,) wrench ``(Fx, Fy, Fz, Tx, Ty, Tz)`` on the tool, tool frame.
     """
 
-    def __init__(self, simulation: SimulationInterface) -> None:
-        self.simulation = simulation
+    def __init__(self, read: Callable[[], np.ndarray]) -> None:
+        self.read = read
 
     def reset(self, q: np.ndarray) -> None:
         del q
@@ -53,7 +55,7 @@ class GroundTruthWrench:
     def update(self, q: np.ndarray, dq: np.ndarray, tau_cmd: np.ndarray,
                dt: float) -> np.ndarray:
         del q, dq, tau_cmd, dt
-        return self.simulation.contact_wrench()
+        return self.read()
 
 
 @dataclass(frozen=True)
@@ -213,7 +215,7 @@ def build_loop(robot: Robot, bridge_params: dict[str, Any] | None = None,
     :param bridge_params: the ``ros__parameters`` of ``config/bridge.yaml`` (sections
         ``impedance``, ``safety``, ``rest``, ``loop``); missing sections keep the defaults.
     :param estimator: builds the wrench estimator from the robot and the controller's model,
-        e.g. ``lambda robot, model: GroundTruthWrench(robot.simulation)``; ``None``: none.
+        e.g. ``lambda robot, model: MeasuredWrench(robot.simulation.contact_wrench)``; ``None``: none.
     """
     params = bridge_params or {}
     model = tool_model(robot.description.tool)
