@@ -35,6 +35,8 @@ from robot_bridge_node.core.robot_loop import RobotLoop
 __all__ = ["RecorderConfig", "RECORDER_SECTION", "RecorderNode"]
 
 _FINAL = ("done", "aborted")
+#: [s] a bag stays open at least this long after its episode ended (see ``_close_if_complete``).
+_SETTLE = 0.1
 #: ``/episode_status`` as its publisher offers it (transient local: a late recorder still gets
 #: the episode's state), but deep: the executor may publish several statuses back to back (the
 #: last step's ``running`` and ``done``), and a depth of 1 would keep only the last of them.
@@ -98,7 +100,7 @@ class RecorderNode(Node):
         self._subscribe(Transition, topics.TRANSITIONS, self._on_transition, topics.RELIABLE_DEEP, group)
         self._subscribe(WrenchSetpoint, topics.WRENCH_SETPOINT, self._on_setpoint, topics.COMMAND_QOS, group)
         self._subscribe(AtRest, topics.EE_AT_REST, self._on_at_rest, topics.COMMAND_QOS, group)
-        self.create_timer(0.2, self._close_if_complete, callback_group=group)
+        self.create_timer(0.05, self._close_if_complete, callback_group=group)
         #: The clock RL-rate messages are logged on; the robot process sets the loop's.
         self.clock_ns: Callable[[], int] = lambda: self.get_clock().now().nanoseconds
         self.last_setpoint_seq = -1
@@ -155,13 +157,11 @@ class RecorderNode(Node):
             self.recorder.record_raw("/episode_status", t_ns, data)
             if msg.state in _FINAL and self.final_steps is None:
                 self.final_steps, self.ended_at = int(msg.step), time.monotonic()
-                self._close_if_complete()
 
     def _on_transition(self, t_ns: int, data: bytes, msg: Transition) -> None:
         if msg.episode_id == self.episode_id:
             self.recorder.record_raw("/transitions", t_ns, data)
             self.transitions += 1
-            self._close_if_complete()
 
     def _on_setpoint(self, t_ns: int, data: bytes, msg: WrenchSetpoint) -> None:
         # The executor re-sends the running setpoint every few ms as a watchdog keep-alive;
@@ -175,11 +175,21 @@ class RecorderNode(Node):
             self.recorder.record_raw("/ee_at_rest", t_ns, data)
 
     def _close_if_complete(self) -> None:
+        """Close the bag once the episode has ended and all its transitions are in.
+
+        Called by the timer only, never from a message callback: messages published just
+        before the final status (the last ``/ee_at_rest``) may sit in the same batch of ready
+        callbacks as that status, behind it. Waiting at least one timer period after the end
+        lets every message that was already on its way be recorded first.
+        """
         if self.final_steps is None:
             return
-        late = time.monotonic() - self.ended_at > self.config.close_timeout
+        waited = time.monotonic() - self.ended_at
+        if waited < _SETTLE:
+            return
+        late = waited > self.config.close_timeout
         if self.transitions >= self.final_steps or late:
-            if late:
+            if late and self.transitions < self.final_steps:
                 self.get_logger().warning(
                     f"closing bag of {self.episode_id} with {self.transitions} of "
                     f"{self.final_steps} transitions")

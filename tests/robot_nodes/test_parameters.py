@@ -17,21 +17,22 @@ pytestmark = pytest.mark.ros
 def listed(cli, node: str) -> set[str]:
     from qg_learning_node.cli.ros_client import call_service
     return set(call_service(cli, ListParameters, f"{node}/list_parameters",
-                            ListParameters.Request(), timeout=30.0).result.names)
+                            ListParameters.Request(), timeout=30.0, resend_after=5.0).result.names)
 
 
 def get(cli, node: str, *names: str) -> list:
     from qg_learning_node.cli.ros_client import call_service
     from rclpy.parameter import parameter_value_to_python
     values = call_service(cli, GetParameters, f"{node}/get_parameters",
-                          GetParameters.Request(names=list(names))).values
+                          GetParameters.Request(names=list(names)), resend_after=5.0).values
     return [parameter_value_to_python(v) for v in values]
 
 
 def describe(cli, node: str, name: str):
     from qg_learning_node.cli.ros_client import call_service
     return call_service(cli, DescribeParameters, f"{node}/describe_parameters",
-                        DescribeParameters.Request(names=[name])).descriptors[0]
+                        DescribeParameters.Request(names=[name]),
+                        resend_after=5.0).descriptors[0]
 
 
 def set_double(cli, node: str, name: str, value: float):
@@ -42,7 +43,8 @@ def set_double(cli, node: str, name: str, value: float):
 def set_value(cli, node: str, name: str, value: ParameterValue):
     from qg_learning_node.cli.ros_client import call_service
     request = SetParameters.Request(parameters=[Parameter(name=name, value=value)])
-    return call_service(cli, SetParameters, f"{node}/set_parameters", request).results[0]
+    return call_service(cli, SetParameters, f"{node}/set_parameters", request,
+                        resend_after=5.0).results[0]
 
 
 def test_each_robot_node_declares_only_its_own_parameters_read_only(stack):

@@ -16,7 +16,7 @@ def declared(cli, node: str) -> set[str]:
 
     from qg_learning_node.cli.ros_client import call_service
     return set(call_service(cli, ListParameters, f"{node}/list_parameters",
-                            ListParameters.Request(), timeout=30.0).result.names)
+                            ListParameters.Request(), timeout=30.0, resend_after=5.0).result.names)
 
 
 def test_the_peg_task_and_the_nextage_scene_agree_on_the_geometry():

@@ -54,7 +54,8 @@ def test_start_episode_crosses_processes_and_rejects_bad_fields(stack):
     stack.start(("executor", "qg_learning_node", "executor"))
     with stack.client() as cli:
         bad = call_service(cli, StartEpisode, "/executor/start_episode",
-                           StartEpisode.Request(mode="fly", initial_pose=8, reward="lots"), 30.0)
+                           StartEpisode.Request(mode="fly", initial_pose=8, reward="lots"), 30.0,
+                           resend_after=5.0)  # refused, so safe to send twice
         assert not bad.success
         for word in ("mode", "initial_pose", "reward"):
             assert word in bad.message

@@ -2,6 +2,11 @@
 
 This rclpy's ``spin_until_future_complete`` costs 4-21 ms per call, so we spin the executor
 ourselves until the future is done.
+
+A service client is kept for the life of the ``CliNode``: a new client is matched by the
+server a moment after the client sees the server (discovery is not symmetric), and a reply
+sent in that moment is lost, more often on a loaded machine. Reusing one client pays that
+once; ``resend_after`` covers it for requests that are safe to send twice.
 """
 from __future__ import annotations
 
@@ -31,7 +36,15 @@ class CliNode:
         self.node = Node(f"{self.name}_{int(time.time() * 1000) % 100000}", context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
+        self._clients: dict[tuple[Any, str], Any] = {}
         return self
+
+    def client(self, srv_type: Any, name: str) -> Any:
+        """The node's client of service ``name``, created on first use and then kept."""
+        key = (srv_type, name)
+        if key not in self._clients:
+            self._clients[key] = self.node.create_client(srv_type, name)
+        return self._clients[key]
 
     def __exit__(self, *exc: Any) -> None:
         self.executor.shutdown()
@@ -53,18 +66,22 @@ class CliNode:
 
 
 def call_service(cli: CliNode, srv_type: Any, name: str, request: Any,
-                 timeout: float = 10.0) -> Any:
+                 timeout: float = 10.0, resend_after: float | None = None) -> Any:
     """Call ``name`` and return the response.
 
+    :param resend_after: [s] send the request again when it is unanswered this long; only for
+        requests that are safe to repeat (queries, refused requests, parameter sets).
     :raises TimeoutError: naming the service, when it is not available or does not answer.
     """
-    client = cli.node.create_client(srv_type, name)
-    try:
-        if not cli.spin_until(client.service_is_ready, timeout):
-            raise TimeoutError(f"service {name} is not available (is the stack up? `qgl up`)")
+    client = cli.client(srv_type, name)
+    deadline = time.monotonic() + timeout
+    if not cli.spin_until(client.service_is_ready, timeout):
+        raise TimeoutError(f"service {name} is not available (is the stack up? `qgl up`)")
+    while True:
         future = client.call_async(request)
-        if not cli.spin_until(future.done, timeout):
+        attempt = min(deadline - time.monotonic(), resend_after or timeout)
+        if cli.spin_until(future.done, max(attempt, 0.0)):
+            return future.result()
+        client.remove_pending_request(future)
+        if time.monotonic() >= deadline:
             raise TimeoutError(f"service {name} did not answer within {timeout:.0f} s")
-        return future.result()
-    finally:
-        cli.node.destroy_client(client)
