@@ -68,18 +68,23 @@ def test_tiny_suite_writes_results_figures_and_report(tmp_path) -> None:
     page = run_suite(profile, tmp_path / "runs", tmp_path / "docs", workers=1,
                      command="test").read_text()
     out = tmp_path / "runs" / "tiny"
-    for experiment, count in (("random", 2), ("grid", 2), ("variants", 4), ("peg", 4)):
+    for experiment, count in (("random", 2), ("grid", 2), ("variants", 4), ("peg", 4),
+                              ("nextage", 4)):
         assert len(list((out / experiment).glob("*.json"))) == count, experiment
     for section in ("## 1. Random baselines", "## 2. The grid", "## 3. Mean predicted Q",
-                    "## 4. Sparse reward", "## 5. Clearance-fit peg", "agree and disagree"):
+                    "## 4. Sparse reward", "## 5. Clearance-fit peg", "## 6. The peg on the "
+                    "simulated Nextage", "agree and disagree"):
         assert section in page
-    for figure in ("exp1_random_steps", "exp3_mean_q", "exp5_peg_learning", "exp5_peg_q_std"):
+    for figure in ("exp1_random_steps", "exp3_mean_q", "exp5_peg_learning", "exp5_peg_q_std",
+                   "exp6_nextage_learning"):
         assert (tmp_path / "docs" / "figures" / f"{figure}.png").stat().st_size > 1000
     rows = grid.cell_table([json.loads(p.read_text()) for p in (out / "grid").glob("*.json")], 0.5)
     assert {r["algorithm"] for r in rows} == {"ddpg", "qgddpg"}
     assert all(r["mean_test_steps"] == 1.0 and not r["beats_random"] for r in rows)
     spread = peg.q_spread([json.loads(p.read_text()) for p in (out / "peg").glob("*.json")])
     assert all(s.shape == (27 * 11,) and np.all(s > 0) for s in spread.values())
+    nextage = [json.loads(p.read_text()) for p in (out / "nextage").glob("*.json")]
+    assert all(r["rl_steps"] == 2 and r["sim_time"] > 0.02 for r in nextage)
     # A second call finds every run saved and only rewrites the report.
     before = {p: p.stat().st_mtime_ns for p in out.glob("*/*.json")}
     run_suite(profile, tmp_path / "runs", tmp_path / "docs", workers=1, command="test")

@@ -15,12 +15,13 @@ from qg_learning_node.core.residual_task import Observation
 __all__ = ["observation_from_step"]
 
 
-def observation_from_step(result: StepResult,
-                          tool_rotation: np.ndarray | None = None) -> Observation:
+def observation_from_step(result: StepResult, tool_rotation: np.ndarray | None = None,
+                          tool_position: np.ndarray | None = None) -> Observation:
     """Observation at the end of one RL step.
 
     :param tool_rotation: (3, 3) tool orientation from forward kinematics of the measured joints
         (the ``ee_pose`` of the ROS path's ``AtRest``), for the ``tilt`` observation.
+    :param tool_position: (3,) tool position, the same way (the peg task's state).
 
     :raises ValueError: if the loop ran without a wrench estimator (the state would be unknown).
     """
@@ -32,4 +33,6 @@ def observation_from_step(result: StepResult,
                        orientation_error=truth.orientation_error_norm,
                        lateral_offset=float(truth.lateral_offset),
                        tool_rotation=None if tool_rotation is None
-                       else np.array(tool_rotation, dtype=np.float64))
+                       else np.array(tool_rotation, dtype=np.float64),
+                       tool_position=None if tool_position is None
+                       else np.array(tool_position, dtype=np.float64))

@@ -1,4 +1,8 @@
-"""Experiment 5: the clearance-fit peg (free peg, SPEC 4), DDPG vs QG-DDPG over learning rates.
+"""Experiments 5 and 6: the clearance-fit peg (SPEC 4), DDPG vs QG-DDPG over learning rates.
+
+Experiment 5 moves a free peg; experiment 6 runs the same task on the simulated Nextage through
+the stack's cores (``nextage_peg.NextagePeg``: the robot plugin, the bridge's position loop and
+the executor's ``PegTask``), with the same starts, budget and learners.
 
 Thesis ch. 8.3.2 settings: actor and critic of 3 hidden layers x 200, no target networks, a block
 of minibatch updates after every episode (thesis: 50 epochs of up to 15 minibatches; here
@@ -22,13 +26,17 @@ from qg_common.params import config_file, load_ros_params
 from qg_learning_node.core.learner_params import learner_config_from_params
 from qg_learning_node.core.noise import ActionNoise, NoiseConfig
 from qg_learning_node.environments import make_environment
+from qg_learning_node.experiments.nextage_peg import NextagePeg
 from qg_learning_node.experiments.profile import PegBudget
 from qg_learning_node.experiments.runner import (ALGORITHMS, algorithm_config, config_digest,
                                                  episode_noise_seed)
 from qg_learning_node.learner_core import LearnerCore
 
 __all__ = ["PegRunSpec", "peg_specs", "run_peg", "GRID_STATES", "GRID_ACTIONS",
-           "learning_curves", "q_spread"]
+           "learning_curves", "q_spread", "PEG_ROBOTS"]
+
+#: The robots that move the peg, and the experiment each one's runs are saved under.
+PEG_ROBOTS = {"free": "peg", "sim_nextage": "nextage"}
 
 #: 27 states: the centres of a 3 x 3 x 3 partition of the scaled workspace [-1, 1]^3.
 GRID_STATES = np.array(list(itertools.product((-2 / 3, 0.0, 2 / 3), repeat=3)))
@@ -44,6 +52,7 @@ class PegRunSpec:
 
     :param lr: learning rate of actor and critic.
     :param train_iterations: minibatch updates after each episode.
+    :param robot: ``free`` (the free peg) or ``sim_nextage`` (the arm through the stack's cores).
     """
     algorithm: str
     lr: float
@@ -52,14 +61,20 @@ class PegRunSpec:
     train_iterations: int = 750
     episode_steps: int = 200
     config_dir: str | None = None
-    experiment: str = "peg"
+    robot: str = "free"
 
     def __post_init__(self) -> None:
         if self.algorithm not in ALGORITHMS:
             raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {self.algorithm!r}")
+        if self.robot not in PEG_ROBOTS:
+            raise ValueError(f"robot must be one of {sorted(PEG_ROBOTS)}, got {self.robot!r}")
         if not self.lr > 0 or self.episodes < 1 or self.train_iterations < 1 \
                 or self.episode_steps < 1:
             raise ValueError("lr must be > 0; episodes, train_iterations, episode_steps >= 1")
+
+    @property
+    def experiment(self) -> str:
+        return PEG_ROBOTS[self.robot]
 
     @property
     def name(self) -> str:
@@ -69,10 +84,11 @@ class PegRunSpec:
         return run_peg(self)
 
 
-def peg_specs(budget: PegBudget, config_dir: str | None = None) -> list[PegRunSpec]:
+def peg_specs(budget: PegBudget, config_dir: str | None = None,
+              robot: str = "free") -> list[PegRunSpec]:
     return [PegRunSpec(algorithm=a, lr=float(lr), seed=s, episodes=budget.episodes,
                        train_iterations=budget.train_iterations,
-                       episode_steps=budget.episode_steps, config_dir=config_dir)
+                       episode_steps=budget.episode_steps, config_dir=config_dir, robot=robot)
             for lr in budget.lrs for a in budget.algorithms for s in budget.seeds]
 
 
@@ -84,8 +100,8 @@ def run_peg(spec: PegRunSpec) -> dict[str, Any]:
     def params(name: str) -> dict[str, Any]:
         return load_ros_params(config_file(name, spec.config_dir))
 
-    env = make_environment("peg", params("peg_env.yaml"),
-                           episode_steps=spec.episode_steps)
+    env = (make_environment("peg", params("peg_env.yaml"), episode_steps=spec.episode_steps)
+           if spec.robot == "free" else NextagePeg(spec.config_dir, spec.episode_steps))
     base = learner_config_from_params(params("learner.yaml")["learner"])
     config = algorithm_config(base, spec.algorithm, env.action_dim)
     config = dataclasses.replace(
@@ -125,6 +141,8 @@ def run_peg(spec: PegRunSpec) -> dict[str, Any]:
             "q_given": agent.q_values(states, actions).reshape(len(GRID_STATES), -1).tolist(),
             "q_pi": agent.q_values(GRID_STATES, agent.act(GRID_STATES)).tolist(),
             "rl_steps": int(sum(e["steps"] for e in episodes)),
+            **({"sim_time": env.sim_time, "step_timeouts": env.step_timeouts}
+               if isinstance(env, NextagePeg) else {}),
             "wall_time": time.perf_counter() - start}
 
 

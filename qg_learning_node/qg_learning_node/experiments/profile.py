@@ -95,6 +95,7 @@ class Profile:
     grid: GridBudget
     variants: VariantBudget
     peg: PegBudget
+    nextage: PegBudget | None = None   # experiment 6: the peg on the simulated Nextage
 
     def __post_init__(self) -> None:
         if self.estimator not in ESTIMATORS:
@@ -114,4 +115,6 @@ def load_profile(name: str, path: Path | None = None, estimator: str | None = No
                    random=RandomBudget(**random),
                    grid=GridBudget(**_fields(GridBudget, p["grid"])),
                    variants=VariantBudget(**_fields(VariantBudget, p.get("variants", {}))),
-                   peg=PegBudget(**_fields(PegBudget, p["peg"])))
+                   peg=PegBudget(**_fields(PegBudget, p["peg"])),
+                   nextage=PegBudget(**_fields(PegBudget, p["nextage"])) if "nextage" in p
+                   else None)

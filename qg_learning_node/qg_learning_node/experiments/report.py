@@ -20,7 +20,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from qg_learning_node.experiments import grid, peg  # noqa: E402
-from qg_learning_node.experiments.profile import Profile  # noqa: E402
+from qg_learning_node.experiments.profile import PegBudget, Profile  # noqa: E402
 from qg_learning_node.experiments.random_baselines import (random_bar,  # noqa: E402
                                                            summarize_baselines)
 from qg_learning_node.experiments.runner import StackSettings  # noqa: E402
@@ -245,8 +245,22 @@ def _smooth(values: np.ndarray, window: int) -> np.ndarray:
 
 
 # --- experiment 5 ------------------------------------------------------------------------------
-def _peg_section(results: list[dict[str, Any]], figures: Path) -> tuple[list[str], dict]:
-    lines = ["## 5. Clearance-fit peg (free peg)", ""]
+#: Per peg experiment: section heading, figure-name prefix, what moved the peg.
+_PEG_PAGES = {
+    "peg": ("## 5. Clearance-fit peg (free peg)", "exp5_peg",
+            "Free peg (a drive constraint moves it; no arm)"),
+    "nextage": ("## 6. The peg on the simulated Nextage, through the stack's cores", "exp6_nextage",
+                "The Nextage arm (`robot:=sim_nextage`) through the stack's cores in one process "
+                "(`experiments/nextage_peg.py`): the robot plugin, the bridge's 1 kHz position "
+                "loop with its task-space IK and rest detector, and the executor's `PegTask`, "
+                "read from the ROS nodes' config files; the same start positions as the free peg"),
+}
+
+
+def _peg_section(results: list[dict[str, Any]], figures: Path,
+                 experiment: str = "peg") -> tuple[list[str], dict]:
+    heading, prefix, robot = _PEG_PAGES[experiment]
+    lines = [heading, ""]
     if not results:
         return lines + ["Not run in this profile.", ""], {}
     curves = peg.learning_curves(results)
@@ -269,7 +283,7 @@ def _peg_section(results: list[dict[str, Any]], figures: Path) -> tuple[list[str
         f"\nmoving average of {window}" if window > 1 else ""))
     axes[0][0].legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(figures / "exp5_peg_learning.png", dpi=110)
+    fig.savefig(figures / f"{prefix}_learning.png", dpi=110)
     plt.close(fig)
     if spread:
         keys = sorted(spread, key=lambda k: (-k[1], k[0]))
@@ -281,7 +295,7 @@ def _peg_section(results: list[dict[str, Any]], figures: Path) -> tuple[list[str
         ax.set_ylabel("std of Q across seeds")
         ax.set_title("Spread of predicted Q on 27 states x 11 actions")
         fig.tight_layout()
-        fig.savefig(figures / "exp5_peg_q_std.png", dpi=110)
+        fig.savefig(figures / f"{prefix}_q_std.png", dpi=110)
         plt.close(fig)
     tail = max(1, spec["episodes"] // 5)
     table = []
@@ -292,23 +306,28 @@ def _peg_section(results: list[dict[str, Any]], figures: Path) -> tuple[list[str
                       f"{float(np.mean(c['success_mean'][-tail:])):.0%}",
                       _fmt(float(np.mean(c["steps_mean"][-tail:])), 0),
                       "n/a" if s is None else _fmt(float(np.median(s)), 3)])
-    lines += [f"Free peg, {spec['episodes']} episodes of at most {spec['episode_steps']} steps "
+    lines += [f"{robot}. {spec['episodes']} episodes of at most {spec['episode_steps']} steps "
               f"per run, {spec['train_iterations']} minibatch updates after each episode (thesis: "
               "50 epochs x up to 15 minibatches, 300 episodes, 10 seeds). Networks 3 x 200, no "
               f"target networks, actor lr = critic lr. Speed: {_speed(results)}.", "",
-              "![peg learning curves](figures/exp5_peg_learning.png)", ""]
+              f"![{experiment} learning curves](figures/{prefix}_learning.png)", ""]
     if spread:
-        lines += ["![peg Q spread](figures/exp5_peg_q_std.png)", ""]
+        lines += [f"![{experiment} Q spread](figures/{prefix}_q_std.png)", ""]
     lines += _table(["algorithm", "lr", "seeds", f"mean return, last {tail} episodes",
                      "success, last episodes", "steps, last episodes",
                      "median std of Q (27 x 11)"], table)
-    return lines + [""], {"curves": curves, "spread": spread, "tail": tail}
+    return lines + [""], {"curves": curves, "spread": spread, "tail": tail, "robot": experiment}
+
+
+def _peg_budget(budget: PegBudget) -> str:
+    return (f"{budget.episodes} episodes x {len(budget.seeds)} seeds, {len(budget.lrs)} lrs, "
+            f"{budget.train_iterations} updates/episode")
 
 
 # --- the page ----------------------------------------------------------------------------------
 def _comparison(random_rows: list[dict[str, Any]], grid_rows: list[dict[str, Any]],
                 grid_results: list[dict[str, Any]], variant_rows: list[dict[str, Any]],
-                peg_data: dict, q_range: tuple[float, float]) -> list[str]:
+                peg_data: list[dict], q_range: tuple[float, float]) -> list[str]:
     notes = ["## Where our numbers agree and disagree with the thesis", ""]
     if random_rows:
         uniform = [r for r in random_rows if r["kind"] == "uniform"]
@@ -354,8 +373,11 @@ def _comparison(random_rows: list[dict[str, Any]], grid_rows: list[dict[str, Any
                             else f"a replay of {r['replay_capacity']}")
                          + f": {'beat' if r['beats_random'] else 'did not beat'} random "
                          "(thesis: QG-DDPG did, DDPG did not).")
-    if peg_data.get("curves"):
-        curves, spread, tail = peg_data["curves"], peg_data["spread"], peg_data["tail"]
+    for data in peg_data:
+        if not data.get("curves"):
+            continue
+        curves, spread, tail = data["curves"], data["spread"], data["tail"]
+        label = "Peg" if data["robot"] == "peg" else "Nextage peg"
         for lr in sorted({k[1] for k in curves}, reverse=True):
             d, q = curves.get(("ddpg", lr)), curves.get(("qgddpg", lr))
             if d is None or q is None:
@@ -363,7 +385,7 @@ def _comparison(random_rows: list[dict[str, Any]], grid_rows: list[dict[str, Any
             rd = float(np.mean(d["return_mean"][-tail:]))
             rq = float(np.mean(q["return_mean"][-tail:]))
             sd, sq = spread.get(("ddpg", lr)), spread.get(("qgddpg", lr))
-            text = (f"- Peg, lr {lr:g}: late-episode return QG-DDPG {rq:.1f} vs DDPG {rd:.1f} ("
+            text = (f"- {label}, lr {lr:g}: late-episode return QG-DDPG {rq:.1f} vs DDPG {rd:.1f} ("
                     + ("about equal" if abs(rq - rd) < 0.02 * max(abs(rq), abs(rd))
                        else "QG-DDPG better" if rq > rd else "DDPG better")
                     + "; thesis: QG never worse, largest gain at poor learning rates)")
@@ -391,6 +413,7 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
     grid_results = load_results(out, "grid")
     variant_results = load_results(out, "variants")
     peg_results = load_results(out, "peg")
+    nextage_results = load_results(out, "nextage")
     random_rows = summarize_baselines(random_results) if random_results else []
     test_cap = (grid_results[0]["spec"]["test_max_steps"] if grid_results
                 else profile.grid.test_max_steps)
@@ -407,14 +430,16 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
     _write_csv(data / "grid_summary.csv", grid_rows)
     _write_csv(data / "variants_summary.csv", variant_rows)
     for name, results in (("random", random_results), ("grid", grid_results),
-                          ("variants", variant_results), ("peg", peg_results)):
+                          ("variants", variant_results), ("peg", peg_results),
+                          ("nextage", nextage_results)):
         if results:
             _episodes_csv(data / f"{name}_episodes.csv", results)
     settings = StackSettings.load(config_dir)
     g = settings.learner.ddpg.gamma
     q_range = (settings.learner.ddpg.r_min / (1 - g), settings.learner.ddpg.r_max)
     digests = sorted({r.get("config_digest", "?") for r in
-                      (*random_results, *grid_results, *variant_results, *peg_results)})
+                      (*random_results, *grid_results, *variant_results, *peg_results,
+                       *nextage_results)})
     timing_path = out / "timing.json"
     timing = json.loads(timing_path.read_text()) if timing_path.exists() else {}
     estimator = {"ekf": "the EKF wrench estimator (as in the ROS stack)",
@@ -437,7 +462,7 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
     lines += ["", "Budget of this profile against the thesis:", ""]
     pg, pr, pp, pv = profile.grid, profile.random, profile.peg, profile.variants
     results_by = {"random": random_results, "grid": grid_results, "variants": variant_results,
-                  "peg": peg_results}
+                  "peg": peg_results, "nextage": nextage_results}
     budget = {
         "random": ("random baselines", "several noises, 1000-step cap, up to 3000 steps each",
                    f"{len(pr.noises)} settings x {pr.episodes} episodes, cap {pr.max_steps}"),
@@ -449,8 +474,9 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
                      ", ".join([*pv.rewards, *(f"replay {c}" for c in pv.replay_capacities)])
                      or "none"),
         "peg": ("peg", "300 episodes x 10 seeds, 3 lrs, 750 updates/episode",
-                f"{pp.episodes} episodes x {len(pp.seeds)} seeds, {len(pp.lrs)} lrs, "
-                f"{pp.train_iterations} updates/episode")}
+                _peg_budget(pp))}
+    if profile.nextage is not None:
+        budget["nextage"] = ("Nextage peg", "(the real Nextage: ch. 8.3)", _peg_budget(profile.nextage))
     planned = planned or {}
     lines += _table(["experiment", "thesis", f"profile {profile.name}", "runs finished"],
                     [[*row, f"{len(results_by[k])} of {planned.get(k, '?')}"]
@@ -473,8 +499,13 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
     lines += _learning_curves(grid_results, grid_rows, figures, bar)
     lines += _q_section(grid_results, grid_rows, figures, q_range)
     lines += _variant_section(variant_rows, bar)
-    peg_lines, peg_data = _peg_section(peg_results, figures)
-    lines += peg_lines
+    peg_data = []
+    for experiment, results in (("peg", peg_results), ("nextage", nextage_results)):
+        if experiment == "nextage" and profile.nextage is None and not results:
+            continue
+        section, data = _peg_section(results, figures, experiment)
+        lines += section
+        peg_data.append(data)
     lines += _comparison(random_rows, grid_rows, grid_results, variant_rows, peg_data, q_range)
     path = docs / "results.md"
     path.write_text("\n".join(lines))

@@ -1,6 +1,6 @@
 """The whole experiment set of one profile: run what is missing, then write the report.
 
-Random baselines, the grid and the peg runs are independent and share one pool of (at most two)
+Random baselines, the grid and the peg runs (free and on the Nextage) are independent and share one pool of (at most two)
 workers; the variants of experiment 4 need the grid's best cells, so they run after it.
 Results land in ``<out>/<profile>/<experiment>/`` and wall times in ``timing.json`` there.
 """
@@ -17,7 +17,7 @@ from qg_learning_node.experiments.tasks import MAX_WORKERS, load_results, run_sp
 
 __all__ = ["EXPERIMENTS", "run_suite", "all_specs", "planned_runs"]
 
-EXPERIMENTS = ("random", "grid", "variants", "peg")
+EXPERIMENTS = ("random", "grid", "variants", "peg", "nextage")
 
 
 def all_specs(profile: Profile, only: tuple[str, ...] = EXPERIMENTS,
@@ -26,6 +26,8 @@ def all_specs(profile: Profile, only: tuple[str, ...] = EXPERIMENTS,
     specs: list[Any] = []
     if "grid" in only:        # the longest runs first: the two workers finish closer together
         specs += grid.grid_specs(profile.grid, profile.estimator, config_dir)
+    if "nextage" in only and profile.nextage is not None:   # slower per step than the free peg
+        specs += peg.peg_specs(profile.nextage, config_dir, robot="sim_nextage")
     if "peg" in only:
         specs += peg.peg_specs(profile.peg, config_dir)
     if "random" in only:
