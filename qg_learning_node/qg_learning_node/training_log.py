@@ -34,6 +34,7 @@ class TrainingLog:
         self._rows.writerow(["step", "tag", "value"])
         self._lengths: deque[int] = deque(maxlen=EPISODE_WINDOW)
         self._successes: deque[bool] = deque(maxlen=EPISODE_WINDOW)
+        self._returns: deque[float] = deque(maxlen=EPISODE_WINDOW)
 
     def scalar(self, tag: str, value: float, step: int) -> None:
         self.writer.add_scalar(tag, float(value), int(step))
@@ -45,10 +46,11 @@ class TrainingLog:
         if mode == "train":
             self._lengths.append(length)
             self._successes.append(success)
+            self._returns.append(episode_return)
             self.scalar("rollout/ep_len_mean", sum(self._lengths) / len(self._lengths), step)
             self.scalar("rollout/success_rate",
                         sum(self._successes) / len(self._successes), step)
-            self.scalar("rollout/ep_rew_mean", episode_return, step)
+            self.scalar("rollout/ep_rew_mean", sum(self._returns) / len(self._returns), step)
         else:
             self.scalar("eval/ep_length", length, step)
             self.scalar("eval/success", float(success), step)

@@ -83,6 +83,10 @@ def test_tiny_suite_writes_results_figures_and_report(tmp_path) -> None:
     assert all(r["mean_test_steps"] == 1.0 and not r["beats_random"] for r in rows)
     spread = peg.q_spread([json.loads(p.read_text()) for p in (out / "peg").glob("*.json")])
     assert all(s.shape == (27 * 11,) and np.all(s > 0) for s in spread.values())
+    progress = next((out / "tensorboard" / "grid").glob("*/progress.csv")).read_text()
+    for tag in ("rollout/ep_len_mean", "train/critic_loss", "eval/success_rate"):
+        assert f",{tag}," in progress, tag
+    assert list((out / "tensorboard" / "nextage").glob("*/events.out.tfevents.*"))
     nextage = [json.loads(p.read_text()) for p in (out / "nextage").glob("*.json")]
     assert all(r["rl_steps"] == 2 and r["sim_time"] > 0.02 for r in nextage)
     # A second call finds every run saved and only rewrites the report.

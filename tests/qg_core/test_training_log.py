@@ -31,6 +31,8 @@ def test_scalars_are_readable_by_tensorboard_with_sb3_tags(tmp_path) -> None:
     ep_len = events.Scalars("rollout/ep_len_mean")
     assert ep_len[0].value == 50 and ep_len[1].value == 40 and ep_len[2].value == 30
     assert ep_len[-1].value == 5            # the window has forgotten the long early episodes
+    ep_rew = events.Scalars("rollout/ep_rew_mean")          # a rolling mean too
+    assert ep_rew[1].value == pytest.approx(-4.0) and ep_rew[-1].value == pytest.approx(-0.5)
     success = events.Scalars("rollout/success_rate")
     assert success[0].value == 0 and success[-1].value == 1
     assert events.Scalars("eval/success_rate")[0].value == pytest.approx(0.5)

@@ -41,7 +41,8 @@ def main(argv: list[str] | None = None) -> None:
         sys.argv[1:] if argv is None else argv)
     path = run_suite(profile, args.out, args.docs, () if args.report_only else only,
                      args.workers, command, args.config_dir)
-    print(f"wrote {path}")
+    print(f"wrote {path}; TensorBoard: tensorboard --logdir "
+          f"{args.out / profile.name / 'tensorboard'}")
 
 
 if __name__ == "__main__":

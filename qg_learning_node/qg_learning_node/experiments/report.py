@@ -25,6 +25,7 @@ from qg_learning_node.experiments.random_baselines import (random_bar,  # noqa: 
                                                            summarize_baselines)
 from qg_learning_node.experiments.runner import StackSettings  # noqa: E402
 from qg_learning_node.experiments.tasks import load_results  # noqa: E402
+from qg_learning_node.experiments.tensorboard_log import export_runs  # noqa: E402
 
 __all__ = ["write_report", "THESIS"]
 
@@ -434,6 +435,8 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
                           ("nextage", nextage_results)):
         if results:
             _episodes_csv(data / f"{name}_episodes.csv", results)
+    tensorboard = export_runs((*grid_results, *variant_results, *peg_results, *nextage_results),
+                              out / "tensorboard")
     settings = StackSettings.load(config_dir)
     g = settings.learner.ddpg.gamma
     q_range = (settings.learner.ddpg.r_min / (1 - g), settings.learner.ddpg.r_max)
@@ -455,7 +458,9 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
              f"{estimator[profile.estimator]}. Stack config files: "
              f"`{config_dir or 'config/'}`, digest(s) {', '.join(f'`{d}`' for d in digests)} "
              f"(`runner.config_digest`). Every episode and every table row as CSV: "
-             f"[`data/{profile.name}/`](data/{profile.name}/); per-run JSON: `{out}`.", "",
+             f"[`data/{profile.name}/`](data/{profile.name}/); per-run JSON: `{out}`; "
+             f"TensorBoard scalars of every learning run (Stable-Baselines3's tag names): "
+             f"`tensorboard --logdir {tensorboard}`.", "",
              "| step | command | wall time | finished |", "|---|---|---|---|"]
     lines += [f"| {k} | `{v['command']}` | {v['wall_time'] / 60:.1f} min | {v['finished']} |"
               for k, v in timing.items()]
