@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from qg_recording.bag_reader import read_bag
+from tqdm import tqdm
 
 from qg_learning_node.core.episode import TransitionRecord
 
@@ -47,6 +48,7 @@ def rebuild_from_bags(
     learner_core: Any | None = None,
     config: Any | None = None,
     train_iterations: int = 0,
+    progress: bool = False,
 ) -> OfflineResult:
     """Feed every recorded transition to a learner core; optionally train; return the census.
 
@@ -54,6 +56,7 @@ def rebuild_from_bags(
     :param learner_core: a `LearnerCore` to extend; if None, one is built from `config` (default
         `LearnerConfig()`) with the dimensions of the first recorded transition.
     :param train_iterations: train steps after the rebuild, in whole training cycles (rounded up).
+    :param progress: show progress bars (per bag, then per training cycle) with rate and ETA.
     :raises ValueError: if the bags hold no transition and no learner core was given.
     """
     from qg_learning_node.learner_core import LearnerConfig, LearnerCore  # torch: only when used
@@ -62,6 +65,8 @@ def rebuild_from_bags(
         raise ValueError(f"train_iterations must be >= 0, got {train_iterations}")
     core = learner_core
     count, episodes = 0, []
+    if progress:
+        paths = tqdm(list(paths), desc="rebuild", unit="bag", dynamic_ncols=True)
     for transition in iter_transitions(paths):
         if core is None:
             core = LearnerCore(config if config is not None else LearnerConfig(),
@@ -75,7 +80,8 @@ def rebuild_from_bags(
         raise ValueError("the bags hold no /transitions to rebuild from")
     diagnostics: dict[str, float] = {}
     cycles = math.ceil(train_iterations / core.config.iterations_per_cycle) if count else 0
-    for _ in range(cycles):
+    for _ in tqdm(range(cycles), desc="train", unit="cycle", dynamic_ncols=True,
+                  disable=not progress):
         diagnostics = core.train_cycle()
     census = core.graph.census() if core.graph is not None else {}
     return OfflineResult(

@@ -91,6 +91,17 @@ def test_training_after_the_rebuild(recorded) -> None:
     assert np.isfinite(result.diagnostics["critic_loss"])
 
 
+def test_a_rebuild_with_progress_counts_bags_and_cycles_with_a_rate(
+        recorded, capsys: pytest.CaptureFixture) -> None:
+    runs, _ = recorded
+    bags = sorted(runs.iterdir())
+    config = LearnerConfig(zero_action=ZERO, iterations_per_cycle=5, batch_size=16)
+    rebuild_from_bags(bags, config=config, train_iterations=10, progress=True)
+    err = capsys.readouterr().err
+    assert "rebuild: 100%" in err and f"{len(bags)}/{len(bags)}" in err and "bag/s" in err
+    assert "train: 100%" in err and "2/2" in err and "cycle/s" in err
+
+
 def test_qgl_replay_into_learner(recorded, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     runs, episodes = recorded
     parser = argparse.ArgumentParser()

@@ -120,7 +120,8 @@ def _into_learner(args: argparse.Namespace, paths: list[Path]) -> int:
 
     try:
         config = _learner_config(args.learner_config or str(config_file("learner.yaml")))
-        result = rebuild_from_bags(paths, config=config, train_iterations=args.train_iterations)
+        result = rebuild_from_bags(paths, config=config, train_iterations=args.train_iterations,
+                                   progress=True)
     except (ValueError, FileNotFoundError) as exc:
         return _fail("replay", str(exc))
     print(f"transitions: {result.transitions} from {len(result.episodes)} episode(s) in {len(paths)} bag(s)")
