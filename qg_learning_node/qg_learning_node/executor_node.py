@@ -294,7 +294,9 @@ class ExecutorNode(Node):
             self._set_state("aborted", f"error: {exc}")
 
     def _reset(self, episode: Episode) -> AtRest:
-        request = ResetSim.Request(initial_pose=episode.initial_pose, housing_yaw=0.0)
+        # The episode id is the session: from now on the bridge executes only its setpoints.
+        request = ResetSim.Request(initial_pose=episode.initial_pose, housing_yaw=0.0,
+                                   session=episode.episode_id)
         future = self.reset_client.call_async(request)
         deadline = time.monotonic() + self.config.reset_timeout
         while not future.done():
@@ -338,8 +340,9 @@ class ExecutorNode(Node):
 
     def _send(self, setpoint: Setpoint) -> None:
         """Publish ``setpoint`` as the command ``seq`` (stamped now)."""
+        session = self.episode.episode_id if self.episode is not None else ""
         self.setpoint_pub.publish(setpoint_msg(self.seq, setpoint,
-                                               self.get_clock().now().to_msg()))
+                                               self.get_clock().now().to_msg(), session))
 
     def _send_zero_residual(self) -> None:
         """Leave the robot safe from where it is: the task's hold command (the Panda pushes

@@ -113,6 +113,7 @@ class _ResetJob:
     """A reset handed to the loop thread; ``done`` is set with the observation or the error."""
     initial_pose: int
     housing_yaw: float
+    session: str
     done: threading.Event
     observation: AtRest | None = None
     error: Exception | None = None
@@ -126,6 +127,11 @@ class LoopRunner:
     step; one with the ``seq`` of the last accepted command only feeds the watchdog (the
     executor repeats the current setpoint every few ms in realtime mode). A rejected setpoint
     (NaN/inf) is logged and the previous command stays.
+
+    Only the session being served steers the arm: a reset names a session (the executor's
+    episode), and from then on a setpoint of any other session is dropped before it reaches the
+    mailbox, logged and counted (``foreign_setpoints`` in every ``AtRest``). A reset with the
+    empty session serves any sender (manual use).
 
     :param loop: the loop; its ``config.realtime`` turns the watchdog on.
     :param bridge: publishes the tool state and ``/ee_at_rest``.
@@ -161,30 +167,47 @@ class LoopRunner:
         self._reset: _ResetJob | None = None
         self._seq: int | None = None        # last accepted setpoint
         self._step_start: float | None = None   # loop time of the running step's start
+        self._session = ""                  # the served session ("" = any sender)
+        self.foreign_setpoints = 0          # setpoints of other sessions since the last reset
 
     # --- called from ROS callbacks -----------------------------------------------------------
     def submit_setpoint(self, msg: WrenchSetpointMsg) -> None:
-        """Hand a setpoint to the loop (the latest one wins)."""
+        """Hand a setpoint of the served session to the loop (the latest one wins); drop and
+        count one of another session."""
         with self._mail:
-            self._setpoint = msg
-            self._mail.notify()
+            if self._session and msg.session != self._session:
+                self.foreign_setpoints += 1
+                served = self._session
+            else:
+                self._setpoint = msg
+                self._mail.notify()
+                return
+        self.bridge.get_logger().warning(
+            f"setpoint {msg.seq} of session '{msg.session}' ignored: serving '{served}'",
+            throttle_duration_sec=1.0)
 
-    def request_reset(self, initial_pose: int, housing_yaw: float = 0.0) -> _ResetJob:
-        """Ask the loop thread to reset and settle; returns at once."""
-        job = _ResetJob(initial_pose, housing_yaw, threading.Event())
+    def request_reset(self, initial_pose: int, housing_yaw: float = 0.0,
+                      session: str = "") -> _ResetJob:
+        """Ask the loop thread to reset and settle, then serve ``session``; returns at once."""
+        job = _ResetJob(initial_pose, housing_yaw, session, threading.Event())
         with self._mail:
             self._reset = job
+            self._session = session
+            self.foreign_setpoints = 0
+            self._setpoint = None   # a command of the previous session must not run after it
             self._mail.notify()
         return job
 
-    def reset(self, initial_pose: int, housing_yaw: float = 0.0, timeout: float = 30.0) -> AtRest:
+    def reset(self, initial_pose: int, housing_yaw: float = 0.0, timeout: float = 30.0,
+              session: str = "") -> AtRest:
         """Reset and settle on the loop thread; the settled observation (also on /ee_at_rest).
+        From then on only setpoints of ``session`` are executed ("" = any).
 
         :raises TimeoutError: if the loop thread does not finish in ``timeout`` seconds.
         :raises RuntimeError, ValueError: what the simulation raised (e.g. IK out of reach).
         :raises TimeoutError: also when a remote robot sends no state after its restart.
         """
-        job = self.request_reset(initial_pose, housing_yaw)
+        job = self.request_reset(initial_pose, housing_yaw, session)
         if not job.done.wait(timeout):
             raise TimeoutError(f"the loop did not reset within {timeout:.0f} s")
         if job.error is not None:
@@ -293,7 +316,8 @@ class LoopRunner:
     def _event(self, seq: int, start: float, stamp: Time) -> AtRest:
         """The ``AtRest`` of the step that started at loop time ``start``."""
         tool = self.loop.controller.tool
-        return at_rest_msg(seq, self.loop.result(start), tool.position, tool.rotation, stamp)
+        return at_rest_msg(seq, self.loop.result(start), tool.position, tool.rotation, stamp,
+                           self.foreign_setpoints)
 
 
 

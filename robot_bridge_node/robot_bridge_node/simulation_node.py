@@ -148,7 +148,8 @@ class SimulationNode(Node):
 class Resetter(Protocol):
     """Resets the robot to a start pose, settles it, and returns the settled observation."""
 
-    def reset(self, initial_pose: int, housing_yaw: float = 0.0) -> AtRest: ...
+    def reset(self, initial_pose: int, housing_yaw: float = 0.0, timeout: float = 30.0,
+              session: str = "") -> AtRest: ...
 
 
 def serve_reset(node: Node, resetter: Resetter) -> None:
@@ -167,7 +168,8 @@ def serve_reset(node: Node, resetter: Resetter) -> None:
             response.message = f"housing_yaw must be finite, got {request.housing_yaw}"
             return response
         try:
-            response.observation = resetter.reset(request.initial_pose, request.housing_yaw)
+            response.observation = resetter.reset(request.initial_pose, request.housing_yaw,
+                                                  session=request.session)
         except (RuntimeError, ValueError, TimeoutError) as exc:
             node.get_logger().error(f"reset to pose {request.initial_pose} failed: {exc}")
             response.message = f"reset failed: {exc}"

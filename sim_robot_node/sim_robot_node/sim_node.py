@@ -89,15 +89,20 @@ class SeparateSim:
             self.scene.robot, state.q.tolist(), zeros, zeros, physicsClientId=self.scene.cid))
         return gravity - self.config.hold_damping * state.dq
 
-    def reset(self, initial_pose: int, housing_yaw: float) -> AtRest:
+    def reset(self, initial_pose: int, housing_yaw: float = 0.0, timeout: float = 5.0,
+              session: str = "") -> AtRest:
         """Reset on the loop thread; the bridge's settled observation, ``reset_wait`` at the
         earliest.
 
-        :raises TimeoutError: if the bridge reports no settled state within 5 s more.
+        ``session`` is not enforced in this separate-process mode: the bridge learns of a reset
+        only from the restarted state stream, so it serves any sender (the composed ``robot``
+        process, the default, serves only the reset's session).
+        :raises TimeoutError: if the bridge reports no settled state within ``timeout`` s more.
         """
+        del session
         job = _ResetJob(initial_pose, housing_yaw, threading.Event())
         self._jobs.put(job)
-        if not job.done.wait(timeout=self.config.reset_wait + 5.0):
+        if not job.done.wait(timeout=self.config.reset_wait + timeout):
             raise TimeoutError("the bridge reported no settled state after the reset")
         assert job.observation is not None
         return job.observation

@@ -73,7 +73,8 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[tuple
             wrench = store.types["geometry_msgs/msg/Wrench"](force=vec(x=0.0, y=0.0, z=-15.0),
                                                               torque=vec(x=0.1 * i, y=0.0, z=0.0))
             write("/wrench_setpoint", t, store.types["qg_interfaces/msg/WrenchSetpoint"](
-                header=header(stamp=time_msg(store, t), frame_id="tool"), seq=i + 1, wrench=wrench,
+                header=header(stamp=time_msg(store, t), frame_id="tool"), seq=i + 1,
+                session="ep_7", wrench=wrench,
                 pose_reference=pose, reference_from_current=True))
     recorder.record_transition(T0 + TICKS * 1_000_000, 0, [0.1, 0.2, 0.3, 0.4], [0.5, -0.5], -1.0,
                                [0.2, 0.3, 0.4, 0.5], False)

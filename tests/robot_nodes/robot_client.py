@@ -29,33 +29,34 @@ class RobotClient:
         self.setpoints = cli.node.create_publisher(WrenchSetpoint, f"{namespace}/wrench_setpoint",
                                                    10)
 
-    def reset(self, pose: int, timeout: float = 60.0) -> ResetSim.Response:
+    def reset(self, pose: int, timeout: float = 60.0, session: str = "") -> ResetSim.Response:
+        """Reset to ``pose``; the bridge then serves only ``session``'s setpoints ("" = any)."""
         return call_service(self.cli, ResetSim, f"{self.namespace}/sim/reset",
-                            ResetSim.Request(initial_pose=pose), timeout)
+                            ResetSim.Request(initial_pose=pose, session=session), timeout)
 
-    def send(self, seq: int, wrench: tuple[float, ...]) -> None:
+    def send(self, seq: int, wrench: tuple[float, ...], session: str = "") -> None:
         assert self.cli.spin_until(lambda: self.setpoints.get_subscription_count() > 0, 30.0), \
             "nobody subscribes /wrench_setpoint"
         setpoint = types.WrenchSetpoint(np.array(wrench, float))
-        self.setpoints.publish(conversions.setpoint_msg(seq, setpoint, time_msg(0)))
+        self.setpoints.publish(conversions.setpoint_msg(seq, setpoint, time_msg(0), session))
 
     def event(self, seq: int) -> AtRest | None:
         return next((e for e in self.events if e.seq == seq), None)
 
     def step(self, seq: int, wrench: tuple[float, ...], timeout: float = 20.0,
-             resend: float | None = None) -> AtRest | None:
+             resend: float | None = None, session: str = "") -> AtRest | None:
         """Send setpoint ``seq`` and wait for its ``AtRest`` (None on timeout).
 
         :param resend: [s] repeat the setpoint this often while waiting (the realtime watchdog
             holds the pose after 10 ms without one).
         """
-        self.send(seq, wrench)
+        self.send(seq, wrench, session)
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             if self.cli.spin_until(lambda: self.event(seq) is not None,
                                    min(resend or timeout, deadline - time.monotonic())):
                 break
-            self.send(seq, wrench)
+            self.send(seq, wrench, session)
         return self.event(seq)
 
 

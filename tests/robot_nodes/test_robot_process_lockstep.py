@@ -82,3 +82,23 @@ def test_bad_reset_and_nan_setpoint_are_rejected_and_the_process_stays_up(stack)
     codes = stack.stop(grace=5.0)
     assert codes == {"robot": 0}, stack.logs()
     assert time.monotonic() - t0 < 5.0
+
+
+def test_only_the_served_session_steers_the_arm(stack):
+    """Setpoints of another session are dropped, counted and logged; a reset opens a session."""
+    stack.start(ROBOT)
+    with stack.client() as cli:
+        robot = RobotClient(cli)
+        assert robot.reset(2, session="episode_a").success
+        for seq in (1, 2, 3):            # an intruder with fresh sequence numbers and a hard push
+            robot.send(seq, (0.0, 0.0, -20.0, 3.0, 3.0, 0.0), session="intruder")
+        cli.spin_for(1.0)
+        assert [robot.event(seq) for seq in (1, 2, 3)] == [None, None, None]
+        event = robot.step(4, (0.0, 0.0, -10.0, 0.0, 0.0, 0.0), session="episode_a")
+        assert event is not None, stack.logs()
+        assert event.foreign_setpoints == 3
+        assert "setpoint 1 of session 'intruder' ignored: serving 'episode_a'" in stack.logs()
+        # A reset without a session serves any sender, and starts counting from zero.
+        assert robot.reset(2).success
+        event = robot.step(5, (0.0, 0.0, -10.0, 0.0, 0.0, 0.0), session="anyone")
+        assert event is not None and event.foreign_setpoints == 0

@@ -119,3 +119,45 @@ def test_runs_go_to_qg_runs_dir_or_the_current_directory(monkeypatch, tmp_path):
     monkeypatch.delenv("QG_RUNS_DIR")
     monkeypatch.chdir(tmp_path)
     assert runs_dir() == tmp_path / "runs"
+
+
+#: What ``ros2 interface show`` does for a type (ros2interface, rosidl_runtime_py): find its
+#: package among the ament index's ``rosidl_interfaces`` resources, read the definition from the
+#: package's share folder, and do the same for every field type from another package.
+_INTERFACE_SHOW = r"""
+import re, sys
+from ament_index_python.packages import get_package_share_directory
+from ament_index_python.resources import get_resource
+
+def show(type_name, seen):
+    pkg, kind, name = type_name.split("/")
+    listed, _ = get_resource("rosidl_interfaces", pkg)
+    assert f"{kind}/{name}.{kind}" in listed.split(), type_name
+    text = open(f"{get_package_share_directory(pkg)}/{kind}/{name}.{kind}").read()
+    for field_type in re.findall(r"^\s*([A-Za-z_]\w*/[A-Za-z_]\w*)", text, re.M):
+        nested_pkg, nested = field_type.split("/")
+        if (nested_pkg, nested) not in seen:
+            seen.add((nested_pkg, nested))
+            show(f"{nested_pkg}/msg/{nested}", seen)
+
+for type_name in sys.argv[1:]:
+    seen = set()
+    show(type_name, seen)
+    print(type_name, len(seen))
+"""
+
+
+def test_sourcing_the_workspace_alone_lets_ament_tools_find_every_nested_type(tmp_path):
+    """``source install/setup.bash`` in a clean shell is enough for ``ros2 interface show``:
+    the pip-installed std_msgs and geometry_msgs are found through the ament index."""
+    types = ["qg_interfaces/msg/AtRest", "qg_interfaces/msg/WrenchSetpoint",
+             "qg_interfaces/srv/ResetSim"]
+    script = tmp_path / "show.py"
+    script.write_text(_INTERFACE_SHOW)
+    command = (f". '{ROOT / 'ros_ws/install/setup.bash'}' && "
+               f"'{sys.executable}' '{script}' {' '.join(types)}")
+    result = subprocess.run(["env", "-i", "HOME=/tmp", "PATH=/usr/bin:/bin", "bash", "-c", command],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr[-2000:]
+    counts = dict(line.split() for line in result.stdout.splitlines())
+    assert int(counts["qg_interfaces/msg/AtRest"]) >= 5   # Header, Time, Wrench, Pose, ...

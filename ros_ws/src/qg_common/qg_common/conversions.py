@@ -139,17 +139,19 @@ def twist_stamped(twist: np.ndarray, stamp: Time) -> TwistStamped:
 
 # --- RL step ------------------------------------------------------------------------------------
 def at_rest_msg(seq: int, result: StepResult, position: np.ndarray, rotation: np.ndarray,
-                stamp: Time) -> AtRest:
+                stamp: Time, foreign_setpoints: int = 0) -> AtRest:
     """The ``AtRest`` event completing setpoint ``seq`` (0 after a reset).
 
     A run without an estimator reports a zero wrench estimate.
+    :param foreign_setpoints: setpoints of other sessions ignored since the last reset.
     """
     wrench = np.zeros(6) if result.wrench_estimate is None else result.wrench_estimate
     msg = AtRest(seq=int(seq), duration=float(result.duration),
                  linear_speed=float(result.linear_speed),
                  angular_speed=float(result.angular_speed), timed_out=bool(result.timed_out),
                  wrench_estimate=wrench_msg(wrench), ee_pose=pose_msg(position, rotation),
-                 ground_truth=ground_truth_msg(result.ground_truth, stamp))
+                 ground_truth=ground_truth_msg(result.ground_truth, stamp),
+                 foreign_setpoints=int(foreign_setpoints))
     msg.header.stamp = stamp
     msg.header.frame_id = BASE_FRAME
     return msg
@@ -166,9 +168,13 @@ def setpoint_from_msg(msg: WrenchSetpointMsg) -> WrenchSetpoint:
     return WrenchSetpoint(wrench_from_msg(msg.wrench), reference)
 
 
-def setpoint_msg(seq: int, setpoint: WrenchSetpoint, stamp: Time) -> WrenchSetpointMsg:
-    """The message of a core setpoint (what the executor sends)."""
-    msg = WrenchSetpointMsg(seq=int(seq), wrench=wrench_msg(setpoint.wrench),
+def setpoint_msg(seq: int, setpoint: WrenchSetpoint, stamp: Time,
+                 session: str = "") -> WrenchSetpointMsg:
+    """The message of a core setpoint (what the executor sends).
+
+    :param session: the episode it belongs to, as named in its ``ResetSim`` request.
+    """
+    msg = WrenchSetpointMsg(seq=int(seq), session=session, wrench=wrench_msg(setpoint.wrench),
                             reference_from_current=setpoint.reference is None)
     if setpoint.reference is not None:
         msg.pose_reference = pose_msg(setpoint.reference.position, setpoint.reference.rotation)
