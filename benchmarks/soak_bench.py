@@ -80,7 +80,7 @@ def main() -> None:
         codes = launcher.stop()
     bags = sorted(p.parent for p in (run_dir / "episodes").glob("*/metadata.yaml"))
     infos = [bag_info(b) for b in bags]
-    bag_transitions = sum(t.count for info in infos for t in info.topics
+    bag_transitions = sum(t.message_count for info in infos for t in info.topics
                           if t.name == "/transitions")
     learner = learner_counts[-1] if learner_counts else 0
     growth = {name: (end_rss[name] - baseline[name]) / baseline[name]
