@@ -197,10 +197,16 @@ class ExecutorNode(Node):
             return
         with self.lock:
             self.actor, self.actor_version = actor, int(msg.version)
-            self.last_learner_time = time.monotonic()
+        self._heard_from_learner()
 
     def _on_learner(self, msg: LearnerDiagnostics) -> None:
+        self._heard_from_learner()
+
+    def _heard_from_learner(self) -> None:
+        """A sign of life: a restarted learner ends ``degraded`` at once, not at the next step
+        (or, between episodes, the next episode)."""
         self.last_learner_time = time.monotonic()
+        self._set_degraded(False)
 
     def _on_at_rest(self, msg: AtRest) -> None:
         with self.lock:
@@ -301,10 +307,7 @@ class ExecutorNode(Node):
                 if self.stop_requested.is_set():
                     raise EpisodeAborted(self.stop_reason)
                 alive = self.learner_alive()
-                if alive != (not self.degraded):
-                    self.degraded = not alive
-                    self.get_logger().warning("learner silent: zero residual until it is back"
-                                              if self.degraded else "learner is back")
+                self._set_degraded(not alive)
                 with self.lock:
                     actor = self.actor if alive else None
                 action = episode.choose_action(actor)
@@ -379,6 +382,15 @@ class ExecutorNode(Node):
         self._send(self.task.hold())
 
     # --- status ---------------------------------------------------------------------------
+    def _set_degraded(self, degraded: bool) -> None:
+        """Say so (log and status) when the learner goes silent or comes back."""
+        with self.lock:
+            changed, self.degraded = degraded != self.degraded, degraded
+        if changed:
+            self.get_logger().warning("learner silent: zero residual until it is back"
+                                      if degraded else "learner is back")
+            self._publish_status()
+
     def _set_state(self, state: str, message: str = "") -> None:
         self.state, self.message = state, message
         self._publish_status()

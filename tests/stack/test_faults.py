@@ -45,3 +45,72 @@ def test_executor_stopped_mid_episode_aborts_it_and_exits_zero(stack):
             assert "Traceback" not in log and "InvalidHandle" not in log, log
             said = [line for line in log.splitlines() if "shutdown" in line]
             assert len(said) == 1 and response.episode_id in said[0], log
+
+
+def test_first_episode_after_start_up_waits_for_the_learner(stack, tmp_path):
+    """Robot, learner and executor come up together and an episode starts at once: the
+    executor waits for the learner's first word instead of running its first steps degraded."""
+    from test_episodes import learner_spec
+    stack.start(ROBOT, learner_spec(tmp_path / "checkpoints"), executor_spec(max_steps=3))
+    with stack.client() as cli:
+        episodes = Episodes(cli)
+        episodes.wait_for_robot()
+        response = episodes.start(mode="test", initial_pose=0)
+        assert response.success, response.message + stack.logs()
+        final = episodes.final(response.episode_id, timeout=240.0)
+        assert final.state == "done", final.message + stack.logs()
+        mine = [s for s in episodes.statuses if s.episode_id == response.episode_id]
+        assert not any(s.degraded for s in mine), stack.logs()
+    assert "learner silent" not in (stack.log_dir / "executor.log").read_text(), stack.logs()
+
+
+def test_learner_heartbeat_goes_on_while_it_trains(stack, tmp_path):
+    """A training cycle of several seconds must not silence the heartbeat, or the executor
+    would run degraded (zero residual) while the learner is merely busy."""
+    from qg_interfaces.msg import LearnerDiagnostics, Transition
+
+    from qg_common.topics import RELIABLE_DEEP
+    iterations = updates_lasting(3.0)
+    learner = ("learner", "qg_learning_node", "learner",
+               ("--ros-args", "-p", "learner.cycle_steps:=1",
+                "-p", f"learner.iterations_per_cycle:={iterations}",
+                "-p", f"checkpoint_dir:={tmp_path / 'checkpoints'}"))
+    stack.start(learner)
+    with stack.client() as cli:
+        beats: list[tuple[float, int]] = []
+        cli.node.create_subscription(
+            LearnerDiagnostics, "/learner/diagnostics",
+            lambda m: beats.append((time.monotonic(), m.updates)), 10)
+        transitions = cli.node.create_publisher(Transition, "/transitions", RELIABLE_DEEP)
+        assert cli.spin_until(lambda: beats and transitions.get_subscription_count() > 0,
+                              60.0), stack.logs()
+        sent = time.monotonic()
+        transitions.publish(Transition(episode_id="one", step=0, state=[0.1] * 6,
+                                       action=[0.0, 0.1], reward=-1.0, next_state=[0.2] * 6))
+        assert cli.spin_until(lambda: beats[-1][1] >= iterations, 120.0), stack.logs()
+    training = beats[-1][0] - sent
+    times = [sent] + [t for t, _ in beats if t > sent]
+    gaps = [b - a for a, b in zip(times, times[1:])]
+    print(f"a cycle of {iterations} updates took {training:.1f} s; longest heartbeat gap "
+          f"{max(gaps):.2f} s")
+    assert training > 1.5                  # long enough to matter
+    assert max(gaps) < 1.2, gaps           # 0.5 s heartbeats, some jitter on a loaded host
+
+
+def updates_lasting(seconds: float) -> int:
+    """How many training updates of the configured learner take about ``seconds`` on this
+    host now (timed here on the same one-transition replay the test sends)."""
+    import numpy as np
+
+    from qg_common.params import config_file, load_ros_params
+    from qg_learning_node.core.learner_params import learner_config_from_params
+    from qg_learning_node.learner_core import LearnerCore
+    params = load_ros_params(config_file("learner.yaml"), "learner")["learner"]
+    params.update(cycle_steps=1, iterations_per_cycle=10)
+    core = LearnerCore(learner_config_from_params(params), 6, 2)
+    core.add_transition(np.full(6, 0.1), np.array([0.0, 0.1]), -1.0, np.full(6, 0.2), False)
+    core.train_cycle()                     # warm-up
+    start = time.monotonic()
+    core.train_cycle()
+    per_update = (time.monotonic() - start) / 10
+    return int(np.clip(seconds / per_update, 20, 2000))
