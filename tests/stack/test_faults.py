@@ -1,12 +1,13 @@
-"""Faults of the RL nodes with real processes: shutdown mid-episode, a learner restarted or
-busy training."""
+"""Faults of the RL nodes with real processes: shutdown mid-episode, a learner busy training.
+(A learner killed and restarted: ``test_episodes.py``.)"""
 from __future__ import annotations
 
 import signal
 import time
+from pathlib import Path
 
 import pytest
-from test_episodes import ROBOT, Episodes, executor_spec
+from test_episodes import ROBOT, Episodes, executor_spec, wait_for_bag
 
 pytestmark = pytest.mark.ros
 
@@ -47,21 +48,28 @@ def test_executor_stopped_mid_episode_aborts_it_and_exits_zero(stack):
             assert len(said) == 1 and response.episode_id in said[0], log
 
 
-def test_first_episode_after_start_up_waits_for_the_learner(stack, tmp_path):
-    """Robot, learner and executor come up together and an episode starts at once: the
-    executor waits for the learner's first word instead of running its first steps degraded."""
-    from test_episodes import learner_spec
-    stack.start(ROBOT, learner_spec(tmp_path / "checkpoints"), executor_spec(max_steps=3))
+def test_stopping_the_stack_mid_episode_records_the_abort(stack):
+    """``qgl up`` stopped (its launcher's stop): the episode's bag ends with the executor's
+    ``aborted`` status, not with the episode still ``running``."""
+    from rclpy.serialization import deserialize_message
+    from rosbags.highlevel import AnyReader
+
+    from qg_recording.player import message_class
+    stack.start(ROBOT, executor_spec(max_steps=400))
     with stack.client() as cli:
         episodes = Episodes(cli)
         episodes.wait_for_robot()
-        response = episodes.start(mode="test", initial_pose=0)
+        response = episodes.start(mode="train", initial_pose=1)
         assert response.success, response.message + stack.logs()
-        final = episodes.final(response.episode_id, timeout=240.0)
-        assert final.state == "done", final.message + stack.logs()
-        mine = [s for s in episodes.statuses if s.episode_id == response.episode_id]
-        assert not any(s.degraded for s in mine), stack.logs()
-    assert "learner silent" not in (stack.log_dir / "executor.log").read_text(), stack.logs()
+        assert cli.spin_until(lambda: any(s.episode_id == response.episode_id and s.step >= 2
+                                          for s in episodes.statuses), 120.0), stack.logs()
+    assert stack.stop(grace=5.0) == {"robot": 0, "executor": 0}, stack.logs()
+    bag = wait_for_bag(Path(stack.env["QG_RUNS_DIR"]) / "episodes", response.episode_id)
+    with AnyReader([bag]) as reader:
+        statuses = [deserialize_message(data, message_class(c.msgtype))
+                    for c, _, data in reader.messages(
+                        [c for c in reader.connections if c.topic == "/episode_status"])]
+    assert (statuses[-1].state, statuses[-1].message) == ("aborted", "shutdown"), stack.logs()
 
 
 def test_learner_heartbeat_goes_on_while_it_trains(stack, tmp_path):
