@@ -5,13 +5,15 @@ State machine idle -> resetting -> running -> done (or aborted), published on
 ``/actor_parameters``, plus exploration noise in training), send the wrench setpoint, wait for
 the robot's at-rest event, turn it into (s', r, terminal), publish the transition (reliable QoS).
 When the learner goes silent the robot stays safe: the zero residual is sent, the status says
-``degraded``, and the episode goes on.
+``degraded``, and the episode goes on. SIGINT or SIGTERM mid-episode aborts the episode (reason
+``shutdown``): zero residual and final status go out before the node is destroyed.
 """
 from __future__ import annotations
 
 import threading
 import time
 from dataclasses import dataclass, fields
+from collections.abc import Callable
 from typing import Any
 
 from qg_common import topics
@@ -25,6 +27,7 @@ from qg_interfaces.msg import (ActorParameters, AtRest, EpisodeStatus, LearnerDi
                                Transition, WrenchSetpoint)
 from qg_interfaces.srv import ResetSim, StartEpisode, StopEpisode
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.duration import Duration
 from rclpy.node import Node
 
 from qg_learning_node.conversions import (actor_tensors_from_msg, observation_from_msg,
@@ -43,6 +46,8 @@ ROBOT_DISCOVERY_GRACE = 3.0
 #: [s] an episode's first step waits this long for a learner never heard from (it may just
 #: not be discovered yet) before running degraded with the zero residual.
 LEARNER_DISCOVERY_GRACE = 3.0
+#: [s] how long shutdown waits for the episode thread to abort the episode.
+SHUTDOWN_GRACE = 2.0
 
 
 class EpisodeAborted(Exception):
@@ -164,6 +169,7 @@ class ExecutorNode(Node):
         self.degraded = False
         self.episodes_started = 0
         self.stop_requested = threading.Event()
+        self.stop_reason = ""
         self.worker: threading.Thread | None = None
 
     def _configure(self, params: dict[str, Any]) -> None:
@@ -191,10 +197,16 @@ class ExecutorNode(Node):
             return
         with self.lock:
             self.actor, self.actor_version = actor, int(msg.version)
-            self.last_learner_time = time.monotonic()
+        self._heard_from_learner()
 
     def _on_learner(self, msg: LearnerDiagnostics) -> None:
+        self._heard_from_learner()
+
+    def _heard_from_learner(self) -> None:
+        """A sign of life: a restarted learner ends ``degraded`` at once, not at the next step
+        (or, between episodes, the next episode)."""
         self.last_learner_time = time.monotonic()
+        self._set_degraded(False)
 
     def _on_at_rest(self, msg: AtRest) -> None:
         with self.lock:
@@ -251,13 +263,38 @@ class ExecutorNode(Node):
         if self.worker is None or not self.worker.is_alive() or self.episode is None:
             response.success, response.message = False, "no episode is running"
             return response
-        self.stop_requested.set()
-        self.at_rest_event.set()
-        self.worker.join(timeout=self.config.step_timeout + 1.0)
+        self._stop_episode("stop requested", timeout=self.config.step_timeout + 1.0)
         response.success = True
         response.episode_id = self.episode.episode_id
         response.message = f"aborted: {request.reason}" if request.reason else "aborted"
         return response
+
+    def _stop_episode(self, reason: str, timeout: float) -> bool:
+        """Make the running episode abort with ``reason``; True once its thread has ended
+        (within ``timeout`` seconds)."""
+        self.stop_reason = reason
+        self.stop_requested.set()
+        self.at_rest_event.set()
+        assert self.worker is not None
+        self.worker.join(timeout=timeout)
+        return not self.worker.is_alive()
+
+    def abort_on_shutdown(self) -> None:
+        """Abort a running episode while the node can still publish (``run_nodes`` calls this
+        at SIGINT/SIGTERM, before it destroys the node): the episode thread sends the zero
+        residual and the final ``aborted`` status; transient-local readers (recorder, learner)
+        are given a moment to have that status before the publisher goes."""
+        episode = self.episode
+        if self.worker is None or not self.worker.is_alive() or episode is None:
+            return
+        if not self._stop_episode("shutdown", timeout=SHUTDOWN_GRACE):
+            self.get_logger().error(f"shutdown: episode {episode.episode_id} did not stop "
+                                    f"within {SHUTDOWN_GRACE} s")
+            return
+        self.status_pub.wait_for_all_acked(Duration(seconds=1.0))
+        self.setpoint_pub.wait_for_all_acked(Duration(seconds=1.0))
+        self.get_logger().info(f"shutdown: episode {episode.episode_id} aborted at step "
+                               f"{episode.step}, zero residual sent")
 
     # --- the episode ----------------------------------------------------------------------
     def _run_episode(self, episode: Episode) -> None:
@@ -268,12 +305,9 @@ class ExecutorNode(Node):
             self._set_state("running")
             while not episode.done:
                 if self.stop_requested.is_set():
-                    raise EpisodeAborted("stop requested")
+                    raise EpisodeAborted(self.stop_reason)
                 alive = self.learner_alive()
-                if alive != (not self.degraded):
-                    self.degraded = not alive
-                    self.get_logger().warning("learner silent: zero residual until it is back"
-                                              if self.degraded else "learner is back")
+                self._set_degraded(not alive)
                 with self.lock:
                     actor = self.actor if alive else None
                 action = episode.choose_action(actor)
@@ -304,7 +338,7 @@ class ExecutorNode(Node):
                 raise EpisodeAborted(
                     f"/sim/reset did not answer within {self.config.reset_timeout} s")
             if self.stop_requested.wait(0.002):
-                raise EpisodeAborted("stop requested during reset")
+                raise EpisodeAborted(f"{self.stop_reason} during reset")
         result = future.result()
         if result is None or not result.success:
             raise EpisodeAborted(f"reset refused: {getattr(result, 'message', 'no answer')}")
@@ -331,7 +365,7 @@ class ExecutorNode(Node):
             if event is not None:
                 return event
             if self.stop_requested.is_set():
-                raise EpisodeAborted("stop requested")
+                raise EpisodeAborted(self.stop_reason)
             if time.monotonic() > deadline:
                 raise EpisodeAborted(f"no at-rest event within {self.config.step_timeout} s "
                                      "(is the robot process up?)")
@@ -351,6 +385,15 @@ class ExecutorNode(Node):
         self._send(self.task.hold())
 
     # --- status ---------------------------------------------------------------------------
+    def _set_degraded(self, degraded: bool) -> None:
+        """Say so (log and status) when the learner goes silent or comes back."""
+        with self.lock:
+            changed, self.degraded = degraded != self.degraded, degraded
+        if changed:
+            self.get_logger().warning("learner silent: zero residual until it is back"
+                                      if degraded else "learner is back")
+            self._publish_status()
+
     def _set_state(self, state: str, message: str = "") -> None:
         self.state, self.message = state, message
         self._publish_status()
@@ -367,8 +410,15 @@ class ExecutorNode(Node):
         self.status_pub.publish(msg)
 
 
+def _abort_on_shutdown(nodes: list[Node]) -> Callable[[], None]:
+    """What ``run_nodes`` runs at shutdown: the executor's episode abort (no extra work)."""
+    node = nodes[0]
+    assert isinstance(node, ExecutorNode)
+    return node.abort_on_shutdown
+
+
 def main(args: list[str] | None = None) -> int:
-    return run_nodes([ExecutorNode], args)
+    return run_nodes([ExecutorNode], args, background=_abort_on_shutdown)
 
 
 if __name__ == "__main__":

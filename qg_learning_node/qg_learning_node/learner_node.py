@@ -6,7 +6,10 @@ training while the robot moves (``updates_per_step`` per transition, see ``learn
 Each time it publishes the new actor (latched, so a restarted executor gets it at once) and its
 diagnostics. At the end of
 every episode it checkpoints networks, optimizers, Q-Graph and replay memory; with
-``resume: true`` a restarted learner continues from the last checkpoint.
+``resume: true`` a restarted learner continues from the last checkpoint. Only episodes it saw
+running are checkpointed: the latched final status of an episode that ended before it started
+is not news. Its heartbeat has a callback group of its own, so a long training cycle never
+silences it (the executor would run degraded).
 """
 from __future__ import annotations
 
@@ -88,6 +91,7 @@ class LearnerNode(Node):
             self.core = LearnerCore(config, *task_dims(p["observation"]))
         self.lock = threading.Lock()
         self.received: dict[str, int] = {}        # transitions per episode id
+        self.seen_running: set[str] = set()       # episodes with a status before their end
         self.pending_checkpoint: dict[str, tuple[int, float]] = {}  # id -> (final steps, ended at)
         self.checkpointed: set[str] = set()
         self.last_diagnostics: dict = {}
@@ -100,8 +104,10 @@ class LearnerNode(Node):
                                  callback_group=group)
         self.create_subscription(EpisodeStatus, topics.EPISODE_STATUS, self._on_status, LATCHED,
                                  callback_group=group)
-        # A heartbeat, so the executor knows the learner is alive between training cycles.
-        self.create_timer(0.5, self._heartbeat, callback_group=group)
+        self.create_timer(0.5, self._checkpoint_pending, callback_group=group)
+        # A heartbeat, so the executor knows the learner is alive while it trains.
+        self.create_timer(0.5, self._publish_diagnostics,
+                          callback_group=MutuallyExclusiveCallbackGroup())
         self._publish_actor()
 
     def _on_transition(self, msg: Transition) -> None:
@@ -132,13 +138,17 @@ class LearnerNode(Node):
                 stop.wait(0.002)
 
     def _on_status(self, msg: EpisodeStatus) -> None:
-        if msg.state in ("done", "aborted") and msg.episode_id and msg.mode == "train" \
-                and msg.episode_id not in self.checkpointed:
+        if not msg.episode_id or msg.mode != "train":
+            return
+        if msg.state not in ("done", "aborted"):
+            self.seen_running.add(msg.episode_id)
+            return
+        seen = msg.episode_id in self.seen_running or msg.episode_id in self.received
+        if seen and msg.episode_id not in self.checkpointed:
             self.pending_checkpoint.setdefault(msg.episode_id, (int(msg.step), time.monotonic()))
             self._maybe_checkpoint(msg.episode_id)
 
-    def _heartbeat(self) -> None:
-        self._publish_diagnostics()
+    def _checkpoint_pending(self) -> None:
         for episode_id in list(self.pending_checkpoint):
             self._maybe_checkpoint(episode_id)
 

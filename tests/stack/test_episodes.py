@@ -250,6 +250,10 @@ def test_async_learner_trains_while_the_robot_moves(stack, tmp_path):
 
 
 def test_learner_killed_mid_episode_degrades_then_resumes(stack, tmp_path):
+    """The executor runs degraded without the learner and is back to normal as soon as a
+    restarted learner speaks; the restarted learner resumes from the checkpoint and does not
+    checkpoint again the episode that ended while it was down (its latched status)."""
+    from qg_learning_node.learner_node import CHECKPOINT_GRACE
     checkpoints = tmp_path / "checkpoints"
     stack.start(ROBOT, learner_spec(checkpoints), executor_spec(max_steps=25))
     with stack.client() as cli:
@@ -276,6 +280,10 @@ def test_learner_killed_mid_episode_degrades_then_resumes(stack, tmp_path):
 
         stack.start(learner_spec(checkpoints, name="learner2"))
         episodes.wait_for_learner()
+        restarted = time.monotonic()
+        # Back before any new episode: the executor's idle status heartbeat says so.
+        assert cli.spin_until(lambda: not episodes.statuses[-1].degraded, 3.0), stack.logs()
+        assert episodes.statuses[-1].episode_id == second.episode_id
         third = episodes.start(mode="train", initial_pose=2)
         assert third.success, third.message
         final3 = episodes.final(third.episode_id, timeout=240.0)
@@ -286,8 +294,16 @@ def test_learner_killed_mid_episode_degrades_then_resumes(stack, tmp_path):
                    if s.episode_id == third.episode_id and s.state == "running" and s.step >= 1]
         assert stepped and not stepped[0].degraded, stack.logs()
         assert final3.actor_version >= 1, final3
-    log = (stack.log_dir / "learner2.log").read_text()
-    assert "resumed from" in log, log
+        # Past the learner's grace for missing transitions: a re-checkpoint would be done now.
+        cli.spin_for(max(0.0, restarted + CHECKPOINT_GRACE + 1.5 - time.monotonic()))
+    learner2_log = stack.log_dir / "learner2.log"
+    deadline = time.monotonic() + 30.0    # saving the checkpoint takes a while on a busy host
+    while f"checkpoint after {third.episode_id}" not in learner2_log.read_text() \
+            and time.monotonic() < deadline:
+        time.sleep(0.2)
+    log = learner2_log.read_text()
+    assert "resumed from" in log and f"checkpoint after {third.episode_id}" in log, log
+    assert "never arrived" not in log and f"checkpoint after {second.episode_id}" not in log, log
 
 
 def test_bad_requests_are_refused_and_the_stack_stays_up(stack):

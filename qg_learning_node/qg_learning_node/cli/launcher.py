@@ -186,22 +186,34 @@ class Launcher:
             time.sleep(period)
 
     def stop(self, grace: float = 5.0) -> dict[str, int]:
-        """SIGINT all, then SIGTERM and SIGKILL stragglers; return each exit code."""
+        """SIGINT all, then SIGTERM and SIGKILL stragglers; return each exit code.
+
+        SIGINT goes in reverse start order, each process given until the wave's deadline to end
+        before the next is signalled: what a later process says at its end (the executor's
+        final ``aborted`` status) still reaches the earlier ones (the robot process's recorder).
+        """
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
-            alive = [r for r in self.running if r.popen.poll() is None]
+            alive = [r for r in reversed(self.running) if r.popen.poll() is None]
             if not alive:
                 break
+            deadline = time.monotonic() + grace
             for r in alive:
                 try:
                     r.popen.send_signal(sig)
                 except ProcessLookupError:
                     pass
-            deadline = time.monotonic() + grace
-            while time.monotonic() < deadline and any(r.popen.poll() is None for r in alive):
-                time.sleep(0.05)
+                if sig == signal.SIGINT:
+                    self._wait([r], deadline)
+            self._wait(alive, deadline)
         for r in self.running:
             r.pump.join(timeout=2.0)
         return {r.spec.name: r.popen.returncode for r in self.running}
+
+    @staticmethod
+    def _wait(processes: list[_Running], deadline: float) -> None:
+        """Until all of ``processes`` have ended or ``deadline`` (monotonic) has passed."""
+        while time.monotonic() < deadline and any(r.popen.poll() is None for r in processes):
+            time.sleep(0.05)
 
     def pids(self) -> dict[str, Any]:
         return {r.spec.name: r.popen.pid for r in self.running}

@@ -5,12 +5,14 @@
 ``ros2 run robot_bridge_node robot`` behaves like the configured stack and a ``--params-file``
 or ``-p`` overrides only what it names. A given parameter that no node of the process declares
 (a misspelt name) stops the start with exit code 2, as does a value of the wrong type or out of
-range. SIGINT and SIGTERM end the process with exit code 0 after the nodes are destroyed (rclpy
-turns both into a shutdown).
+range. SIGINT and SIGTERM end the process with exit code 0: spinning stops, the nodes' shutdown
+work runs while ROS is still up (the executor publishes its last status), then the nodes are
+destroyed and ROS is shut down.
 """
 from __future__ import annotations
 
 import os
+import signal
 import sys
 import threading
 import time
@@ -20,6 +22,7 @@ from collections.abc import Callable, Sequence
 import rclpy
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 
 from qg_common.node_parameters import unknown_overrides
 from qg_common.params import ConfigError
@@ -35,11 +38,17 @@ def run_nodes(factories: Sequence[Callable[[], Node]], argv: Sequence[str] | Non
         in order (a later one may use what an earlier node declared).
     :param argv: the command line (default ``sys.argv``), ``--ros-args`` included.
     :param background: optional; given the nodes, starts extra work (e.g. the 1 kHz loop
-        thread) and returns a function that stops it; that function raises ``RuntimeError``
-        if the work failed, which makes the exit code 1.
+        thread) and returns the function run at shutdown, before the nodes are destroyed and
+        while they can still publish: it stops that work or ends what the nodes are doing (the
+        executor's running episode); it raises ``RuntimeError`` if the work failed, which makes
+        the exit code 1.
     :returns: never: the process exits with the code (0 on SIGINT/SIGTERM, 2 on bad parameters).
     """
-    rclpy.init(args=list(sys.argv if argv is None else argv))
+    # rclpy's own signal handlers shut ROS down at once, under the nodes' feet: nothing could
+    # be published any more and threads still using a node crash on its destroyed handles.
+    rclpy.init(args=list(sys.argv if argv is None else argv),
+               signal_handler_options=SignalHandlerOptions.NO)
+    stopping = _stop_on_signals()
     nodes: list[Node] = []
     stop_background: Callable[[], None] | None = None
     code = 0
@@ -54,7 +63,10 @@ def run_nodes(factories: Sequence[Callable[[], Node]], argv: Sequence[str] | Non
             executor.add_node(node)
         if background is not None:
             stop_background = background(nodes)
-        executor.spin()
+        stopping.spinning = True
+        # Until a signal (noticed within 0.1 s) or a failed background thread shuts ROS down.
+        while not stopping.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ConfigError, ValueError) as exc:
@@ -62,8 +74,7 @@ def run_nodes(factories: Sequence[Callable[[], Node]], argv: Sequence[str] | Non
             print(f"error: {exc}", file=sys.stderr)
             code = 2
     except Exception:
-        # SIGINT/SIGTERM while a node is still being built invalidates the context under it:
-        # that is a requested shutdown, not a failure.
+        # A failed background thread shuts ROS down under the nodes; that thread reports it.
         if rclpy.ok():
             raise
     finally:
@@ -81,6 +92,27 @@ def run_nodes(factories: Sequence[Callable[[], Node]], argv: Sequence[str] | Non
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(code)
+
+
+class _StopRequest(threading.Event):
+    """Set by SIGINT or SIGTERM; ``spinning`` says whether the nodes are up yet."""
+    spinning = False
+
+
+def _stop_on_signals() -> _StopRequest:
+    """SIGINT and SIGTERM set the returned event once the nodes spin (the spin loop then ends
+    and the shutdown work runs); while the nodes are still being built they interrupt that.
+    Python runs the handler in the main thread."""
+    stopping = _StopRequest()
+
+    def handle(signum: int, frame: object) -> None:
+        stopping.set()
+        if not stopping.spinning:
+            raise KeyboardInterrupt
+
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, handle)
+    return stopping
 
 
 class RealtimePacer:

@@ -1,0 +1,124 @@
+"""Faults of the RL nodes with real processes: shutdown mid-episode, a learner busy training.
+(A learner killed and restarted: ``test_episodes.py``.)"""
+from __future__ import annotations
+
+import signal
+import time
+from pathlib import Path
+
+import pytest
+from test_episodes import ROBOT, Episodes, executor_spec, wait_for_bag
+
+pytestmark = pytest.mark.ros
+
+
+def test_executor_stopped_mid_episode_aborts_it_and_exits_zero(stack):
+    """SIGINT (Ctrl-C, ``qgl up`` stopping) and SIGTERM alike: the running episode ends as
+    ``aborted`` (reason ``shutdown``) on the latched status, the robot gets the zero residual,
+    and the process says so and exits 0 without a traceback."""
+    from qg_interfaces.msg import WrenchSetpoint
+
+    from qg_common.topics import COMMAND_QOS
+    stack.start(ROBOT)
+    with stack.client() as cli:
+        episodes = Episodes(cli)
+        setpoints: list = []
+        cli.node.create_subscription(WrenchSetpoint, "/wrench_setpoint", setpoints.append,
+                                     COMMAND_QOS)
+        episodes.wait_for_robot()
+        for name, sig in (("executor_int", signal.SIGINT), ("executor_term", signal.SIGTERM)):
+            spec = executor_spec(max_steps=400)
+            stack.start((name, *spec[1:]))
+            response = episodes.start(mode="train", initial_pose=1)
+            assert response.success, response.message + stack.logs()
+            assert cli.spin_until(lambda: any(s.episode_id == response.episode_id and s.step >= 2
+                                              for s in episodes.statuses), 120.0), stack.logs()
+            proc = next(r for r in stack.launcher.running if r.spec.name == name).popen
+            proc.send_signal(sig)
+            final = episodes.final(response.episode_id, timeout=10.0)
+            assert final.state == "aborted" and final.message == "shutdown", (final, stack.logs())
+            assert proc.wait(timeout=5.0) == 0, stack.logs()
+            cli.spin_for(0.3)
+            assert setpoints[-1].seq > final.step            # after the last step's command
+            assert [setpoints[-1].wrench.force.z, setpoints[-1].wrench.torque.x,
+                    setpoints[-1].wrench.torque.y] == [-15.0, 0.0, 0.0]   # the zero residual
+            log = (stack.log_dir / f"{name}.log").read_text()
+            assert "Traceback" not in log and "InvalidHandle" not in log, log
+            said = [line for line in log.splitlines() if "shutdown" in line]
+            assert len(said) == 1 and response.episode_id in said[0], log
+
+
+def test_stopping_the_stack_mid_episode_records_the_abort(stack):
+    """``qgl up`` stopped (its launcher's stop): the episode's bag ends with the executor's
+    ``aborted`` status, not with the episode still ``running``."""
+    from rclpy.serialization import deserialize_message
+    from rosbags.highlevel import AnyReader
+
+    from qg_recording.player import message_class
+    stack.start(ROBOT, executor_spec(max_steps=400))
+    with stack.client() as cli:
+        episodes = Episodes(cli)
+        episodes.wait_for_robot()
+        response = episodes.start(mode="train", initial_pose=1)
+        assert response.success, response.message + stack.logs()
+        assert cli.spin_until(lambda: any(s.episode_id == response.episode_id and s.step >= 2
+                                          for s in episodes.statuses), 120.0), stack.logs()
+    assert stack.stop(grace=5.0) == {"robot": 0, "executor": 0}, stack.logs()
+    bag = wait_for_bag(Path(stack.env["QG_RUNS_DIR"]) / "episodes", response.episode_id)
+    with AnyReader([bag]) as reader:
+        statuses = [deserialize_message(data, message_class(c.msgtype))
+                    for c, _, data in reader.messages(
+                        [c for c in reader.connections if c.topic == "/episode_status"])]
+    assert (statuses[-1].state, statuses[-1].message) == ("aborted", "shutdown"), stack.logs()
+
+
+def test_learner_heartbeat_goes_on_while_it_trains(stack, tmp_path):
+    """A training cycle of several seconds must not silence the heartbeat, or the executor
+    would run degraded (zero residual) while the learner is merely busy."""
+    from qg_interfaces.msg import LearnerDiagnostics, Transition
+
+    from qg_common.topics import RELIABLE_DEEP
+    iterations = updates_lasting(3.0)
+    learner = ("learner", "qg_learning_node", "learner",
+               ("--ros-args", "-p", "learner.cycle_steps:=1",
+                "-p", f"learner.iterations_per_cycle:={iterations}",
+                "-p", f"checkpoint_dir:={tmp_path / 'checkpoints'}"))
+    stack.start(learner)
+    with stack.client() as cli:
+        beats: list[tuple[float, int]] = []
+        cli.node.create_subscription(
+            LearnerDiagnostics, "/learner/diagnostics",
+            lambda m: beats.append((time.monotonic(), m.updates)), 10)
+        transitions = cli.node.create_publisher(Transition, "/transitions", RELIABLE_DEEP)
+        assert cli.spin_until(lambda: beats and transitions.get_subscription_count() > 0,
+                              60.0), stack.logs()
+        sent = time.monotonic()
+        transitions.publish(Transition(episode_id="one", step=0, state=[0.1] * 6,
+                                       action=[0.0, 0.1], reward=-1.0, next_state=[0.2] * 6))
+        assert cli.spin_until(lambda: beats[-1][1] >= iterations, 120.0), stack.logs()
+    training = beats[-1][0] - sent
+    times = [sent] + [t for t, _ in beats if t > sent]
+    gaps = [b - a for a, b in zip(times, times[1:])]
+    print(f"a cycle of {iterations} updates took {training:.1f} s; longest heartbeat gap "
+          f"{max(gaps):.2f} s")
+    assert training > 1.5                  # long enough to matter
+    assert max(gaps) < 1.2, gaps           # 0.5 s heartbeats, some jitter on a loaded host
+
+
+def updates_lasting(seconds: float) -> int:
+    """How many training updates of the configured learner take about ``seconds`` on this
+    host now (timed here on the same one-transition replay the test sends)."""
+    import numpy as np
+
+    from qg_common.params import config_file, load_ros_params
+    from qg_learning_node.core.learner_params import learner_config_from_params
+    from qg_learning_node.learner_core import LearnerCore
+    params = load_ros_params(config_file("learner.yaml"), "learner")["learner"]
+    params.update(cycle_steps=1, iterations_per_cycle=10)
+    core = LearnerCore(learner_config_from_params(params), 6, 2)
+    core.add_transition(np.full(6, 0.1), np.array([0.0, 0.1]), -1.0, np.full(6, 0.2), False)
+    core.train_cycle()                     # warm-up
+    start = time.monotonic()
+    core.train_cycle()
+    per_update = (time.monotonic() - start) / 10
+    return int(np.clip(seconds / per_update, 20, 2000))
