@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -16,6 +17,7 @@ import pytest
 from qg_learning_node.experiments import grid, peg
 from qg_learning_node.experiments.__main__ import main
 from qg_learning_node.experiments.profile import load_profile
+from qg_learning_node.experiments.runner import STACK_CONFIG_FILES
 from qg_learning_node.experiments.tasks import DEFAULT_WORKERS, result_path, run_specs
 
 
@@ -31,9 +33,8 @@ def _without_wall_time(path: Path) -> dict:
     return result
 
 
-@pytest.mark.slow                    # about 25 s on the 2 loaded cores, most of it starting Ray
+@pytest.mark.slow                    # 22-33 s on the 2 loaded cores, most of it starting Ray
 def test_ray_runs_give_the_pools_results_and_resume(tmp_path: Path) -> None:
-    pytest.importorskip("ray")
     specs = _small_specs()
     pooled = run_specs(specs, tmp_path / "pool", workers=2)
     on_ray = run_specs(specs, tmp_path / "ray", workers=1, backend="ray")
@@ -47,6 +48,29 @@ def test_ray_runs_give_the_pools_results_and_resume(tmp_path: Path) -> None:
     assert len(saved) == 2
     run_specs(specs, tmp_path / "ray", workers=1, backend="ray")
     assert {p: p.stat().st_mtime_ns for p in (tmp_path / "ray").glob("*/*.json")} == saved
+
+
+@pytest.mark.slow                    # about 21 s on the loaded cores: a second local Ray
+def test_a_ray_worker_that_reads_other_config_files_saves_nothing(tmp_path: Path) -> None:
+    """A cluster whose workers see other config files than this machine: the sweep stops."""
+    import ray
+
+    from qg_common.params import config_file
+    edited = tmp_path / "config"
+    edited.mkdir()
+    for name in STACK_CONFIG_FILES:
+        shutil.copy(config_file(name), edited / name)
+    with open(edited / "learner.yaml", "a") as f:       # same numbers, other bytes
+        f.write("# edited on the workers\n")
+    spec = peg.peg_specs(load_profile("tiny").peg, None)[0]
+    ray.init(num_cpus=1, include_dashboard=False,
+             runtime_env={"env_vars": {"QG_CONFIG_DIR": str(edited)}})
+    try:
+        with pytest.raises(RuntimeError, match="Ray workers see other config files"):
+            run_specs([spec], tmp_path / "runs", workers=1, backend="ray")
+    finally:
+        ray.shutdown()
+    assert not list(tmp_path.glob("runs/*/*.json"))
 
 
 def test_qgl_and_the_pool_never_import_ray(tmp_path: Path) -> None:
