@@ -1,4 +1,8 @@
-"""Command line: ``python -m qg_learning_node.experiments [--profile small] [--only ...]``."""
+"""Command line: ``python -m qg_learning_node.experiments [--profile small] [--only ...]``.
+
+Runs go to a pool of one process per core (``--workers`` to change), or with ``--backend ray``
+to a local Ray (``--address`` joins a Ray cluster); the results are the same either way.
+"""
 from __future__ import annotations
 
 import argparse
@@ -8,7 +12,7 @@ from pathlib import Path
 
 from qg_learning_node.experiments.profile import load_profile
 from qg_learning_node.experiments.suite import EXPERIMENTS, run_suite
-from qg_learning_node.experiments.tasks import MAX_WORKERS
+from qg_learning_node.experiments.tasks import BACKENDS, DEFAULT_WORKERS
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -18,7 +22,14 @@ def main(argv: list[str] | None = None) -> None:
                         "(config/experiments.yaml)")
     parser.add_argument("--only", default=",".join(EXPERIMENTS),
                         help=f"comma-separated subset of {','.join(EXPERIMENTS)}")
-    parser.add_argument("--workers", type=int, default=MAX_WORKERS, help="processes (max 2)")
+    parser.add_argument("--workers", type=int, default=DEFAULT_WORKERS,
+                        help=f"runs at a time on this machine (default: the {DEFAULT_WORKERS} "
+                        "cores)")
+    parser.add_argument("--backend", choices=BACKENDS, default="process",
+                        help="process: a pool on this machine; ray: Ray tasks (a local Ray "
+                        "unless --address)")
+    parser.add_argument("--address", default=None,
+                        help="Ray cluster to run on (ray://head:10001 or head:6379; --backend ray)")
     parser.add_argument("--out", type=Path, default=Path("runs/experiments"),
                         help="results folder (a subfolder per profile)")
     parser.add_argument("--docs", type=Path, default=Path("docs"),
@@ -32,6 +43,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--report-only", action="store_true",
                         help="only regenerate results.md from saved results")
     args = parser.parse_args(argv)
+    if args.workers < 1:
+        parser.error(f"--workers must be at least 1, got {args.workers}")
+    if args.address is not None and args.backend != "ray":
+        parser.error("--address needs --backend ray")
     only = tuple(o for o in args.only.split(",") if o)
     unknown = set(only) - set(EXPERIMENTS)
     if unknown:
@@ -40,7 +55,7 @@ def main(argv: list[str] | None = None) -> None:
     command = "python -m qg_learning_node.experiments " + shlex.join(
         sys.argv[1:] if argv is None else argv)
     path = run_suite(profile, args.out, args.docs, () if args.report_only else only,
-                     args.workers, command, args.config_dir)
+                     args.workers, command, args.config_dir, args.backend, args.address)
     print(f"wrote {path}; TensorBoard: tensorboard --logdir "
           f"{args.out / profile.name / 'tensorboard'}")
 

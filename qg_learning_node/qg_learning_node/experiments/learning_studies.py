@@ -1,6 +1,6 @@
 """The studies behind docs/learning.md, beside the thesis grid: which lever makes the robot learn.
 
-``python -m qg_learning_node.experiments.learning_studies`` runs (resumably, two workers) and
+``python -m qg_learning_node.experiments.learning_studies`` runs (resumably, on every core) and
 summarises, all with the thesis protocol of the ``thesis`` profile (40 training episodes capped at
 50 steps, 8 test episodes capped at 200, 3 seeds):
 
@@ -31,7 +31,7 @@ import numpy as np
 from qg_learning_node.experiments.grid import grid_specs, test_steps
 from qg_learning_node.experiments.profile import load_profile
 from qg_learning_node.experiments.runner import RunSpec
-from qg_learning_node.experiments.tasks import MAX_WORKERS, run_specs
+from qg_learning_node.experiments.tasks import DEFAULT_WORKERS, run_specs
 
 __all__ = ["study_specs", "summarise", "main"]
 
@@ -146,7 +146,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--only", default="observation,graph,housing,schedule")
     parser.add_argument("--out", type=Path, default=Path("runs/experiments/studies"))
     parser.add_argument("--docs", type=Path, default=Path("docs"))
-    parser.add_argument("--workers", type=int, default=MAX_WORKERS)
+    parser.add_argument("--workers", type=int, default=DEFAULT_WORKERS)
     args = parser.parse_args(argv)
     studies = study_specs()
     summary: dict[str, Any] = {}

@@ -1,7 +1,8 @@
 """The whole experiment set of one profile: run what is missing, then write the report.
 
-Random baselines, the grid and the peg runs (free and on the Nextage) are independent and share one pool of (at most two)
-workers; the variants of experiment 4 need the grid's best cells, so they run after it.
+Random baselines, the grid and the peg runs (free and on the Nextage) are independent and share
+one pool of workers (a process per core, or Ray: ``tasks.BACKENDS``); the variants of
+experiment 4 need the grid's best cells, so they run after it.
 Results land in ``<out>/<profile>/<experiment>/`` and wall times in ``timing.json`` there.
 """
 from __future__ import annotations
@@ -13,7 +14,7 @@ from typing import Any
 
 from qg_learning_node.experiments import grid, peg, random_baselines, report
 from qg_learning_node.experiments.profile import Profile
-from qg_learning_node.experiments.tasks import MAX_WORKERS, load_results, run_specs
+from qg_learning_node.experiments.tasks import DEFAULT_WORKERS, load_results, run_specs
 
 __all__ = ["EXPERIMENTS", "run_suite", "all_specs", "planned_runs"]
 
@@ -24,7 +25,7 @@ def all_specs(profile: Profile, only: tuple[str, ...] = EXPERIMENTS,
               config_dir: str | None = None) -> list[Any]:
     """The independent runs (grid, peg, random) of ``profile`` selected by ``only``."""
     specs: list[Any] = []
-    if "grid" in only:        # the longest runs first: the two workers finish closer together
+    if "grid" in only:        # the longest runs first: the workers finish closer together
         specs += grid.grid_specs(profile.grid, profile.estimator, config_dir)
     if "nextage" in only and profile.nextage is not None:   # slower per step than the free peg
         specs += peg.peg_specs(profile.nextage, config_dir, robot="sim_nextage")
@@ -44,10 +45,12 @@ def _record_time(out: Path, key: str, seconds: float, command: str) -> None:
 
 
 def run_suite(profile: Profile, out: Path, docs: Path, only: tuple[str, ...] = EXPERIMENTS,
-              workers: int = MAX_WORKERS, command: str = "",
-              config_dir: str | None = None) -> Path:
+              workers: int = DEFAULT_WORKERS, command: str = "",
+              config_dir: str | None = None, backend: str = "process",
+              address: str | None = None) -> Path:
     """Run the selected experiments of ``profile`` (resuming saved runs) and write the report.
 
+    :param workers, backend, address: where the runs execute (``tasks.run_specs``).
     :returns: the written ``results.md``.
     """
     out = Path(out) / profile.name
@@ -56,14 +59,14 @@ def run_suite(profile: Profile, out: Path, docs: Path, only: tuple[str, ...] = E
     specs = all_specs(profile, only, config_dir)
     if specs:
         step = "+".join(o for o in only if o != "variants")
-        run_specs(specs, out, workers, f"{profile.name}: {step}")
+        run_specs(specs, out, workers, f"{profile.name}: {step}", backend, address)
         _record_time(out, step, time.perf_counter() - start, command)
     if "variants" in only and (profile.variants.rewards or profile.variants.replay_capacities):
         start = time.perf_counter()
         rows = grid.cell_table(load_results(out, "grid"), None)
         specs = grid.variant_specs(profile.grid, profile.variants, grid.best_cells(rows),
                                    profile.estimator, config_dir)
-        run_specs(specs, out, workers, f"{profile.name}: variants")
+        run_specs(specs, out, workers, f"{profile.name}: variants", backend, address)
         _record_time(out, "variants", time.perf_counter() - start, command)
     return report.write_report(profile, out, Path(docs), config_dir, planned_runs(profile))
 

@@ -1,16 +1,20 @@
-"""Runs independent experiment runs in at most two worker processes, saving each as it ends.
+"""Runs independent experiment runs on a pool of worker processes or on Ray, saving each as it ends.
 
 Every run is a frozen spec with ``name``, ``experiment`` and ``run() -> dict``; its result goes
 to ``<out>/<experiment>/<name>.json`` the moment it finishes, so an interrupted sweep keeps what
 it did, and a second call with the same specs skips runs whose saved spec and config digest
-(see ``runner.config_digest``) are identical.
+(see ``runner.config_digest``) are identical. Only where a run executes depends on the backend:
+``process`` (the default) is a pool of one process per core on this machine, ``ray`` hands the
+runs to a Ray cluster (``ray_backend``); skipping, saving, the progress bar and the results are
+the same code for both.
 """
 from __future__ import annotations
 
 import dataclasses
 import json
 import multiprocessing
-from collections.abc import Sequence
+import os
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -19,10 +23,13 @@ from tqdm import tqdm
 
 from qg_learning_node.experiments.runner import config_digest
 
-__all__ = ["RunnableSpec", "MAX_WORKERS", "result_path", "run_specs", "load_results"]
+__all__ = ["RunnableSpec", "BACKENDS", "DEFAULT_WORKERS", "result_path", "run_specs",
+           "run_one", "load_results"]
 
-#: The machine has two cores; more processes only thrash.
-MAX_WORKERS = 2
+#: Where runs execute: a process pool on this machine, or a Ray cluster (local or remote).
+BACKENDS = ("process", "ray")
+#: One single-threaded run per core: more processes only thrash.
+DEFAULT_WORKERS = os.cpu_count() or 1
 
 
 class RunnableSpec(Protocol):
@@ -51,17 +58,37 @@ def _saved(out: Path, spec: RunnableSpec) -> dict[str, Any] | None:
     return result if same else None
 
 
-def _run(spec: RunnableSpec) -> tuple[RunnableSpec, dict[str, Any]]:
+def run_one(spec: RunnableSpec) -> tuple[RunnableSpec, dict[str, Any]]:
+    """One run in a worker of either backend: single-threaded torch, as every worker runs."""
     torch.set_num_threads(1)
     return spec, spec.run()
 
 
-def run_specs(specs: Sequence[RunnableSpec], out: Path, workers: int = MAX_WORKERS,
-              description: str = "runs") -> list[dict[str, Any]]:
+def _pool_results(todo: Sequence[RunnableSpec], workers: int
+                  ) -> Iterable[tuple[RunnableSpec, dict[str, Any]]]:
+    """``(spec, result)`` of each run of ``todo`` as it ends, on ``workers`` local processes."""
+    if workers == 1:
+        yield from map(run_one, todo)
+        return
+    with multiprocessing.get_context("spawn").Pool(workers) as pool:
+        yield from pool.imap_unordered(run_one, todo)
+
+
+def run_specs(specs: Sequence[RunnableSpec], out: Path, workers: int = DEFAULT_WORKERS,
+              description: str = "runs", backend: str = "process",
+              address: str | None = None) -> list[dict[str, Any]]:
     """Run every spec not already saved under ``out``; results in the order of ``specs``.
 
-    :param workers: processes (1 runs in this process; capped at :data:`MAX_WORKERS`).
+    :param workers: runs at a time on this machine: processes of the pool (1 runs in this
+        process), or the CPUs of the local Ray; a Ray cluster at ``address`` uses its own CPUs.
+    :param backend: one of :data:`BACKENDS`.
+    :param address: the Ray cluster to join (``ray`` backend only; None starts a local one).
+    :raises ValueError: for an unknown backend, or an address without the ``ray`` backend.
     """
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+    if address is not None and backend != "ray":
+        raise ValueError(f"a cluster address needs the ray backend, got backend {backend!r}")
     results: dict[str, dict[str, Any]] = {}
     todo = []
     for spec in specs:
@@ -70,7 +97,7 @@ def run_specs(specs: Sequence[RunnableSpec], out: Path, workers: int = MAX_WORKE
             todo.append(spec)
         else:
             results[f"{spec.experiment}/{spec.name}"] = saved
-    workers = max(1, min(workers, MAX_WORKERS, len(todo)))
+    workers = max(1, min(workers, len(todo)))
     bar = tqdm(total=len(specs), initial=len(specs) - len(todo), desc=description, unit="run",
                dynamic_ncols=True)
 
@@ -82,13 +109,15 @@ def run_specs(specs: Sequence[RunnableSpec], out: Path, workers: int = MAX_WORKE
         bar.set_postfix_str(f"{spec.name} {result['wall_time']:.0f}s")
         bar.update()
 
-    if workers == 1:
-        for spec in todo:
-            keep(*_run(spec))
+    if not todo:
+        finished: Iterable[tuple[RunnableSpec, dict[str, Any]]] = ()
+    elif backend == "ray":          # imported here: the pool and `qgl` never import ray
+        from qg_learning_node.experiments.ray_backend import ray_results
+        finished = ray_results(todo, workers, address)
     else:
-        with multiprocessing.get_context("spawn").Pool(workers) as pool:
-            for spec, result in pool.imap_unordered(_run, todo):
-                keep(spec, result)
+        finished = _pool_results(todo, workers)
+    for spec, result in finished:
+        keep(spec, result)
     bar.close()
     return [results[f"{s.experiment}/{s.name}"] for s in specs]
 
