@@ -52,10 +52,14 @@ class LearnerNodeConfig:
         for the peg task; sets the networks' input and output sizes.
     :param checkpoint_dir: folder of ``learner.pt``; "" = ``<runs>/checkpoints``.
     :param resume: restore networks, optimizers, graph and replay at start.
+    :param robot_namespaces: the robots whose ``<ns>/transitions`` and ``<ns>/episode_status``
+        this learner learns from; "" is the learner's own namespace (one robot, the default).
+        ``qgl up --robots 2`` gives ``[robot0, robot1]`` (see ``cli/fleet.py``).
     """
     observation: str = "thesis"
     checkpoint_dir: str = ""
     resume: bool = False
+    robot_namespaces: tuple[str, ...] = ("",)
 
 
 #: The learner's parameters, all read-only: a running learner keeps its networks' settings.
@@ -96,10 +100,11 @@ class LearnerNode(Node):
         self.diagnostics_pub = self.create_publisher(LearnerDiagnostics, topics.LEARNER_DIAGNOSTICS,
                                                      topics.COMMAND_QOS)
         group = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(Transition, topics.TRANSITIONS, self._on_transition, RELIABLE_DEEP,
-                                 callback_group=group)
-        self.create_subscription(EpisodeStatus, topics.EPISODE_STATUS, self._on_status, LATCHED,
-                                 callback_group=group)
+        for namespace in p["robot_namespaces"]:
+            self.create_subscription(Transition, topics.robot_topic(namespace, topics.TRANSITIONS),
+                                     self._on_transition, RELIABLE_DEEP, callback_group=group)
+            self.create_subscription(EpisodeStatus, topics.robot_topic(namespace, topics.EPISODE_STATUS),
+                                     self._on_status, LATCHED, callback_group=group)
         # A heartbeat, so the executor knows the learner is alive between training cycles.
         self.create_timer(0.5, self._heartbeat, callback_group=group)
         self._publish_actor()
