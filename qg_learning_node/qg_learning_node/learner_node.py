@@ -14,6 +14,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 from qg_common import topics
@@ -102,18 +103,19 @@ class LearnerNode(Node):
         group = MutuallyExclusiveCallbackGroup()
         for namespace in p["robot_namespaces"]:
             self.create_subscription(Transition, topics.robot_topic(namespace, topics.TRANSITIONS),
-                                     self._on_transition, RELIABLE_DEEP, callback_group=group)
+                                     partial(self._on_transition, robot=namespace),
+                                     RELIABLE_DEEP, callback_group=group)
             self.create_subscription(EpisodeStatus, topics.robot_topic(namespace, topics.EPISODE_STATUS),
                                      self._on_status, LATCHED, callback_group=group)
         # A heartbeat, so the executor knows the learner is alive between training cycles.
         self.create_timer(0.5, self._heartbeat, callback_group=group)
         self._publish_actor()
 
-    def _on_transition(self, msg: Transition) -> None:
+    def _on_transition(self, msg: Transition, robot: str = "") -> None:
         t = TransitionRecord.from_message(msg)
         with self.lock:
             cycle_due = self.core.add_transition(t.state, t.action, t.reward, t.next_state,
-                                                 t.terminal)
+                                                 t.terminal, robot)
             self.received[t.episode_id] = self.received.get(t.episode_id, 0) + 1
             cycle_due = cycle_due and self.core.config.schedule == "cycle"
             if cycle_due:
