@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -33,6 +34,8 @@ def two_hosts() -> Iterator[tuple[str, str]]:
     (DDS discovery by multicast, as on a LAN); deleted afterwards, whatever happened."""
     tag = f"qg{os.getpid()}"
     hosts = (f"{tag}a", f"{tag}b")
+    if shutil.which("ip") is None:
+        pytest.skip("cannot create network namespaces here: no `ip` command (iproute2)")
     probe = ip("netns", "add", hosts[0])
     if probe.returncode != 0:
         pytest.skip(f"cannot create network namespaces here: {probe.stderr.strip()}")
