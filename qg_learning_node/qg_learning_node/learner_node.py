@@ -101,11 +101,15 @@ class LearnerNode(Node):
         self.diagnostics_pub = self.create_publisher(LearnerDiagnostics, topics.LEARNER_DIAGNOSTICS,
                                                      topics.COMMAND_QOS)
         group = MutuallyExclusiveCallbackGroup()
-        for namespace in p["robot_namespaces"]:
-            self.create_subscription(Transition, topics.robot_topic(namespace, topics.TRANSITIONS),
-                                     partial(self._on_transition, robot=namespace),
-                                     RELIABLE_DEEP, callback_group=group)
-            self.create_subscription(EpisodeStatus, topics.robot_topic(namespace, topics.EPISODE_STATUS),
+        robots = [namespace.strip("/") for namespace in p["robot_namespaces"]]
+        if len(set(robots)) != len(robots):     # each transition would count twice
+            raise ValueError(f"robot_namespaces names a robot twice: {p['robot_namespaces']}")
+        for robot in robots:
+            self.create_subscription(Transition, topics.robot_topic(robot, topics.TRANSITIONS),
+                                     partial(self._on_transition, robot=robot), RELIABLE_DEEP,
+                                     callback_group=group)
+            self.create_subscription(EpisodeStatus,
+                                     topics.robot_topic(robot, topics.EPISODE_STATUS),
                                      self._on_status, LATCHED, callback_group=group)
         # A heartbeat, so the executor knows the learner is alive between training cycles.
         self.create_timer(0.5, self._heartbeat, callback_group=group)

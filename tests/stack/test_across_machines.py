@@ -20,7 +20,8 @@ pytestmark = pytest.mark.ros
 
 LEARNER_ADDRESS, ROBOT_ADDRESS = "10.200.0.1", "10.200.0.2"
 #: The learner with its default checkpoint folder (``<runs>/checkpoints`` on its own host).
-LEARNER = ("learner", "qg_learning_node", "learner", ("--ros-args", "-p", "learner.cycle_steps:=10"))
+LEARNER = ("learner", "qg_learning_node", "learner",
+           ("--ros-args", "-p", "learner.cycle_steps:=10"))
 
 
 def ip(*args: str) -> subprocess.CompletedProcess:

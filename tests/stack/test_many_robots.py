@@ -70,3 +70,12 @@ def test_two_robots_run_concurrent_episodes_into_one_learner(stack, tmp_path):
         assert {t.episode_id for t in recorded} == {episode_id}
         assert sorted(t.step for t in recorded) == list(range(finals[ns].step))
     assert stack.launcher.poll() == [], stack.logs()
+
+
+@pytest.mark.parametrize("namespaces, word", [("[robot0,robot0]", "twice"),
+                                              ("[robot0,2robot]", "not a ROS namespace")])
+def test_learner_refuses_bad_robot_namespaces_with_a_message(stack, namespaces, word):
+    stack.start(("learner", "qg_learning_node", "learner",
+                 ("--ros-args", "-p", f"robot_namespaces:={namespaces}")))
+    (name, code), = [stack.launcher.wait_any()]
+    assert code == 2 and word in stack.logs(), stack.logs()

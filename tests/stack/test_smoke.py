@@ -87,6 +87,8 @@ def test_qgl_up_robots_needs_one_learner_and_at_least_one_robot(tmp_path):
                    "  - {name: executor, package: qg_learning_node, executable: executor}\n")
     no_learner = qgl("up", "--config", str(cfg), "--robots", "2")
     assert no_learner.returncode == 2 and "exactly one learner" in no_learner.stderr
+    bad_robot = qgl("episode", "start", "--robot", "robot-1")
+    assert bad_robot.returncode == 2 and "not a ROS namespace" in bad_robot.stderr
 
 
 def test_qgl_up_reports_a_dying_node_and_exits_nonzero(tmp_path):

@@ -96,6 +96,16 @@ _PARAM_SERVICES = ("/describe_parameters", "/get_parameter_types", "/get_paramet
                    "/get_type_description")
 
 
+def _robot_namespace(text: str) -> str:
+    """``--robot``: a namespace ROS accepts (refused by argparse with the reason otherwise)."""
+    from qg_common import topics
+    try:
+        topics.robot_topic(text, topics.START_EPISODE)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="qgl", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -123,7 +133,7 @@ def build_parser() -> argparse.ArgumentParser:
     stop.add_argument("--reason", default="stopped from qgl")
     for p in (start, stop):
         p.add_argument("--timeout", type=float, default=10.0, help="service timeout [s]")
-        p.add_argument("--robot", default="", metavar="NAMESPACE",
+        p.add_argument("--robot", default="", metavar="NAMESPACE", type=_robot_namespace,
                        help="the robot's namespace under `qgl up --robots N` (robot0, robot1, "
                             "...); default: the robot at the root")
     ep.set_defaults(func=_cmd_episode)

@@ -6,6 +6,8 @@ In the default namespace they resolve to ``/joint_states``, ``/sim/reset`` and s
 """
 from __future__ import annotations
 
+import re
+
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 __all__ = [
@@ -38,6 +40,8 @@ START_EPISODE = "executor/start_episode"       # service
 STOP_EPISODE = "executor/stop_episode"         # service
 
 
+_NAMESPACE = re.compile(r"[A-Za-z_]\w*(/[A-Za-z_]\w*)*", re.ASCII)
+
 
 def robot_topic(namespace: str, name: str) -> str:
     """The topic or service ``name`` of the robot in ``namespace`` (``robot1`` or ``/robot1``):
@@ -45,6 +49,9 @@ def robot_topic(namespace: str, name: str) -> str:
     A node outside the robots' namespaces (the learner of many robots, a command line client)
     names their topics this way."""
     namespace = namespace.strip("/")
+    if namespace and not _NAMESPACE.fullmatch(namespace):
+        raise ValueError(f"{namespace!r} is not a ROS namespace (letters, digits, '_' and '/', "
+                         "no part starting with a digit)")
     return f"/{namespace}/{name}" if namespace else name
 
 
