@@ -5,7 +5,9 @@ processes and executors in ``/robot0``..., one learner at the root; N = 1: every
 root) with the demo's settings (episodes capped at ``--max-steps``, critic lr 1e-3, 50
 iterations per 20-step cycle). Every robot runs training episodes back to back for
 ``--seconds`` of wall time; the learner's ``transitions`` counter (``/learner/diagnostics``)
-over that window gives the rate. Episodes still running at the end are awaited and counted.
+over that window gives the rate. Episodes still running at the end are awaited and counted;
+``transitions_per_s_until_learned`` is every transition over the time until the learner had
+them all.
 
 The learner trains in its transition callback, so on a busy machine its counter lags the
 robots: the executors' own step rate (``robot_steps_per_s``: steps over the time until every
@@ -142,6 +144,7 @@ def run(robots: int, record: bool, seconds: float, max_steps: int, domain_id: st
             # a learner that lags catches up (its queue is deep: RELIABLE_DEEP); none is lost
             cli.spin_until(lambda: heartbeats[-1][1] >= sum(steps), 300.0)
             learner = heartbeats[-1][1]
+            learned = next((t for t, n in heartbeats if n >= sum(steps)), time.monotonic())
     finally:
         launcher.stop()
     infos = [bag_info(p.parent) for p in (run_dir / "episodes").glob("*/metadata.yaml")]
@@ -154,6 +157,7 @@ def run(robots: int, record: bool, seconds: float, max_steps: int, domain_id: st
             "incomplete_bags": (episodes - sum(i.complete for i in infos)) if record else None,
             "dropped": max(sum(steps) - learner, sum(steps) - bag_transitions if record else 0),
             "transitions_per_s": round(window, 2),
+            "transitions_per_s_until_learned": round(learner / (learned - t0), 2),
             "robot_steps_per_s": round(sum(steps) / produced, 2),
             "robot_cpu_ms_per_tick": [round(c, 3) for c in cpu]}
 
@@ -177,6 +181,7 @@ def main() -> None:
         summary.append({
             "robots": n, "transitions_per_s": on["transitions_per_s"],
             "per_robot": round(on["transitions_per_s"] / n, 2),
+            "transitions_per_s_until_learned": on["transitions_per_s_until_learned"],
             "robot_steps_per_s": on["robot_steps_per_s"],
             "transitions_per_s_unrecorded": off["transitions_per_s"],
             "robot_cpu_ms_per_tick": round(cpu_on, 3),
@@ -185,7 +190,8 @@ def main() -> None:
             "dropped": on["dropped"] + off["dropped"], "incomplete_bags": on["incomplete_bags"]})
         s = summary[-1]
         print(f"N={n}: {s['transitions_per_s']:.1f} transitions/s into the learner "
-              f"({s['per_robot']:.1f} per robot; the robots made {s['robot_steps_per_s']:.1f} "
+              f"({s['per_robot']:.1f} per robot; {s['transitions_per_s_until_learned']:.1f} "
+              f"until it had them all; the robots made {s['robot_steps_per_s']:.1f} "
               f"steps/s; {s['transitions_per_s_unrecorded']:.1f} transitions/s without "
               f"recording); robot process CPU per 1 ms tick {cpu_on:.3f} ms recording, "
               f"{cpu_off:.3f} ms not: recording takes {s['recording_loop_share']:.1%} of the "
