@@ -247,6 +247,10 @@ class ExecutorNode(Node):
         pose = req.initial_pose if req.initial_pose >= 0 else index % N_POSES
         reward = req.reward or self.task.config.reward
         episode_id = f"{time.strftime('%Y%m%d_%H%M%S')}_{index:04d}_{req.mode}_p{pose}"
+        # Under many robots the id names its robot: ids, bags and the learner's bookkeeping of
+        # concurrent episodes never collide (robot0_..., see cli/fleet.py).
+        robot = self.get_namespace().strip("/").replace("/", "_")
+        episode_id = f"{robot}_{episode_id}" if robot else episode_id
         seed = req.seed if req.seed != 0 else 1000 + index
         self.episode = Episode(episode_id, req.mode, pose, reward, self.task,
                                ActionNoise(self.noise_config, self.task.action_dim, seed))

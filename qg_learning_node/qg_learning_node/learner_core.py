@@ -131,11 +131,12 @@ class LearnerCore:
         self._census: dict = {}
 
     def add_transition(self, s: np.ndarray, a: np.ndarray, r: float, s_next: np.ndarray,
-                       terminal: bool) -> bool:
-        """Store one executed step; True when a training cycle is due."""
+                       terminal: bool, robot: str = '') -> bool:
+        """Store one executed step of ``robot`` (its trajectory stream in replay memory; one
+        robot: the default); True when a training cycle is due."""
         s, a = np.asarray(s, dtype=np.float64), np.asarray(a, dtype=np.float64)
         s_next = np.asarray(s_next, dtype=np.float64)
-        self.replay.add(s, a, r, s_next, terminal)
+        self.replay.add(s, a, r, s_next, terminal, stream=robot)
         if self.zero_action is not None and not terminal and not np.array_equal(s, s_next):
             self.replay.add(s_next, self.zero_action, r, s_next, False, synthetic=True)
         if self.graph is not None:

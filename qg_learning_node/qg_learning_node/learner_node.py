@@ -17,6 +17,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 from qg_common import topics
@@ -55,10 +56,14 @@ class LearnerNodeConfig:
         for the peg task; sets the networks' input and output sizes.
     :param checkpoint_dir: folder of ``learner.pt``; "" = ``<runs>/checkpoints``.
     :param resume: restore networks, optimizers, graph and replay at start.
+    :param robot_namespaces: the robots whose ``<ns>/transitions`` and ``<ns>/episode_status``
+        this learner learns from; "" is the learner's own namespace (one robot, the default).
+        ``qgl up --robots 2`` gives ``[robot0, robot1]`` (see ``cli/fleet.py``).
     """
     observation: str = "thesis"
     checkpoint_dir: str = ""
     resume: bool = False
+    robot_namespaces: tuple[str, ...] = ("",)
 
 
 #: The learner's parameters, all read-only: a running learner keeps its networks' settings.
@@ -100,21 +105,27 @@ class LearnerNode(Node):
         self.diagnostics_pub = self.create_publisher(LearnerDiagnostics, topics.LEARNER_DIAGNOSTICS,
                                                      topics.COMMAND_QOS)
         group = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(Transition, topics.TRANSITIONS, self._on_transition, RELIABLE_DEEP,
-                                 callback_group=group)
-        self.create_subscription(EpisodeStatus, topics.EPISODE_STATUS, self._on_status, LATCHED,
-                                 callback_group=group)
+        robots = [namespace.strip("/") for namespace in p["robot_namespaces"]]
+        if len(set(robots)) != len(robots):     # each transition would count twice
+            raise ValueError(f"robot_namespaces names a robot twice: {p['robot_namespaces']}")
+        for robot in robots:
+            self.create_subscription(Transition, topics.robot_topic(robot, topics.TRANSITIONS),
+                                     partial(self._on_transition, robot=robot), RELIABLE_DEEP,
+                                     callback_group=group)
+            self.create_subscription(EpisodeStatus,
+                                     topics.robot_topic(robot, topics.EPISODE_STATUS),
+                                     self._on_status, LATCHED, callback_group=group)
         self.create_timer(0.5, self._checkpoint_pending, callback_group=group)
         # A heartbeat, so the executor knows the learner is alive while it trains.
         self.create_timer(0.5, self._publish_diagnostics,
                           callback_group=MutuallyExclusiveCallbackGroup())
         self._publish_actor()
 
-    def _on_transition(self, msg: Transition) -> None:
+    def _on_transition(self, msg: Transition, robot: str = "") -> None:
         t = TransitionRecord.from_message(msg)
         with self.lock:
             cycle_due = self.core.add_transition(t.state, t.action, t.reward, t.next_state,
-                                                 t.terminal)
+                                                 t.terminal, robot)
             self.received[t.episode_id] = self.received.get(t.episode_id, 0) + 1
             cycle_due = cycle_due and self.core.config.schedule == "cycle"
             if cycle_due:

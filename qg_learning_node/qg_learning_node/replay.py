@@ -6,7 +6,9 @@ as the Q-Graph grows, so the caller fills ``Batch.lower_bounds`` at sampling tim
 
 Each real transition also remembers its trajectory neighbours (the previous and next real
 transition of the same episode), which the n-step bounds of He et al. (2017) need. Synthetic
-transitions (zero-action self-loops) have no neighbours and do not break the chain.
+transitions (zero-action self-loops) have no neighbours and do not break the chain. Several
+robots feeding one memory interleave their steps: each robot is its own ``stream``, and a
+transition continues the chain of its own stream only.
 """
 
 from __future__ import annotations
@@ -67,8 +69,9 @@ class ReplayMemory:
         self.state_dim, self.action_dim = state_dim, action_dim
         self._allocate(capacity if capacity is not None else 1024)
         self._added = 0  # serial number of the next transition
-        self._last_real = -1  # serial of the last real transition
-        self._last_next_state: np.ndarray | None = None
+        # per stream: serial of its last real transition, and that one's s' (None after a
+        # terminal one), which the stream's next transition continues if it starts there
+        self._chain_ends: dict[str, tuple[int, np.ndarray | None]] = {}
 
     def _allocate(self, size: int) -> None:
         self.states = np.zeros((size, self.state_dim))
@@ -98,8 +101,11 @@ class ReplayMemory:
         return ok & (self.serial[self._slot(np.where(ok, serial, 0))] == serial)
 
     def add(self, s: np.ndarray, a: np.ndarray, r: float, s_next: np.ndarray, terminal: bool,
-            synthetic: bool = False) -> None:
-        """Store a transition; ``synthetic`` ones (never executed) stay out of trajectories."""
+            synthetic: bool = False, stream: str = '') -> None:
+        """Store a transition; ``synthetic`` ones (never executed) stay out of trajectories.
+
+        :param stream: the robot the transition comes from (one robot: the default).
+        """
         if self.capacity is None and self._added == len(self.rewards):
             self._grow()
         serial = self._added
@@ -108,13 +114,14 @@ class ReplayMemory:
         self.next_states[slot], self.terminals[slot] = s_next, terminal
         self.serial[slot], self.prev[slot], self.next[slot] = serial, -1, -1
         if not synthetic:
-            last = np.array(self._last_real)
-            if (self._last_next_state is not None and self._alive(last)
-                    and np.array_equal(self._last_next_state, self.states[slot])):
-                self.prev[slot] = self._last_real
+            last_real, last_next_state = self._chain_ends.get(stream, (-1, None))
+            last = np.array(last_real)
+            if (last_next_state is not None and self._alive(last)
+                    and np.array_equal(last_next_state, self.states[slot])):
+                self.prev[slot] = last_real
                 self.next[self._slot(last)] = serial
-            self._last_real = serial
-            self._last_next_state = None if terminal else self.next_states[slot].copy()
+            self._chain_ends[stream] = (serial,
+                                        None if terminal else self.next_states[slot].copy())
         self._added += 1
 
     def sample(self, batch_size: int, rng: np.random.Generator) -> Batch:
@@ -156,8 +163,7 @@ class ReplayMemory:
     def state_dict(self) -> dict:
         state = {name: getattr(self, name)[:len(self.rewards)].copy() for name in _FIELDS}
         state.update(capacity=self.capacity, state_dim=self.state_dim, action_dim=self.action_dim,
-                     added=self._added, last_real=self._last_real,
-                     last_next_state=self._last_next_state)
+                     added=self._added, chain_ends=dict(self._chain_ends))
         return state
 
     def load_state_dict(self, state: dict) -> None:
@@ -166,5 +172,6 @@ class ReplayMemory:
             raise ValueError('replay state does not match this memory\'s capacity/dimensions')
         for name in _FIELDS:
             setattr(self, name, state[name].copy())
-        self._added, self._last_real = state['added'], state['last_real']
-        self._last_next_state = state['last_next_state']
+        self._added = state['added']
+        self._chain_ends = dict(state['chain_ends'] if 'chain_ends' in state   # else: one robot
+                                else {'': (state['last_real'], state['last_next_state'])})

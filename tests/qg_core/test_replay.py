@@ -49,6 +49,23 @@ def test_trajectory_context_follows_real_steps_and_skips_zero_loops():
     assert not loop.future_valid.any() and not loop.past_valid.any()
 
 
+def test_interleaved_robots_each_continue_their_own_trajectory():
+    """Two robots' steps arrive interleaved; each links to its own previous step only."""
+    memory = ReplayMemory(None, 2, 1)
+    for t in range(3):          # slots: a0, b0, a1, b1, a2, b2
+        for robot, offset in (("a", 0.0), ("b", 100.0)):
+            memory.add(np.array([t + offset, 0.0]), np.array([1.0]), -(t + offset),
+                       np.array([t + 1 + offset, 0.0]), False, stream=robot)
+    context = memory.trajectory_context(np.array([0, 1]), horizon=2)   # a0, b0
+    np.testing.assert_array_equal(context.future_rewards, [[-1.0, -2.0], [-101.0, -102.0]])
+    assert context.future_valid.all()
+    restored = ReplayMemory(None, 2, 1)         # the chain ends survive a checkpoint
+    restored.load_state_dict(memory.state_dict())
+    restored.add(np.array([103.0, 0.0]), np.array([1.0]), -103.0, np.array([104.0, 0.0]), True,
+                 stream="b")
+    assert restored.prev[6] == 5                # b3 continues b2
+
+
 def test_links_break_when_neighbour_is_overwritten():
     memory = ReplayMemory(3, 2, 1)
     chain(memory, 5)  # keeps t2, t3, t4

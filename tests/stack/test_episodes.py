@@ -32,15 +32,17 @@ def learner_spec(checkpoint_dir: Path, name: str = "learner") -> tuple:
 class Episodes:
     """Calls StartEpisode and follows /episode_status from the test process."""
 
-    def __init__(self, cli) -> None:
+    def __init__(self, cli, robot: str = "") -> None:
+        """:param robot: the robot's namespace (``robot0`` under many robots), "" = the root."""
         from qg_interfaces.msg import EpisodeStatus, LearnerDiagnostics
 
-        from qg_common.topics import LATCHED
+        from qg_common.topics import LATCHED, robot_topic
         self.cli = cli
+        self.robot = robot
         self.statuses: list = []
         self.learner_heartbeats: list = []
-        cli.node.create_subscription(EpisodeStatus, "/episode_status", self.statuses.append,
-                                     LATCHED)
+        cli.node.create_subscription(EpisodeStatus, robot_topic(robot, "episode_status"),
+                                     self.statuses.append, LATCHED)
         cli.node.create_subscription(LearnerDiagnostics, "/learner/diagnostics",
                                      self.learner_heartbeats.append, 10)
 
@@ -59,7 +61,8 @@ class Episodes:
         from qg_interfaces.srv import StartEpisode
 
         from qg_learning_node.cli.ros_client import call_service
-        return call_service(self.cli, StartEpisode, "/executor/start_episode",
+        from qg_common.topics import robot_topic
+        return call_service(self.cli, StartEpisode, robot_topic(self.robot, "executor/start_episode"),
                             StartEpisode.Request(**fields), timeout=60.0)
 
     def final(self, episode_id: str, timeout: float):

@@ -79,6 +79,18 @@ def test_qgl_up_with_missing_or_malformed_config_says_one_line_and_exits_2(tmp_p
     assert malformed.stderr.strip().count("\n") == 0 and "malformed YAML" in malformed.stderr
 
 
+def test_qgl_up_robots_needs_one_learner_and_at_least_one_robot(tmp_path):
+    none = qgl("up", "--robots", "0")
+    assert none.returncode == 2 and "--robots must be >= 1" in none.stderr
+    cfg = tmp_path / "stack.yaml"
+    cfg.write_text("processes:\n"
+                   "  - {name: executor, package: qg_learning_node, executable: executor}\n")
+    no_learner = qgl("up", "--config", str(cfg), "--robots", "2")
+    assert no_learner.returncode == 2 and "exactly one learner" in no_learner.stderr
+    bad_robot = qgl("episode", "start", "--robot", "robot-1")
+    assert bad_robot.returncode == 2 and "not a ROS namespace" in bad_robot.stderr
+
+
 def test_qgl_up_reports_a_dying_node_and_exits_nonzero(tmp_path):
     cfg = tmp_path / "stack.yaml"
     # A params file that does not exist makes the learner fail at start-up.

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from qg_common.params import config_file, runs_dir
 
+from qg_learning_node.cli.fleet import fleet_specs
 from qg_learning_node.cli.launcher import Launcher, ProcessSpec, load_stack_config
 from qg_learning_node.cli.ros_env import stack_env
 from qg_learning_node.training_log import TrainingLog
@@ -222,15 +223,18 @@ def _with_demo_settings(spec: ProcessSpec, settings: DemoSettings) -> ProcessSpe
 
 
 def start_stack(run_dir: Path, settings: DemoSettings, config: Path,
-                domain_id: str | None = None) -> tuple[Launcher, dict[str, str]]:
-    """Start the processes of ``config`` with ``settings``; episodes, checkpoints, logs and ROS
-    logs go under ``run_dir``. :returns: the launcher (stop it) and the stack's environment."""
+                domain_id: str | None = None,
+                robots: int = 1) -> tuple[Launcher, dict[str, str]]:
+    """Start the processes of ``config`` with ``settings`` (``robots`` > 1: that many robots and
+    one learner, ``cli/fleet.py``); episodes, checkpoints, logs and ROS logs go under
+    ``run_dir``. :returns: the launcher (stop it) and the stack's environment."""
     env = stack_env(log_dir=run_dir / "ros_log")
     env["QG_RUNS_DIR"] = str(run_dir)     # episodes/ (MCAP) and checkpoints/ go here
     if domain_id is not None:
         env["ROS_DOMAIN_ID"] = domain_id
     launcher = Launcher(env=env, out=None, log_dir=run_dir / "logs")
-    launcher.start([_with_demo_settings(spec, settings) for spec in load_stack_config(config)])
+    launcher.start(fleet_specs([_with_demo_settings(spec, settings)
+                                for spec in load_stack_config(config)], robots))
     return launcher, env
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 from qg_interfaces.msg import EpisodeStatus
 
 from qg_learning_node.cli.ros_client import CliNode
+from qg_common import topics
 from qg_common.topics import LATCHED
 
 __all__ = ["wait_for_episode", "FINAL_STATES"]
@@ -11,8 +12,11 @@ __all__ = ["wait_for_episode", "FINAL_STATES"]
 FINAL_STATES = ("done", "aborted")
 
 
-def wait_for_episode(cli: CliNode, episode_id: str, timeout: float) -> int:
-    """Print status changes of ``episode_id`` until it ends; 0 if it ended, 1 on timeout."""
+def wait_for_episode(cli: CliNode, episode_id: str, timeout: float, namespace: str = "") -> int:
+    """Print status changes of ``episode_id`` until it ends; 0 if it ended, 1 on timeout.
+
+    :param namespace: the robot's namespace (``robot1``), "" for a robot at the root.
+    """
     last: list[EpisodeStatus] = []
 
     def on_status(msg: EpisodeStatus) -> None:
@@ -23,7 +27,8 @@ def wait_for_episode(cli: CliNode, episode_id: str, timeout: float) -> int:
                       f"degraded={msg.degraded} {msg.message}", flush=True)
             last.append(msg)
 
-    sub = cli.node.create_subscription(EpisodeStatus, "/episode_status", on_status, LATCHED)
+    sub = cli.node.create_subscription(
+        EpisodeStatus, topics.robot_topic(namespace, topics.EPISODE_STATUS), on_status, LATCHED)
     try:
         ended = cli.spin_until(lambda: bool(last) and last[-1].state in FINAL_STATES, timeout)
     finally:

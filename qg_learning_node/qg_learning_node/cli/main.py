@@ -13,6 +13,7 @@ from pathlib import Path
 
 from qg_common.params import ConfigError, config_file
 
+from qg_learning_node.cli.fleet import fleet_specs
 from qg_learning_node.cli.launcher import Launcher, StackConfigError, load_stack_config
 from qg_learning_node.cli.ros_env import exports, stack_env
 
@@ -21,6 +22,7 @@ __all__ = ["main", "build_parser"]
 
 def _cmd_up(args: argparse.Namespace) -> int:
     specs = load_stack_config(Path(args.config) if args.config else config_file("stack.yaml"))
+    specs = fleet_specs(specs, args.robots)
     launcher = Launcher(env=stack_env(), log_dir=Path(args.log_dir) if args.log_dir else None)
     stopping = False
 
@@ -48,19 +50,23 @@ def _cmd_up(args: argparse.Namespace) -> int:
 def _cmd_episode(args: argparse.Namespace) -> int:
     from qg_interfaces.srv import StartEpisode, StopEpisode
 
+    from qg_common import topics
+
+    from qg_learning_node.cli.episode_wait import wait_for_episode
     from qg_learning_node.cli.ros_client import CliNode, call_service
     with CliNode() as cli:
         if args.action == "start":
             req = StartEpisode.Request(mode=args.mode, initial_pose=args.initial_pose,
                                        seed=args.seed, reward=args.reward)
-            resp = call_service(cli, StartEpisode, "/executor/start_episode", req, args.timeout)
+            service = topics.robot_topic(args.robot, topics.START_EPISODE)
+            resp = call_service(cli, StartEpisode, service, req, args.timeout)
         else:
-            resp = call_service(cli, StopEpisode, "/executor/stop_episode",
-                                StopEpisode.Request(reason=args.reason), args.timeout)
+            service = topics.robot_topic(args.robot, topics.STOP_EPISODE)
+            resp = call_service(cli, StopEpisode, service, StopEpisode.Request(reason=args.reason),
+                                args.timeout)
         print(f"success={resp.success} episode_id={resp.episode_id!r} message={resp.message!r}")
         if resp.success and args.action == "start" and args.wait:
-            from qg_learning_node.cli.episode_wait import wait_for_episode
-            return wait_for_episode(cli, resp.episode_id, args.timeout_episode)
+            return wait_for_episode(cli, resp.episode_id, args.timeout_episode, args.robot)
         return 0 if resp.success else 1
 
 
@@ -90,6 +96,16 @@ _PARAM_SERVICES = ("/describe_parameters", "/get_parameter_types", "/get_paramet
                    "/get_type_description")
 
 
+def _robot_namespace(text: str) -> str:
+    """``--robot``: a namespace ROS accepts (refused by argparse with the reason otherwise)."""
+    from qg_common import topics
+    try:
+        topics.robot_topic(text, topics.START_EPISODE)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="qgl", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -99,6 +115,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="stack file listing the processes (default: the stack.yaml that "
                          "qg_learning_node installs, share/qg_learning_node/config)")
     up.add_argument("--log-dir", default=None, help="also write each process's output here")
+    up.add_argument("--robots", type=int, default=1,
+                    help="N > 1: N robot stacks in the namespaces /robot0../robot<N-1> and one "
+                         "learner at the root that learns from all of them (see cli/fleet.py)")
     up.set_defaults(func=_cmd_up)
 
     ep = sub.add_parser("episode", help="start or stop an episode")
@@ -114,6 +133,9 @@ def build_parser() -> argparse.ArgumentParser:
     stop.add_argument("--reason", default="stopped from qgl")
     for p in (start, stop):
         p.add_argument("--timeout", type=float, default=10.0, help="service timeout [s]")
+        p.add_argument("--robot", default="", metavar="NAMESPACE", type=_robot_namespace,
+                       help="the robot's namespace under `qgl up --robots N` (robot0, robot1, "
+                            "...); default: the robot at the root")
     ep.set_defaults(func=_cmd_episode)
 
     nodes = sub.add_parser("nodes", help="list discovered nodes, topics and services")

@@ -6,6 +6,8 @@ In the default namespace they resolve to ``/joint_states``, ``/sim/reset`` and s
 """
 from __future__ import annotations
 
+import re
+
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 __all__ = [
@@ -13,7 +15,7 @@ __all__ = [
     "SIM_RESTARTED", "SIM_RESET", "WRENCH_ESTIMATE", "WRENCH_SETPOINT", "EE_POSE", "EE_TWIST",
     "EE_AT_REST", "EPISODE_STATUS", "TRANSITIONS", "ACTOR_PARAMETERS", "LEARNER_DIAGNOSTICS",
     "START_EPISODE", "STOP_EPISODE", "SENSOR_QOS", "COMMAND_QOS", "RESTARTED_QOS",
-    "RELIABLE_DEEP", "LATCHED"]
+    "RELIABLE_DEEP", "LATCHED", "robot_topic"]
 
 # --- the robot process (1 kHz unless said otherwise) -------------------------------------------
 JOINT_STATES = "joint_states"
@@ -36,6 +38,22 @@ ACTOR_PARAMETERS = "actor_parameters"
 LEARNER_DIAGNOSTICS = "learner/diagnostics"
 START_EPISODE = "executor/start_episode"       # service
 STOP_EPISODE = "executor/stop_episode"         # service
+
+
+_NAMESPACE = re.compile(r"[A-Za-z_]\w*(/[A-Za-z_]\w*)*", re.ASCII)
+
+
+def robot_topic(namespace: str, name: str) -> str:
+    """The topic or service ``name`` of the robot in ``namespace`` (``robot1`` or ``/robot1``):
+    absolute, or ``name`` itself, still relative, for "" (one robot in the caller's namespace).
+    A node outside the robots' namespaces (the learner of many robots, a command line client)
+    names their topics this way."""
+    namespace = namespace.strip("/")
+    if namespace and not _NAMESPACE.fullmatch(namespace):
+        raise ValueError(f"{namespace!r} is not a ROS namespace (letters, digits, '_' and '/', "
+                         "no part starting with a digit)")
+    return f"/{namespace}/{name}" if namespace else name
+
 
 # --- QoS -----------------------------------------------------------------------------------
 #: 1 kHz state: only the newest sample matters.
