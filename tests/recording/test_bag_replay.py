@@ -53,6 +53,6 @@ def test_replay_at_rate_two_takes_half_the_time(stack, tmp_path: Path) -> None:
     assert [x for _, x in arrivals] == [float(i) for i in range(N)]  # all, in order
     assert twists == []  # --topics left /ee_twist out
     span = arrivals[-1][0] - arrivals[0][0]
-    assert 0.45 <= span <= 0.8, span  # 1.0 s of recording at rate 2 (subscriber side, loaded host)
+    assert 0.4 <= span <= 0.8, span  # 1.0 s of recording at rate 2 (subscriber side, loaded host)
     published = float(out.split(" messages in ")[1].split()[0])
     assert f"published {N} messages" in out and 0.49 <= published <= 0.6, out

@@ -92,10 +92,17 @@ def play(
         node = Node("qgl_replay")
     try:
         publishers: dict[str, Any] = {}
+        #: Reliable topics with the shallow history of a latched topic: a message published
+        #: before its predecessor is acknowledged would overwrite it in the writer's history
+        #: and never reach a slow reader, so replay waits for the acknowledgement first.
+        shallow: set[str] = set()
         for topic in info.topics:
             if (wanted is None or topic.name in wanted) and topic.name not in publishers and topic.message_count:
+                qos = offered_qos(topic.qos)
                 publishers[topic.name] = node.create_publisher(
-                    message_class(topic.type_name), topic.name, offered_qos(topic.qos))
+                    message_class(topic.type_name), topic.name, qos)
+                if qos.reliability == ReliabilityPolicy.RELIABLE and qos.depth < 10:
+                    shallow.add(topic.name)
         deadline = time.monotonic() + wait_for_subscribers_s
         while time.monotonic() < deadline and any(p.get_subscription_count() == 0 for p in publishers.values()):
             time.sleep(0.02)
@@ -111,7 +118,10 @@ def play(
             wait = due - time.monotonic()
             if wait > 0.0:
                 time.sleep(wait)
-            publishers[message.topic].publish(message.data)
+            publisher = publishers[message.topic]
+            publisher.publish(message.data)
+            if message.topic in shallow:
+                publisher.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
             last, last_t = time.monotonic(), message.t_ns
             count += 1
         # The last reliable messages may still be in flight: destroying the node now would drop
