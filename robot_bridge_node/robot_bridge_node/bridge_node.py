@@ -194,7 +194,6 @@ class LoopRunner:
             self._reset = job
             self._session = session
             self.foreign_setpoints = 0
-            self._setpoint = None   # a command of the previous session must not run after it
             self._mail.notify()
         return job
 
@@ -245,7 +244,8 @@ class LoopRunner:
             job, self._reset = self._reset, None
         if job is not None:
             self._do_reset(job)
-        if setpoint is not None:
+        # A command of another session that was waiting when the reset came must not run in it.
+        if setpoint is not None and (not self._session or setpoint.session == self._session):
             self._take_setpoint(setpoint)
 
     def _take_setpoint(self, msg: WrenchSetpointMsg) -> None:
