@@ -180,6 +180,7 @@ def test_episodes_started_and_stopped_from_another_thread(tmp_path: Path) -> Non
             while not stop.is_set():
                 recorder.record_wrench(T0 + i, [float(i), 0.0, 0.0], [0.0, 0.0, 0.0])
                 i += 1
+                time.sleep(0.0002)   # about a 1 kHz loop: a busier one only starves the GIL
         except Exception as exc:  # noqa: BLE001 - the assertion below reports it
             errors.append(exc)
 
