@@ -175,7 +175,7 @@ class LoopRunner:
         """Hand a setpoint of the served session to the loop (the latest one wins); drop and
         count one of another session."""
         with self._mail:
-            if not self._serves(msg):
+            if self._session and msg.session != self._session:
                 self.foreign_setpoints += 1
                 served = self._session
             else:
@@ -185,10 +185,6 @@ class LoopRunner:
         self.bridge.get_logger().warning(
             f"setpoint {msg.seq} of session '{msg.session}' ignored: serving '{served}'",
             throttle_duration_sec=1.0)
-
-    def _serves(self, msg: WrenchSetpointMsg) -> bool:
-        """Whether ``msg`` belongs to the served session (any does while that is "")."""
-        return not self._session or msg.session == self._session
 
     def request_reset(self, initial_pose: int, housing_yaw: float = 0.0,
                       session: str = "") -> _ResetJob:
@@ -236,7 +232,7 @@ class LoopRunner:
     def _wait_for_work(self, stop: threading.Event) -> bool:
         """Lockstep: a step runs or mail is waiting (else wait a little and say no)."""
         if self._step_start is not None:
-            return not self._session or msg.session == self._session
+            return True
         with self._mail:
             if self._setpoint is None and self._reset is None:
                 self._mail.wait(timeout=0.05)
@@ -249,7 +245,7 @@ class LoopRunner:
         if job is not None:
             self._do_reset(job)
         # A command of another session that was waiting when the reset came must not run in it.
-        if setpoint is not None and self._serves(setpoint):
+        if setpoint is not None and (not self._session or setpoint.session == self._session):
             self._take_setpoint(setpoint)
 
     def _take_setpoint(self, msg: WrenchSetpointMsg) -> None:
