@@ -53,6 +53,7 @@ class PegRunSpec:
     :param lr: learning rate of actor and critic.
     :param train_iterations: minibatch updates after each episode.
     :param robot: ``free`` (the free peg) or ``sim_nextage`` (the arm through the stack's cores).
+    :param gamma: discount (``PegBudget.gamma``), not ``learner.yaml``'s, which is the Panda's.
     """
     algorithm: str
     lr: float
@@ -62,6 +63,7 @@ class PegRunSpec:
     episode_steps: int = 200
     config_dir: str | None = None
     robot: str = "free"
+    gamma: float = 0.99
 
     def __post_init__(self) -> None:
         if self.algorithm not in ALGORITHMS:
@@ -88,7 +90,8 @@ def peg_specs(budget: PegBudget, config_dir: str | None = None,
               robot: str = "free") -> list[PegRunSpec]:
     return [PegRunSpec(algorithm=a, lr=float(lr), seed=s, episodes=budget.episodes,
                        train_iterations=budget.train_iterations,
-                       episode_steps=budget.episode_steps, config_dir=config_dir, robot=robot)
+                       episode_steps=budget.episode_steps, config_dir=config_dir, robot=robot,
+                       gamma=budget.gamma)
             for lr in budget.lrs for a in budget.algorithms for s in budget.seeds]
 
 
@@ -109,7 +112,7 @@ def run_peg(spec: PegRunSpec) -> dict[str, Any]:
         cycle_steps=spec.episode_steps,
         ddpg=dataclasses.replace(config.ddpg, actor_hidden=(200, 200, 200),
                                  critic_hidden=(200, 200, 200), critic_lr=spec.lr,
-                                 actor_lr=spec.lr, seed=spec.seed))
+                                 actor_lr=spec.lr, seed=spec.seed, gamma=spec.gamma))
     noise_config = NoiseConfig.from_dict(params("executor.yaml").get("noise", {}))
     learner = LearnerCore(config, env.state_dim, env.action_dim)
     episodes = []

@@ -74,13 +74,18 @@ class VariantBudget:
 
 @dataclass(frozen=True)
 class PegBudget:
-    """:param train_iterations: minibatch updates after each episode (thesis: 50 x 15 = 750)."""
+    """:param train_iterations: minibatch updates after each episode (thesis: 50 x 15 = 750).
+
+    :param gamma: the peg's own discount: its episodes last up to 200 steps, ten times the
+        Panda task's, whose ``learner.yaml`` discount is tuned to them.
+    """
     lrs: tuple[float, ...]
     algorithms: tuple[str, ...] = ALGORITHMS
     seeds: tuple[int, ...] = (0, 1, 2)
     episodes: int = 100
     train_iterations: int = 750
     episode_steps: int = 200
+    gamma: float = 0.99
 
     def __post_init__(self) -> None:
         if not self.lrs or len(self.seeds) < 2:
