@@ -465,7 +465,9 @@ def _start_separate_bridge(nodes: list[Node]) -> Callable[[], None]:
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_nodes([BridgeNode], args, background=_start_separate_bridge)
+    # Its callbacks only store the latest message for the loop thread.
+    return run_nodes([BridgeNode], args, background=_start_separate_bridge,
+                     blocking_callbacks=False)
 
 
 if __name__ == "__main__":

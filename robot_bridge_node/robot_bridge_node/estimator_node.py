@@ -110,7 +110,9 @@ def _start_separate_estimator(nodes: list[Node]) -> Callable[[], None]:
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_nodes([WrenchEstimatorNode], args, background=_start_separate_estimator)
+    # Its one callback runs the EKF on a state and publishes: nothing waits.
+    return run_nodes([WrenchEstimatorNode], args, background=_start_separate_estimator,
+                     blocking_callbacks=False)
 
 
 if __name__ == "__main__":

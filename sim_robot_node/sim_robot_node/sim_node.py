@@ -13,7 +13,7 @@ import queue
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pybullet
@@ -150,7 +150,10 @@ def _start_separate_sim(nodes: list[Node]) -> Callable[[], None]:
     node = nodes[0]
     assert isinstance(node, SimulationNode)
     if not node.config.realtime:
+        # The realtime rates follow, not only the pacing: published at lockstep's 100 Hz, the
+        # states would clock the bridge's loop (one tick per state) ten times too slowly.
         node.get_logger().info("separate sim process: running in realtime (wall-clock 1 kHz)")
+        node.config = replace(node.config, clock_mode="realtime")
     scene = PandaShaftScene(PandaSceneConfig.from_dict(node.params.get("panda_scene", {})))
     scene.reset(node.config.initial_pose)
     sim = SeparateSim(node, scene)
