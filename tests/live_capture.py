@@ -18,7 +18,7 @@ def live_qos(topic: str):
     """The reliability and durability the stack's subscribers of ``topic`` ask for, with a
     history deep enough that a test process that spins late drops nothing."""
     from qg_common import topics
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rclpy.qos import QoSProfile
     profile = {"/episode_status": topics.LATCHED, "/transitions": topics.RELIABLE_DEEP}.get(
         topic, topics.SENSOR_QOS if topic in SENSOR_TOPICS else QoSProfile(depth=topics.COMMAND_QOS))
     return QoSProfile(depth=5000, reliability=profile.reliability, durability=profile.durability)

@@ -175,7 +175,7 @@ class LoopRunner:
         """Hand a setpoint of the served session to the loop (the latest one wins); drop and
         count one of another session."""
         with self._mail:
-            if self._session and msg.session != self._session:
+            if not self._serves(msg):
                 self.foreign_setpoints += 1
                 served = self._session
             else:
@@ -185,6 +185,10 @@ class LoopRunner:
         self.bridge.get_logger().warning(
             f"setpoint {msg.seq} of session '{msg.session}' ignored: serving '{served}'",
             throttle_duration_sec=1.0)
+
+    def _serves(self, msg: WrenchSetpointMsg) -> bool:
+        """Whether ``msg`` belongs to the served session (any does while that is "")."""
+        return not self._session or msg.session == self._session
 
     def request_reset(self, initial_pose: int, housing_yaw: float = 0.0,
                       session: str = "") -> _ResetJob:
@@ -245,7 +249,7 @@ class LoopRunner:
         if job is not None:
             self._do_reset(job)
         # A command of another session that was waiting when the reset came must not run in it.
-        if setpoint is not None and (not self._session or setpoint.session == self._session):
+        if setpoint is not None and self._serves(setpoint):
             self._take_setpoint(setpoint)
 
     def _take_setpoint(self, msg: WrenchSetpointMsg) -> None:

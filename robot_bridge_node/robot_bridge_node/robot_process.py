@@ -65,14 +65,13 @@ class RobotProcess:
             if sim.plugin.interface == "torque" else build_position_loop(robot, bridge_params)
         #: Realtime: holds the wall-clock tick period (``missed`` counts dropped ticks).
         self.pacer = RealtimePacer(self.loop.config.dt) if config.realtime else None
-        pace = None
-        if self.pacer is not None:
-            pacer = self.pacer
+        pacer = self.pacer
 
-            def pace() -> bool:
-                pacer.wait()
-                return True
-        self.runner = LoopRunner(self.loop, bridge, lockstep=not config.realtime, pace=pace,
+        def pace() -> bool:
+            pacer.wait()
+            return True
+        self.runner = LoopRunner(self.loop, bridge, lockstep=not config.realtime,
+                                 pace=pace if pacer is not None else None,
                                  publish_every=config.publish_every(self.loop.config.dt),
                                  publish=self._publish)
         self.truth_every = config.ground_truth_every(self.loop.config.dt)

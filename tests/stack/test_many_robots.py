@@ -77,5 +77,5 @@ def test_two_robots_run_concurrent_episodes_into_one_learner(stack, tmp_path):
 def test_learner_refuses_bad_robot_namespaces_with_a_message(stack, namespaces, word):
     stack.start(("learner", "qg_learning_node", "learner",
                  ("--ros-args", "-p", f"robot_namespaces:={namespaces}")))
-    (name, code), = [stack.launcher.wait_any()]
+    (_, code), = [stack.launcher.wait_any()]
     assert code == 2 and word in stack.logs(), stack.logs()

@@ -23,7 +23,6 @@ from typing import Any
 import numpy as np
 
 from qg_learning_node.core.episode import Episode
-from qg_learning_node.core.noise import ActionNoise, NoiseConfig
 from qg_learning_node.core.residual_task import ACTION_DIM
 from qg_learning_node.experiments.runner import PandaTask, StackSettings, run_episode
 
