@@ -33,6 +33,7 @@ from rclpy.node import Node
 from qg_learning_node.conversions import (actor_tensors_from_msg, observation_from_msg,
                                           transition_to_msg)
 from qg_learning_node.core.episode import Episode
+from qg_learning_node.core.episode_id import episode_id as make_episode_id
 from qg_learning_node.core.episode_request import N_POSES, EpisodeRequest
 from qg_learning_node.core.noise import ActionNoise, NoiseConfig
 from qg_learning_node.core.peg_task import PegTask, PegTaskConfig
@@ -246,11 +247,8 @@ class ExecutorNode(Node):
         self.episodes_started += 1
         pose = req.initial_pose if req.initial_pose >= 0 else index % N_POSES
         reward = req.reward or self.task.config.reward
-        episode_id = f"{time.strftime('%Y%m%d_%H%M%S')}_{index:04d}_{req.mode}_p{pose}"
-        # Under many robots the id names its robot: ids, bags and the learner's bookkeeping of
-        # concurrent episodes never collide (robot0_..., see cli/fleet.py).
-        robot = self.get_namespace().strip("/").replace("/", "_")
-        episode_id = f"{robot}_{episode_id}" if robot else episode_id
+        # Under many robots the id names its robot (robot0_..., core/episode_id.py).
+        episode_id = make_episode_id(self.get_namespace(), index, req.mode, pose)
         seed = req.seed if req.seed != 0 else 1000 + index
         self.episode = Episode(episode_id, req.mode, pose, reward, self.task,
                                ActionNoise(self.noise_config, self.task.action_dim, seed))

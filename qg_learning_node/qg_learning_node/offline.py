@@ -4,10 +4,23 @@ The recorded `/transitions` are exactly what the learner received online, in the
 feeding them to a fresh `LearnerCore` with the same configuration reproduces its replay memory
 and Q-Graph (and therefore its census) without running the robot; training on them afterwards is
 optional. Used by `qgl replay --into-learner` and by analysis scripts.
+
+Under many robots (`qgl up --robots N`) each robot records its own episodes, and the one
+learner received the robots' transitions interleaved, each tagged with its robot, which keeps
+one trajectory chain per robot in replay memory. The rebuild does the same: the robot of a bag
+is the one its episode id names (`robot1_...`, `core/episode_id.py`; "" for a robot at the
+root), each robot's bags are read one after another in the order given, and the robots' streams
+are merged by recorded log time, so the rebuilt memory interleaves them as the learner's did and
+links each step only to its own robot's previous one. A bag's log time is its robot's loop
+clock: the wall clock in realtime mode, that robot's simulated time in lockstep, where the
+merged order across robots is therefore approximate (each robot's own order is exact; its
+chains and the Q-Graph do not depend on how the robots interleave, unless a bounded replay
+memory evicts by arrival order).
 """
 
 from __future__ import annotations
 
+import heapq
 import math
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
@@ -18,8 +31,9 @@ from qg_recording.bag_reader import read_bag
 from tqdm import tqdm
 
 from qg_learning_node.core.episode import TransitionRecord
+from qg_learning_node.core.episode_id import robot_of_episode
 
-__all__ = ["OfflineResult", "iter_transitions", "rebuild_from_bags"]
+__all__ = ["OfflineResult", "iter_transitions", "robot_transitions", "rebuild_from_bags"]
 
 TRANSITIONS_TOPIC = "/transitions"
 
@@ -34,13 +48,58 @@ class OfflineResult:
     train_iterations: int = 0
     diagnostics: dict[str, float] = field(default_factory=dict)  # of the last training cycle
     learner_core: Any = None  # the core that was fed (to checkpoint or keep training)
+    robots: dict[str, int] = field(default_factory=dict)  # robot ("" = the root) -> transitions
 
 
 def iter_transitions(paths: Iterable[Path]) -> Iterator[TransitionRecord]:
     """The recorded transitions of the given bags, bag after bag, in recording order."""
     for path in paths:
-        for _, _, _, msg in read_bag(path, topics=[TRANSITIONS_TOPIC]):
-            yield TransitionRecord.from_message(msg)
+        for _, transition in _logged(path):
+            yield transition
+
+
+def _logged(path: Path) -> Iterator[tuple[int, TransitionRecord]]:
+    for _, _, t_ns, msg in read_bag(path, topics=[TRANSITIONS_TOPIC]):
+        yield t_ns, TransitionRecord.from_message(msg)
+
+
+def _bag_robot(path: Path) -> str | None:
+    """The robot that recorded ``path`` (from its first transition); None if it has none."""
+    stream = _logged(path)
+    try:
+        first = next(stream, None)
+    finally:
+        stream.close()
+    return None if first is None else robot_of_episode(first[1].episode_id)
+
+
+def robot_transitions(paths: Iterable[Path], on_bag_done: Any = None
+                      ) -> Iterator[tuple[str, TransitionRecord]]:
+    """(robot, transition) of the given bags in the order one learner of all their robots
+    received them (see the module docstring): each robot's bags one after another in the given
+    order, the robots merged by recorded log time. One robot: exactly bag after bag.
+
+    :param on_bag_done: called with no argument once per bag when it has been read (progress).
+    """
+    done = on_bag_done or (lambda: None)
+    by_robot: dict[str, list[Path]] = {}
+    for path in paths:
+        robot = _bag_robot(path)
+        if robot is None:
+            done()
+        else:
+            by_robot.setdefault(robot, []).append(path)
+
+    def stream(robot: str, bags: list[Path]) -> Iterator[tuple[int, str, TransitionRecord]]:
+        for bag in bags:
+            for t_ns, transition in _logged(bag):
+                yield t_ns, robot, transition
+            done()
+
+    merged = heapq.merge(*(stream(robot, bags) for robot, bags in by_robot.items()),
+                         key=lambda item: item[0])
+    for _, robot, transition in merged:
+        yield robot, transition
 
 
 def rebuild_from_bags(
@@ -52,7 +111,8 @@ def rebuild_from_bags(
 ) -> OfflineResult:
     """Feed every recorded transition to a learner core; optionally train; return the census.
 
-    :param paths: episode bags (directories or .mcap files), fed in this order.
+    :param paths: episode bags (directories or .mcap files), fed in this order, each robot's
+        in this order and the robots' interleaved by log time (``robot_transitions``).
     :param learner_core: a `LearnerCore` to extend; if None, one is built from `config` (default
         `LearnerConfig()`) with the dimensions of the first recorded transition.
     :param train_iterations: train steps after the rebuild, in whole training cycles (rounded up).
@@ -64,18 +124,22 @@ def rebuild_from_bags(
     if train_iterations < 0:
         raise ValueError(f"train_iterations must be >= 0, got {train_iterations}")
     core = learner_core
-    count, episodes = 0, []
-    if progress:
-        paths = tqdm(list(paths), desc="rebuild", unit="bag", dynamic_ncols=True)
-    for transition in iter_transitions(paths):
-        if core is None:
-            core = LearnerCore(config if config is not None else LearnerConfig(),
-                               state_dim=transition.state.size, action_dim=transition.action.size)
-        core.add_transition(transition.state, transition.action, transition.reward,
-                            transition.next_state, transition.terminal)
-        count += 1
-        if not episodes or episodes[-1] != transition.episode_id:
-            episodes.append(transition.episode_id)
+    count, episodes, robots = 0, [], {}
+    paths = list(paths)
+    bar = tqdm(total=len(paths), desc="rebuild", unit="bag", dynamic_ncols=True,
+               disable=not progress)
+    with bar:
+        for robot, transition in robot_transitions(paths, on_bag_done=lambda: bar.update(1)):
+            if core is None:
+                core = LearnerCore(config if config is not None else LearnerConfig(),
+                                   state_dim=transition.state.size,
+                                   action_dim=transition.action.size)
+            core.add_transition(transition.state, transition.action, transition.reward,
+                                transition.next_state, transition.terminal, robot=robot)
+            count += 1
+            robots[robot] = robots.get(robot, 0) + 1
+            if not episodes or episodes[-1] != transition.episode_id:
+                episodes.append(transition.episode_id)
     if core is None:
         raise ValueError("the bags hold no /transitions to rebuild from")
     diagnostics: dict[str, float] = {}
@@ -87,4 +151,4 @@ def rebuild_from_bags(
     return OfflineResult(
         transitions=count, episodes=tuple(dict.fromkeys(episodes)), census=census,
         train_iterations=cycles * core.config.iterations_per_cycle, diagnostics=diagnostics,
-        learner_core=core)
+        learner_core=core, robots=robots)

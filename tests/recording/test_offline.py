@@ -115,3 +115,47 @@ def test_qgl_replay_into_learner(recorded, tmp_path: Path, capsys: pytest.Captur
     assert f"transitions: {sum(len(e) for e in episodes)} from {len(episodes)} episode(s)" in out
     assert f"'connected': {census['connected']}" in out
     assert LearnerCore.load(tmp_path / "ckpt.pt").graph.census() == census
+
+
+def test_bags_of_two_robots_are_merged_by_log_time_into_one_chain_per_robot(
+        tmp_path: Path) -> None:
+    """Two robots, two bags each, recorded at the same time: each robot's second episode goes
+    on from where its first stopped (a cut, not the goal). The one learner got the robots'
+    steps alternately, each tagged with its robot; the rebuild from the bags, listed by start
+    time as `qgl replay` lists a runs folder, must store the same memory: the same order, the
+    same neighbours (across each robot's two bags too) and the same chain ends."""
+    walks = {robot: random_walk_episodes(1, 24, seed=seed)[0] for robot, seed in
+             (("robot0", 3), ("robot1", 4))}
+    arrivals = []                               # (t_ns, robot, transition): what the learner got
+    for k, (robot, walk) in enumerate(walks.items()):
+        assert not any(t[-1] for t in walk[:12])        # no goal before the cut
+        for i, transition in enumerate(walk):
+            arrivals.append((1_000_000_000 + 20_000_000 * i + 10_000_000 * k, robot, transition))
+    arrivals.sort(key=lambda a: a[0])
+    bags = []
+    for part, (start, stop) in enumerate(((0, 12), (12, None))):
+        for robot, walk in walks.items():
+            recorder = EpisodeRecorder(tmp_path)
+            bags.append(recorder.start(f"{robot}_20260101_120000_{part:04d}_train_p{part}"))
+            for t, r, (step, s, a, reward, s_next, terminal) in arrivals:
+                if r == robot and (step >= start) and (stop is None or step < stop):
+                    recorder.record_transition(t, step - start, s, a, reward, s_next, terminal)
+            recorder.stop()
+    config = LearnerConfig(zero_action=ZERO)
+    online = LearnerCore(config, state_dim=2, action_dim=2)
+    for _, robot, (_, s, a, reward, s_next, terminal) in arrivals:
+        online.add_transition(s, a, reward, s_next, terminal, robot=robot)
+
+    result = rebuild_from_bags(bags, config=config)
+    rebuilt, expected = result.learner_core.replay.state_dict(), online.replay.state_dict()
+    assert result.robots == {robot: len(walk) for robot, walk in walks.items()}
+    for name in ("states", "actions", "prev", "next", "serial"):
+        assert np.array_equal(rebuilt[name], expected[name]), name
+    assert rebuilt["chain_ends"].keys() == {"robot0", "robot1"}
+    for robot, (serial, next_state) in expected["chain_ends"].items():
+        assert rebuilt["chain_ends"][robot][0] == serial
+        assert np.array_equal(rebuilt["chain_ends"][robot][1], next_state)
+    # each robot's first step of its second bag continues its first bag's last step
+    linked = int(np.sum(expected["prev"] >= 0))
+    assert linked == sum(len(walk) - 1 for walk in walks.values())
+    assert result.census == online.graph.census()

@@ -125,6 +125,10 @@ def _into_learner(args: argparse.Namespace, paths: list[Path]) -> int:
     except (ValueError, FileNotFoundError) as exc:
         return _fail("replay", str(exc))
     print(f"transitions: {result.transitions} from {len(result.episodes)} episode(s) in {len(paths)} bag(s)")
+    if set(result.robots) != {""}:     # bags of several robots (or of one namespaced robot)
+        print("robots: " + ", ".join(f"{robot or '(root)'} {n} transitions"
+                                      for robot, n in result.robots.items())
+              + " (one trajectory chain each, merged by log time)")
     census = {k: v for k, v in result.census.items() if k != "path_length_histogram"}
     print(f"graph census: {census}")
     if result.census.get("path_length_histogram"):

@@ -5,23 +5,33 @@ Brings the stack up (``config/stack.yaml``), trains QG-DDPG for a few episodes b
 learning-curve PNG, TensorBoard scalars (``tensorboard/``, Stable-Baselines3's tag names) and
 ``episodes.json`` next to the MCAP episodes the stack recorded. The progress bar follows
 ``/transitions``, so it moves at every RL step.
+
+``--robots N`` brings up N namespaced robots and one learner (``cli/fleet.py``) and deals the
+training episodes to them, which run them all at once (``cli/episode_schedule.py``): the same
+number of robot steps in less wall time. The tests then run on ``robot0``.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
+from functools import partial
 from pathlib import Path
 
 from qg_common.params import config_file, runs_dir
 
-from qg_learning_node.cli.fleet import fleet_specs
+from qg_learning_node.cli.episode_schedule import (EpisodeJob, EpisodeOutcome, robot_name,
+                                                   run_episode_by_service, run_lanes,
+                                                   split_over_robots)
+from qg_learning_node.cli.fleet import fleet_specs, robot_namespace
 from qg_learning_node.cli.launcher import Launcher, ProcessSpec, load_stack_config
 from qg_learning_node.cli.ros_env import stack_env
 from qg_learning_node.training_log import TrainingLog
 
-__all__ = ["add_parser", "DemoSettings", "EpisodeOutcome", "StepMonitor",
+__all__ = ["add_parser", "DemoSettings", "EpisodeOutcome", "StepMonitor", "demo_schedule",
            "run_episode_by_service", "start_stack", "wait_for_stack"]
 
 
@@ -46,16 +56,11 @@ class DemoSettings:
 
 
 @dataclass
-class EpisodeOutcome:
-    """What the executor reported at the end of one episode."""
-    index: int
-    mode: str
-    episode_id: str
-    initial_pose: int
-    steps: int
-    episode_return: float
-    success: bool
-    wall_time: float
+class _RobotProgress:
+    """What the progress line shows of one robot: its episode and the step it is at."""
+    label: str = "idle"
+    episode_id: str = ""
+    steps: int = 0
 
 
 class StepMonitor:
@@ -63,22 +68,27 @@ class StepMonitor:
 
     :param bar: the tqdm bar (one unit per episode) whose postfix shows the current step.
     :param log: where episode and learner scalars go.
+    :param robots: the robots' namespaces ("" = one robot at the root); every robot's
+        ``transitions`` move the bar, and with many robots the line shows each one's episode.
     """
 
-    def __init__(self, cli, bar, log: TrainingLog, episodes: int) -> None:
+    def __init__(self, cli, bar, log: TrainingLog, episodes: int,
+                 robots: Sequence[str] = ("",)) -> None:
         from qg_interfaces.msg import LearnerDiagnostics, Transition
 
-        from qg_common.topics import RELIABLE_DEEP
+        from qg_common.topics import LEARNER_DIAGNOSTICS, RELIABLE_DEEP, TRANSITIONS
         self.bar, self.log, self.episodes = bar, log, episodes
         self.steps = 0
         self.started = time.monotonic()
-        self.label, self.episode_id = "", ""
-        self.episode_steps, self.episode_return, self.last_return = 0, 0.0, float("nan")
+        self.robots = {robot: _RobotProgress() for robot in robots}
+        self.last_return = float("nan")
         self.successes = {"train": [0, 0], "test": [0, 0]}
         self.actor_version = -1
-        cli.node.create_subscription(Transition, "/transitions", self._on_transition,
-                                     RELIABLE_DEEP)
-        cli.node.create_subscription(LearnerDiagnostics, "/learner/diagnostics",
+        self.learner_transitions = 0     # as the learner's last heartbeat counts them
+        for robot in robots:
+            cli.node.create_subscription(Transition, robot_name(robot, TRANSITIONS),
+                                         partial(self._on_transition, robot=robot), RELIABLE_DEEP)
+        cli.node.create_subscription(LearnerDiagnostics, "/" + LEARNER_DIAGNOSTICS,
                                      self._on_diagnostics, 10)
 
     @property
@@ -86,22 +96,22 @@ class StepMonitor:
         """RL steps per wall second since the first episode started."""
         return self.steps / max(1e-9, time.monotonic() - self.started)
 
-    def begin(self, index: int, mode: str) -> None:
+    def begin(self, index: int, mode: str, robot: str = "") -> None:
         if index == 0:
             self.started = time.monotonic()
-        self.label = f"{mode} {index + 1}/{self.episodes}"
-        self.episode_steps, self.episode_return = 0, 0.0
+        self.robots[robot] = _RobotProgress(f"{mode} {index + 1}/{self.episodes}")
         self._show()
 
-    def _on_transition(self, msg) -> None:
-        if msg.episode_id != self.episode_id:
-            self.episode_id, self.episode_steps, self.episode_return = msg.episode_id, 0, 0.0
+    def _on_transition(self, msg, robot: str = "") -> None:
+        progress = self.robots[robot]
+        if msg.episode_id != progress.episode_id:
+            progress.episode_id, progress.steps = msg.episode_id, 0
         self.steps += 1
-        self.episode_steps = int(msg.step) + 1
-        self.episode_return += float(msg.reward)
+        progress.steps = int(msg.step) + 1
         self._show()
 
     def _on_diagnostics(self, msg) -> None:
+        self.learner_transitions = int(msg.transitions)
         if int(msg.actor_version) != self.actor_version:      # a new training cycle, not a heartbeat
             self.actor_version = int(msg.actor_version)
             if self.actor_version > 0:
@@ -116,59 +126,45 @@ class StepMonitor:
         self.last_return = outcome.episode_return
         self.log.episode(outcome.mode, outcome.steps, outcome.success, outcome.episode_return,
                          self.steps, self.fps)
+        if len(self.robots) > 1:       # (one robot: the line keeps its last episode)
+            self.robots[outcome.robot] = _RobotProgress()
         self.bar.update(1)
         self._show()
+
+    def _where(self) -> str:
+        """``train 3/40 step 12``; many robots: each one's, ``r0 train 3/40 step 12, r1 idle``."""
+        if list(self.robots) == [""]:
+            progress = self.robots[""]
+            return f"{progress.label} step {progress.steps}"
+        return ", ".join(f"{robot.replace('robot', 'r', 1)} {p.label}"
+                         + (f" step {p.steps}" if p.label != "idle" else "")
+                         for robot, p in self.robots.items())
 
     def _show(self) -> None:
         train, test = self.successes["train"], self.successes["test"]
         self.bar.set_postfix_str(
-            f"{self.label} step {self.episode_steps} | {self.fps:.1f} steps/s | last return "
+            f"{self._where()} | {self.fps:.1f} steps/s | last return "
             f"{self.last_return:.2f} | inserted: train {train[0]}/{train[1]}"
             + (f", test {test[0]}/{test[1]}" if test[1] else ""))
 
 
-def run_episode_by_service(cli, index: int, mode: str, pose: int, seed: int,
-                           timeout: float) -> EpisodeOutcome:
-    """Start one episode by ``/executor/start_episode`` and wait for its final status."""
-    from qg_interfaces.msg import EpisodeStatus
-    from qg_interfaces.srv import StartEpisode
+def wait_for_stack(cli, timeout: float, robots: Sequence[str] = ("",)) -> None:
+    """Until every robot answers resets, its executor takes episodes and the learner is alive.
 
-    from qg_learning_node.cli.episode_wait import FINAL_STATES
-    from qg_learning_node.cli.ros_client import call_service
-    from qg_common.topics import LATCHED
-
-    # Keyed by id: the final status may arrive while the service call is still being answered.
-    final: dict[str, EpisodeStatus] = {}
-
-    def on_status(msg: EpisodeStatus) -> None:
-        if msg.state in FINAL_STATES:
-            final[msg.episode_id] = msg
-
-    sub = cli.node.create_subscription(EpisodeStatus, "/episode_status", on_status, LATCHED)
-    t0 = time.monotonic()
-    try:
-        resp = call_service(cli, StartEpisode, "/executor/start_episode",
-                            StartEpisode.Request(mode=mode, initial_pose=pose, seed=seed), 30.0)
-        if not resp.success:
-            raise RuntimeError(f"StartEpisode refused: {resp.message}")
-        if not cli.spin_until(lambda: resp.episode_id in final, timeout):
-            raise TimeoutError(f"episode {resp.episode_id} did not end within {timeout:.0f} s")
-    finally:
-        cli.node.destroy_subscription(sub)
-    msg = final[resp.episode_id]
-    return EpisodeOutcome(index, mode, msg.episode_id, msg.initial_pose, int(msg.step),
-                          float(msg.episode_return), bool(msg.success), time.monotonic() - t0)
-
-
-def wait_for_stack(cli, timeout: float) -> None:
-    """Until the robot answers resets, the executor takes episodes and the learner is alive."""
+    The start-episode clients are the node's kept ones (``CliNode.client``): the episodes'
+    requests then go through clients the executors have long matched.
+    """
     from qg_interfaces.msg import LearnerDiagnostics
     from qg_interfaces.srv import ResetSim, StartEpisode
+
+    from qg_common.topics import LEARNER_DIAGNOSTICS, SIM_RESET, START_EPISODE
     heartbeats: list = []
-    sub = cli.node.create_subscription(LearnerDiagnostics, "/learner/diagnostics",
+    sub = cli.node.create_subscription(LearnerDiagnostics, "/" + LEARNER_DIAGNOSTICS,
                                        heartbeats.append, 10)
-    clients = {name: cli.node.create_client(srv, name) for name, srv in
-               (("/sim/reset", ResetSim), ("/executor/start_episode", StartEpisode))}
+    resets = {robot_name(r, SIM_RESET): cli.node.create_client(ResetSim, robot_name(r, SIM_RESET))
+              for r in robots}
+    clients = {**resets, **{robot_name(r, START_EPISODE):
+                            cli.client(StartEpisode, robot_name(r, START_EPISODE)) for r in robots}}
     try:
         ready = cli.spin_until(lambda: all(c.service_is_ready() for c in clients.values())
                                and bool(heartbeats), timeout)
@@ -177,7 +173,7 @@ def wait_for_stack(cli, timeout: float) -> None:
             raise TimeoutError(f"the stack did not come up within {timeout:.0f} s: "
                                f"{', '.join(missing) or 'no learner heartbeat'} missing")
     finally:
-        for c in clients.values():
+        for c in resets.values():
             cli.node.destroy_client(c)
         cli.node.destroy_subscription(sub)
 
@@ -238,51 +234,97 @@ def start_stack(run_dir: Path, settings: DemoSettings, config: Path,
     return launcher, env
 
 
+def demo_schedule(train_episodes: int, test_poses: int, seed: int,
+                  robots: Sequence[str]) -> tuple[dict[str, list[EpisodeJob]], list[EpisodeJob]]:
+    """The demo's episodes: training dealt to the robots, then the tests on the first robot.
+
+    Episode ``i`` has seed ``seed + i`` whatever robot runs it. One robot takes the next pose of
+    its rotation (as ``qgl episode start`` does); many robots get pose ``i mod 8`` explicitly, so
+    the poses of the whole training are the same as with one robot. The tests run one after
+    another on one robot: the learner keeps training on test transitions, so running them
+    concurrently would test other actors than one robot does.
+    """
+    from qg_learning_node.core.episode_request import N_POSES
+    train = [EpisodeJob(i, "train", -1 if len(robots) == 1 else i % N_POSES, seed + i)
+             for i in range(train_episodes)]
+    tests = [EpisodeJob(train_episodes + p, "test", p, seed + train_episodes + p)
+             for p in range(test_poses)]
+    return split_over_robots(train, robots), tests
+
+
+def _summary(outcomes: list[EpisodeOutcome], run_dir: Path, robots: Sequence[str],
+             train_wall: float, learner_transitions: int, wall: float,
+             codes: dict[str, int]) -> str:
+    """The demo's last line: test result, training budget and time, where the outputs are."""
+    tests = [o for o in outcomes if o.mode == "test"]
+    train = [o for o in outcomes if o.mode == "train"]
+    bags = sorted(p.parent.name for p in (run_dir / "episodes").glob("*/metadata.yaml"))
+    per_robot = "" if robots == [""] else " (" + ", ".join(
+        f"{r} {sum(b.startswith(r + '_') for b in bags)}" for r in robots) + ")"
+    return (f"[qgl demo] test: {sum(o.success for o in tests)}/{len(tests)} inserted, mean steps "
+            f"{sum(o.steps for o in tests) / max(1, len(tests)):.1f}; training: "
+            f"{sum(o.steps for o in train)} RL steps, {sum(o.success for o in train)}/{len(train)} "
+            f"inserted, on {len(robots)} robot(s) in {train_wall:.0f} s; the learner received "
+            f"{learner_transitions} transitions; {len(bags)} MCAP "
+            f"episodes{per_robot} in {run_dir / 'episodes'}; plot "
+            f"{run_dir / 'learning_curve.png'}; TensorBoard {run_dir / 'tensorboard'}; "
+            f"{wall:.0f} s; exit codes {codes}")
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from qg_learning_node.cli.ros_client import CliNode
+    if args.robots < 1:
+        print(f"qgl demo: --robots must be >= 1, got {args.robots}", file=sys.stderr)
+        return 2
     run_dir = Path(args.runs_dir or runs_dir()) / time.strftime("demo_%Y%m%d_%H%M%S")
     run_dir.mkdir(parents=True, exist_ok=True)
     settings = DemoSettings(train_max_steps=args.train_max_steps, critic_lr=args.critic_lr,
                             iterations=args.iterations, schedule=args.schedule,
                             updates_per_step=args.updates_per_step)
+    robots = [robot_namespace(k) for k in range(args.robots)] if args.robots > 1 else [""]
     launcher, env = start_stack(run_dir, settings,
-                                Path(args.config) if args.config else config_file("stack.yaml"))
-    schedule = [("train", -1)] * args.train_episodes + [("test", p) for p in range(args.test_poses)]
+                                Path(args.config) if args.config else config_file("stack.yaml"),
+                                robots=args.robots)
+    train, tests = demo_schedule(args.train_episodes, args.test_poses, args.seed, robots)
     outcomes: list[EpisodeOutcome] = []
     log = TrainingLog(run_dir / "tensorboard")
     print(f"[qgl demo] stack up (logs: {run_dir / 'logs'}); {args.train_episodes} training "
-          f"episodes, then tests on {args.test_poses} poses; TensorBoard: "
+          f"episodes" + (f" over {len(robots)} robots at once" if len(robots) > 1 else "")
+          + f", then tests on {args.test_poses} poses; TensorBoard: "
           f"tensorboard --logdir {run_dir / 'tensorboard'}", flush=True)
+
+    def check_processes() -> None:
+        died = launcher.poll()
+        if died:
+            raise RuntimeError(f"process {died[0][0]} exited with code {died[0][1]}")
+
     started = time.monotonic()
+    train_wall, learner_transitions = 0.0, 0
     try:
         with CliNode("qgl_demo", domain_id=int(env["ROS_DOMAIN_ID"])) as cli, \
-                tqdm(total=len(schedule), unit="episode", dynamic_ncols=True) as bar:
-            wait_for_stack(cli, timeout=180.0)
-            monitor = StepMonitor(cli, bar, log, len(schedule))
-            for i, (mode, pose) in enumerate(schedule):
-                died = launcher.poll()
-                if died:
-                    raise RuntimeError(f"process {died[0][0]} exited with code {died[0][1]}")
-                monitor.begin(i, mode)
-                outcome = run_episode_by_service(cli, i, mode, pose, seed=args.seed + i,
-                                       timeout=args.episode_timeout)
-                outcomes.append(outcome)
-                monitor.end(outcome)
-            tests = [o for o in outcomes if o.mode == "test"]
-            log.evaluation([o.steps for o in tests], [o.success for o in tests], monitor.steps)
+                tqdm(total=args.train_episodes + len(tests), unit="episode",
+                     dynamic_ncols=True) as bar:
+            wait_for_stack(cli, timeout=180.0, robots=robots)
+            monitor = StepMonitor(cli, bar, log, args.train_episodes + len(tests), robots)
+            train_started = time.monotonic()
+            outcomes += run_lanes(cli, train, monitor, args.episode_timeout, check_processes)
+            train_wall = time.monotonic() - train_started
+            outcomes += run_lanes(cli, {robots[0]: tests}, monitor, args.episode_timeout,
+                                  check_processes)
+            done = [o for o in outcomes if o.mode == "test"]
+            log.evaluation([o.steps for o in done], [o.success for o in done], monitor.steps)
+            # the learner's heartbeat (every 0.5 s) catches up with the last transitions
+            cli.spin_until(lambda: monitor.learner_transitions >= monitor.steps, 5.0)
+            learner_transitions = monitor.learner_transitions
     finally:
         codes = launcher.stop()
         log.close()
     (run_dir / "episodes.json").write_text(json.dumps([asdict(o) for o in outcomes], indent=1))
     _plot(outcomes, run_dir / "learning_curve.png")
-    tests = [o for o in outcomes if o.mode == "test"]
-    bags = sorted(p.parent for p in (run_dir / "episodes").glob("*/metadata.yaml"))
-    print(f"[qgl demo] test: {sum(o.success for o in tests)}/{len(tests)} inserted, mean steps "
-          f"{sum(o.steps for o in tests) / max(1, len(tests)):.1f}; {len(bags)} MCAP episodes in "
-          f"{run_dir / 'episodes'}; plot {run_dir / 'learning_curve.png'}; TensorBoard "
-          f"{run_dir / 'tensorboard'}; {time.monotonic() - started:.0f} s; exit codes {codes}")
+    print(_summary(outcomes, run_dir, robots, train_wall, learner_transitions,
+                   time.monotonic() - started, codes))
     return 0 if all(c == 0 for c in codes.values()) else 1
 
 
@@ -307,6 +349,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                            "trains while the robot moves")
     demo.add_argument("--updates-per-step", type=float, default=DemoSettings.updates_per_step,
                       help="train steps per RL step (schedule async)")
+    demo.add_argument("--robots", type=int, default=1,
+                      help="robots learning at once (namespaces /robot0, /robot1, ... and one "
+                           "learner, as `qgl up --robots N`): the training episodes are dealt "
+                           "to them and run concurrently; the tests run on robot0")
     demo.add_argument("--seed", type=int, default=1)
     demo.add_argument("--episode-timeout", type=float, default=900.0, help="[s]")
     demo.set_defaults(func=_cmd_demo)
