@@ -221,6 +221,29 @@ class ExecutorNode(Node):
                and not self.stop_requested.is_set()):
             time.sleep(0.01)
 
+    def _await_learner_reading_transitions(self, timeout: float) -> None:
+        """Wait until the learner, once heard from, also reads our transitions.
+
+        Discovery runs per direction: a (re)started learner's heartbeat can reach us seconds
+        before our transitions publisher has matched its subscription on a loaded host, and a
+        reliable publisher delivers nothing to a reader it has not matched: the episode's
+        first transitions would be lost to the learner. Done when the learner's reader is in
+        the graph and every reader in the graph is matched; after ``timeout`` the episode runs
+        anyway, with a warning.
+        """
+        if not self.learner_alive():
+            return
+        topic = self.transition_pub.topic_name
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline and not self.stop_requested.is_set():
+            readers = self.get_subscriptions_info_by_topic(topic)
+            if any(r.node_name == topics.LEARNER_NODE for r in readers) \
+                    and self.transition_pub.get_subscription_count() >= len(readers):
+                return
+            time.sleep(0.01)
+        self.get_logger().warning(f"the learner is alive but not matched on {topic} after "
+                                  f"{timeout:.0f} s: it may miss this episode's transitions")
+
     def learner_alive(self) -> bool:
         return time.monotonic() - self.last_learner_time < self.config.learner_timeout
 
@@ -304,6 +327,7 @@ class ExecutorNode(Node):
             observation = observation_from_msg(self._reset(episode))
             episode.begin(observation)
             self._await_first_learner_contact(LEARNER_DISCOVERY_GRACE)
+            self._await_learner_reading_transitions(LEARNER_DISCOVERY_GRACE)
             self._set_state("running")
             while not episode.done:
                 if self.stop_requested.is_set():

@@ -84,7 +84,7 @@ class LearnerNode(Node):
     """Keeps the Q-Graph and replay memory, trains every cycle, publishes the actor."""
 
     def __init__(self) -> None:
-        super().__init__("learner")
+        super().__init__(topics.LEARNER_NODE)
         p = declare_parameters(self, LEARNER_SECTIONS, (("qg_learning_node", "learner.yaml"),))
         config = learner_config_from_params(p["learner"])
         self.checkpoint = Path(p["checkpoint_dir"] or runs_dir() / "checkpoints") / CHECKPOINT_NAME
