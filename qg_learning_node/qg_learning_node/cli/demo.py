@@ -41,7 +41,8 @@ class DemoSettings:
 
     Training episodes are capped shorter than the executor's default (a demo should end in
     minutes, and a jammed early episode teaches little after its first tens of steps), and the
-    learner runs the grid cell where every QG-DDPG seed learned (docs/learning.md).
+    learner runs the grid cell where every QG-DDPG seed inserted all 8 test poses
+    (docs/learning.md, section 4).
     :param train_max_steps: step cap of training episodes (the executor's default is 1000).
     :param critic_lr: critic learning rate (the actor's is one tenth).
     :param iterations: training iterations per 20-step cycle (schedule ``cycle``).
@@ -49,7 +50,7 @@ class DemoSettings:
     :param updates_per_step: train steps per RL step (schedule ``async``).
     """
     train_max_steps: int = 50
-    critic_lr: float = 1e-3
+    critic_lr: float = 1e-2
     iterations: int = 50
     schedule: str = "cycle"
     updates_per_step: float = 10.0
