@@ -11,15 +11,21 @@ from robot_client import DEEP, RobotClient, wrench
 pytestmark = pytest.mark.ros
 
 
-def count_for(cli, topic: str, msg_type, seconds: float) -> int:
-    """Messages of ``topic`` stamped within ``seconds`` after the first one received."""
+def stamps_for(cli, topic: str, msg_type, seconds: float) -> list[int]:
+    """[ns] Stamps of the messages of ``topic`` received within ``seconds`` of stamp time after
+    the first one received."""
     stamps: list[int] = []
     cli.node.create_subscription(
         msg_type, topic, lambda m: stamps.append(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec),
         DEEP)
     assert cli.spin_until(lambda: stamps and stamps[-1] - stamps[0] > (seconds + 0.2) * 1e9, 30.0), \
         f"{topic}: {len(stamps)} messages"
-    return sum(1 for s in stamps if s - stamps[0] < seconds * 1e9)
+    return [s for s in stamps if s - stamps[0] < seconds * 1e9]
+
+
+def count_for(cli, topic: str, msg_type, seconds: float) -> int:
+    """Messages of ``topic`` stamped within ``seconds`` after the first one received."""
+    return len(stamps_for(cli, topic, msg_type, seconds))
 
 
 def test_composed_realtime_is_paced_by_the_wall_clock_and_completes_steps(stack):
@@ -53,10 +59,6 @@ def test_separate_sim_bridge_and_estimator_processes_complete_a_step(stack):
     stack.start(("sim", "sim_robot_node", "sim"), ("bridge", "robot_bridge_node", "bridge"),
                 ("wrench_estimator", "robot_bridge_node", "wrench_estimator"))
     with stack.client() as cli:
-        # The sim runs realtime whatever sim.clock_mode says, its rates included: the bridge
-        # ticks once per state, so lockstep's 100 Hz would make every step ten times as long.
-        n = count_for(cli, "/joint_states", JointState, 1.0)
-        assert 200 < n <= 1001, f"{n} /joint_states stamped within 1 s (1 kHz expected)"
         estimates: list[WrenchStamped] = []
         cli.node.create_subscription(WrenchStamped, "/wrench_estimate", estimates.append, DEEP)
         assert cli.spin_until(lambda: len(estimates) >= 100, 30.0), \
@@ -73,5 +75,14 @@ def test_separate_sim_bridge_and_estimator_processes_complete_a_step(stack):
         assert time.monotonic() - t0 < 5.0
         assert stack.logs().count("the sim restarted") == 1, stack.logs()
         assert np.all(np.isfinite(wrench(event.wrench_estimate)))
+        # The sim runs realtime whatever sim.clock_mode says, its rates included: the bridge
+        # ticks once per state, so lockstep's 100 Hz would make every step ten times as long.
+        # A reader on a busy host misses many of 1000 states a second (45 seen in the CI
+        # rehearsal, right after start), so the test reads the period from the stamps it gets,
+        # once the stack is warm: a tick's states are 1 ms apart, lockstep's 10 ms.
+        stamps = stamps_for(cli, "/joint_states", JointState, 2.0)
+        gaps = np.diff(stamps)
+        assert len(stamps) <= 2001 and gaps.size >= 10, f"{len(stamps)} states in 2 s"
+        assert gaps[gaps > 0].min() < 2e6, f"closest states {gaps[gaps > 0].min() / 1e6} ms apart"
     codes = stack.stop(grace=5.0)
     assert codes == {"sim": 0, "bridge": 0, "wrench_estimator": 0}, stack.logs()
