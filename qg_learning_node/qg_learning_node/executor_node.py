@@ -214,12 +214,19 @@ class ExecutorNode(Node):
             self.at_rest[int(msg.seq)] = msg
         self.at_rest_event.set()
 
+    def _wait_until(self, condition: Callable[[], bool], timeout: float) -> bool:
+        """Poll ``condition`` (the episode thread; callbacks run elsewhere) until it holds, for
+        at most ``timeout`` seconds or until a stop is requested; whether it held."""
+        deadline = time.monotonic() + timeout
+        while not condition():
+            if time.monotonic() >= deadline or self.stop_requested.is_set():
+                return False
+            time.sleep(0.01)
+        return True
+
     def _await_first_learner_contact(self, timeout: float) -> None:
         """Give a learner that was never heard from ``timeout`` seconds to be discovered."""
-        deadline = time.monotonic() + timeout
-        while (self.last_learner_time == -float("inf") and time.monotonic() < deadline
-               and not self.stop_requested.is_set()):
-            time.sleep(0.01)
+        self._wait_until(lambda: self.last_learner_time != -float("inf"), timeout)
 
     def _await_learner_reading_transitions(self, timeout: float) -> None:
         """Wait until the learner, once heard from, also reads our transitions.
@@ -234,15 +241,15 @@ class ExecutorNode(Node):
         if not self.learner_alive():
             return
         topic = self.transition_pub.topic_name
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline and not self.stop_requested.is_set():
+
+        def learner_matched() -> bool:
             readers = self.get_subscriptions_info_by_topic(topic)
-            if any(r.node_name == topics.LEARNER_NODE for r in readers) \
-                    and self.transition_pub.get_subscription_count() >= len(readers):
-                return
-            time.sleep(0.01)
-        self.get_logger().warning(f"the learner is alive but not matched on {topic} after "
-                                  f"{timeout:.0f} s: it may miss this episode's transitions")
+            return (any(r.node_name == topics.LEARNER_NODE for r in readers)
+                    and self.transition_pub.get_subscription_count() >= len(readers))
+
+        if not self._wait_until(learner_matched, timeout):
+            self.get_logger().warning(f"the learner is alive but not matched on {topic} after "
+                                      f"{timeout:.0f} s: it may miss this episode's transitions")
 
     def learner_alive(self) -> bool:
         return time.monotonic() - self.last_learner_time < self.config.learner_timeout
