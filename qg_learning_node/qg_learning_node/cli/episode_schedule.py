@@ -17,7 +17,7 @@ from typing import Any, Protocol
 __all__ = ["EpisodeJob", "EpisodeOutcome", "EpisodeObserver", "robot_name", "split_over_robots",
            "run_lanes", "run_episode_by_service"]
 
-#: [s] how long a lane waits for its robot's start_episode service to appear.
+#: [s] how long a lane waits for its robot's start_episode service to appear and answer.
 SERVICE_TIMEOUT = 30.0
 
 
@@ -125,6 +125,9 @@ class _Lane:
                 raise TimeoutError(f"service {self.service} is not available (is the stack up? "
                                    "`qgl up`)")
             return None
+        if self.future is not None and not self.future.done() and waited > SERVICE_TIMEOUT:
+            raise TimeoutError(f"service {self.service} did not answer within "
+                               f"{SERVICE_TIMEOUT:.0f} s")
         if self.future is not None and self.future.done():
             response = self.future.result()
             self.future = None
