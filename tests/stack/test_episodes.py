@@ -210,13 +210,15 @@ def check_bag_against_live(bag: Path, live, graph: dict, episode_id: str) -> dic
                    if min(by_stamp) <= stamp_ns(m) <= max(by_stamp)]
         assert len(in_span) >= 5, topic
         assert all(by_stamp.get(t) == data for t, data in in_span), topic
-    # RL-rate messages: what the executor published for this episode, byte for byte (the bag
-    # closes at the end of the episode; the executor's status heartbeat goes on after it).
+    # RL-rate messages: what the executor published for this episode, byte for byte, up to and
+    # past its end. The executor's status heartbeat goes on after the end, and the bag and the
+    # capture each stop taking it at their own moment, so only their common prefix is compared.
     mine = [(data, m.state) for data, m in zip(live.received["/episode_status"], live.decoded("/episode_status"))
             if m.episode_id == episode_id]
     ended = next(i for i, (_, state) in enumerate(mine) if state in ("done", "aborted"))
     in_bag = [data for _, data in recorded["/episode_status"]]
-    assert len(in_bag) > ended and in_bag == [data for data, _ in mine[:len(in_bag)]]
+    common = min(len(in_bag), len(mine))
+    assert common > ended and in_bag[:common] == [data for data, _ in mine[:common]], (len(in_bag), len(mine))
     assert sorted(data for _, data in recorded["/transitions"]) == sorted(live.received["/transitions"])
     first_of_seq = {}
     for data, m in zip(live.received["/wrench_setpoint"], live.decoded("/wrench_setpoint")):
