@@ -19,8 +19,8 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import tempfile
 import statistics
+import tempfile
 import time
 from pathlib import Path
 
@@ -65,6 +65,8 @@ def step_time_split(setpoints: list[tuple[float, int]], rests: list[tuple[float,
 
     def ms(values: list[float]) -> dict:
         ordered = sorted(values)
+        if not ordered:
+            return {"median": float("nan"), "p90": float("nan"), "n": 0}
         return {"median": 1e3 * statistics.median(ordered),
                 "p90": 1e3 * ordered[int(0.9 * (len(ordered) - 1))], "n": len(ordered)}
     return {"robot_ms": ms(robot), "turnaround_ms": ms(turnaround),
