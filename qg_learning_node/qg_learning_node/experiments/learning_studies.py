@@ -12,7 +12,10 @@ summarises, all with the thesis protocol of the ``thesis`` profile (40 training 
   90 degrees and tilted by 10 degrees (the tilt state then measures against the tilted bore);
 * ``schedule``: simulated robot time until a test on all 8 poses (every 4 training episodes,
   50-step cap) first succeeds everywhere: the thesis's train-every-20-steps schedule against
-  the ``async`` learner (10 updates per step; in process its deterministic stand-in).
+  the ``async`` learner (10 updates per step; in process its deterministic stand-in);
+* ``cap``: the thesis's training cap of 1000 steps (the grid's deviation is 50) at the cell the
+  grid leaves update-starved, lr 1e-4 with 10 iterations: do longer training episodes, and so
+  more updates, let the test actor beat random there?
 
 Results go to ``<out>/<study>/``; ``docs/data/learning_studies.json`` and two figures to
 ``docs``.
@@ -37,6 +40,10 @@ __all__ = ["study_specs", "summarise", "main"]
 
 #: The cell the studies compare at (the thesis grid's lr 1e-4 with 50 iterations per cycle).
 CELL = (1e-4, 50)
+#: The ``cap`` study's cell: the thesis grid's cell that gets too few updates at a cap of 50.
+STARVED_CELL = (1e-4, 10)
+#: [steps] The thesis's training-episode cap (SPEC 2), which the grid cuts to 50.
+THESIS_TRAIN_CAP = 1000
 #: Merging grid of the ``graph`` study, in scaled state units.
 RESOLUTION = 0.1
 #: [rad] Fixture tilt of the housing in the second generalisation test (issue 12's example).
@@ -61,8 +68,11 @@ def study_specs(profile_name: str = "thesis") -> dict[str, list[RunSpec]]:
                 for extra in ({}, {"schedule": "async", "updates_per_step": 10.0,
                                    "publish_every": 20})
                 for s in grid_specs(timed)]
+    cap = [dataclasses.replace(s, experiment="cap", train_max_steps=THESIS_TRAIN_CAP)
+           for s in grid_specs(dataclasses.replace(grid, cells=(STARVED_CELL,),
+                                                   algorithms=("qgddpg",)))]
     return {"observation": observation, "graph": graph, "housing": housing,
-            "schedule": schedule}
+            "schedule": schedule, "cap": cap}
 
 
 def _label(spec: dict[str, Any]) -> str:
@@ -75,6 +85,8 @@ def _label(spec: dict[str, Any]) -> str:
         label += f", async learner ({spec['updates_per_step']:g} updates/step)"
     elif spec.get("eval_every"):
         label += ", thesis schedule (2.5 updates/step)"
+    if spec.get("experiment") == "cap":
+        label += f", training cap {spec['train_max_steps']}"
     if spec.get("test_housing_yaw"):
         label += f", tested at housing yaw {math.degrees(spec['test_housing_yaw']):.0f} deg"
     if spec.get("test_housing_tilt"):
@@ -143,7 +155,7 @@ def _mc_figure(results: list[dict[str, Any]], path: Path) -> None:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m qg_learning_node.experiments."
                                      "learning_studies", description=__doc__)
-    parser.add_argument("--only", default="observation,graph,housing,schedule")
+    parser.add_argument("--only", default="observation,graph,housing,schedule,cap")
     parser.add_argument("--out", type=Path, default=Path("runs/experiments/studies"))
     parser.add_argument("--docs", type=Path, default=Path("docs"))
     parser.add_argument("--workers", type=int, default=DEFAULT_WORKERS)
