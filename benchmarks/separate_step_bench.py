@@ -4,7 +4,7 @@ Starts ``sim``, ``bridge`` and ``wrench_estimator`` as three processes, resets, 
 the way the executor does (a new setpoint, repeated every 4 ms until ``ee_at_rest``). Per step:
 the wall time from the setpoint to its event, and the step's duration on the bridge loop's clock
 (the states' stamps; at most ``rest.max_time``, 0.25 s, plus one state's gap). Measured on
-2 cores (docs/design.md, the 1 kHz path): median 0.25 s idle and loaded; 0.7-1.4 s idle
+2 cores (docs/design.md, the 1 kHz path): median 0.25 s idle and loaded; 0.7-1.7 s idle
 before the loop took its clock from the stamps and the separate processes handed the GIL over
 every 0.1 ms. The last line is one JSON object.
 
