@@ -6,7 +6,7 @@ takes ``wrench_setpoint`` in, and publishes the tool pose and twist and
 the ``ee_at_rest`` event that ends an RL step. In the composed ``robot`` process the loop's
 hardware is the robot plugin; run on its own (``ros2 run robot_bridge_node bridge``) it is
 ``RemoteRobot``, which reads ``joint_states`` from the separate sim and writes
-``joint_commands``, one tick per received state.
+``joint_commands``, one tick per received state, on the states' clock (``StateClock``).
 """
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ from qg_common.conversions import (at_rest_msg, ground_truth_from_msg, joint_sta
                                    pose_stamped, setpoint_from_msg, time_msg, time_ns,
                                    twist_stamped, wrench_from_msg)
 from qg_common.node_parameters import declare_parameters, package_defaults
-from qg_common.node_runtime import LoopThread, run_nodes
+from qg_common.node_runtime import LoopThread, favour_loop_thread, run_nodes
 from qg_common.params import POSITIVE, ParameterSection
 from qg_common.types import NO_GROUND_TRUTH, GroundTruth, JointState
 from qg_interfaces.msg import AtRest, GroundTruth as GroundTruthMsg
@@ -35,12 +35,12 @@ from robot_bridge_node.core.hardware_interface import ROBOT_SECTION, RobotPlugin
 from robot_bridge_node.core.impedance import HybridImpedanceController, ImpedanceConfig, ToolState
 from robot_bridge_node.core.position_control import PositionControlConfig
 from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
-from robot_bridge_node.core.robot_loop import LoopConfig, RobotLoop, tool_model
+from robot_bridge_node.core.robot_loop import LoopConfig, RobotLoop, StateClock, tool_model
 from robot_bridge_node.core.safety import (HARD_LIMITS, SafetyFilter, SafetyLimits,
                                            SetpointRejected)
 
 __all__ = ["BridgeNode", "CONTROLLER_SECTIONS", "LoopRunner", "LoopObserver", "RemoteRobot",
-           "LatestWrench", "main"]
+           "LatestWrench", "MAX_STATE_GAP", "main"]
 
 #: Called after every tick with the simulated time [ns] (e.g. an MCAP recorder).
 LoopObserver = Callable[[int, RobotLoop], None]
@@ -326,13 +326,19 @@ class LoopRunner:
 
 
 # --- separate-process mode ------------------------------------------------------------------
+#: [s] The most one tick of the separate bridge counts (``StateClock``): the sim's
+#: ``command_timeout``, after which it holds the arm itself rather than following the bridge.
+MAX_STATE_GAP = 0.02
+
+
 class RemoteRobot:
     """The loop's hardware and simulation over topics: the arm is the separate sim process.
 
-    ``read`` is the latest ``joint_states``; ``write`` publishes ``joint_commands`` and waits (up
-    to ``timeout``) for the next state, so the loop ticks once per state the sim publishes. The
-    first state and every ``sim/restarted`` call ``on_restart``; ``reset`` then waits for a state
-    from after the restart, so the loop settles from the new pose.
+    ``read`` is the latest ``joint_states`` and ``state_time`` its stamp; ``write`` publishes
+    ``joint_commands`` and waits (up to ``timeout``) for the next state, so the loop ticks once
+    per state it takes, and a tick covers the time since the previous state it took, however
+    many it missed. The first state and every ``sim/restarted`` call ``on_restart``; ``reset``
+    then waits for a state from after the restart, so the loop settles from the new pose.
     """
 
     def __init__(self, node: Node, n_joints: int, on_restart: Callable[[], None],
@@ -342,6 +348,7 @@ class RemoteRobot:
         self.on_restart = on_restart
         self.timeout = timeout
         self._stamp = 0.0
+        self._read_stamp = 0.0
         self._state: JointState | None = None
         self._truth: GroundTruthMsg | None = None
         self._restart_time = 0.0
@@ -389,8 +396,14 @@ class RemoteRobot:
 
     # --- torque interface ------------------------------------------------------------------
     def read(self) -> JointState:
-        assert self._state is not None, "no joint_states yet (wait_ready first)"
-        return self._state
+        with self._fresh:
+            assert self._state is not None, "no joint_states yet (wait_ready first)"
+            self._read_stamp = self._stamp
+            return self._state
+
+    def state_time(self) -> float:
+        """[s] the stamp of the state ``read`` returned last (the sim's clock)."""
+        return self._read_stamp
 
     def write(self, tau: np.ndarray) -> None:
         msg = JointStateMsg(effort=np.asarray(tau, float).tolist())
@@ -462,9 +475,10 @@ def _start_separate_bridge(nodes: list[Node]) -> Callable[[], None]:
                      RestDetector(RestConfig.from_dict(p.get("rest", {}))),
                      LatestWrench(bridge),
                      replace(LoopConfig.from_dict(p.get("loop", {})), realtime=True),
-                     simulation=remote)
+                     simulation=remote, clock=StateClock(remote, MAX_STATE_GAP))
     runner = LoopRunner(loop, bridge, lockstep=False, pace=remote.wait_ready)
     bridge.setpoint_handler = runner.submit_setpoint
+    favour_loop_thread()
     return LoopThread("bridge loop", runner.run, bridge).start().stop
 
 

@@ -17,11 +17,10 @@ simulation and settles -> the settled ``AtRest`` is the answer. Clock modes (``s
 """
 from __future__ import annotations
 
-import sys
 from collections.abc import Callable
 
 from builtin_interfaces.msg import Time
-from qg_common.node_runtime import LoopThread, RealtimePacer, run_nodes
+from qg_common.node_runtime import LoopThread, RealtimePacer, favour_loop_thread, run_nodes
 from rclpy.node import Node
 
 from robot_bridge_node.bridge_node import BridgeNode, LoopRunner
@@ -31,11 +30,7 @@ from robot_bridge_node.estimator_node import WrenchEstimatorNode, build_ekf
 from robot_bridge_node.recorder_node import RecorderNode
 from robot_bridge_node.simulation_node import SimulationNode, serve_reset
 
-__all__ = ["REALTIME_SWITCH_INTERVAL", "RobotProcess", "main"]
-
-#: [s] Python's GIL hand-over interval in realtime mode. The default 5 ms lets a ROS callback
-#: thread hold the GIL for five ticks before the loop thread gets it back.
-REALTIME_SWITCH_INTERVAL = 1e-4
+__all__ = ["RobotProcess", "main"]
 
 
 class RobotProcess:
@@ -93,7 +88,7 @@ class RobotProcess:
     def start(self) -> Callable[[], None]:
         """Start the loop thread; returns the function that stops it."""
         if not self.runner.lockstep:
-            sys.setswitchinterval(REALTIME_SWITCH_INTERVAL)
+            favour_loop_thread()
         priority = 0 if self.runner.lockstep else self.sim.config.realtime_priority
         return LoopThread("robot loop", self.runner.run, self.bridge, priority).start().stop
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pybullet
 from qg_common import topics
-from qg_common.node_runtime import LoopThread, RealtimePacer, run_nodes
+from qg_common.node_runtime import LoopThread, RealtimePacer, favour_loop_thread, run_nodes
 from qg_common.types import JointState
 from qg_interfaces.msg import AtRest
 from rclpy.node import Node
@@ -157,6 +157,7 @@ def _start_separate_sim(nodes: list[Node]) -> Callable[[], None]:
     scene = PandaShaftScene(PandaSceneConfig.from_dict(node.params.get("panda_scene", {})))
     scene.reset(node.config.initial_pose)
     sim = SeparateSim(node, scene)
+    favour_loop_thread()
     return LoopThread("sim", sim.run, node, node.config.realtime_priority).start().stop
 
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from robot_bridge_node.core.hardware_interface import load_robot
 from robot_bridge_node.core.robot_loop import (MeasuredWrench, LoopConfig, RobotLoop,
-                                               build_loop)
+                                               StateClock, TickClock, build_loop)
 from robot_bridge_node.core.safety import SetpointRejected
 from qg_common.types import N_START_POSES, PoseReference, WrenchSetpoint
 
@@ -139,3 +139,73 @@ def test_ground_truth_estimator_reports_the_contact_wrench(loop: RobotLoop) -> N
     # read one tick before the step ended, at rest: equal to the final truth within noise
     np.testing.assert_allclose(result.wrench_estimate, result.ground_truth.wrench, atol=0.01)
     assert result.wrench_estimate[2] == pytest.approx(PUSH, abs=0.5)
+
+
+class MissingLink:
+    """The simulated Panda behind a link on which the loop takes only every ``every``-th state
+    (as the separate bridge does on a busy machine): the arm keeps the last command meanwhile,
+    and each state carries its simulated time."""
+
+    def __init__(self, robot, every: int) -> None:
+        self.robot = robot
+        self.every = every
+        self.stamp = 0.0
+
+    def read(self):
+        self.stamp = self.robot.scene.time
+        return self.robot.read()
+
+    def write(self, tau: np.ndarray) -> None:
+        for _ in range(self.every):
+            self.robot.write(tau)
+
+    def state_time(self) -> float:
+        return self.stamp
+
+
+def test_a_loop_missing_states_ends_the_step_at_its_time_limit_of_the_states_clock(
+        loop: RobotLoop) -> None:
+    link = MissingLink(loop.hardware, every=3)
+    remote = RobotLoop(link, loop.controller, loop.safety, loop.rest, loop.estimator,
+                       LoopConfig(), loop.simulation, clock=StateClock(link, max_period=0.02))
+    remote.reset(1)
+    scene = loop.simulation.scene
+    start, settled = scene.time, remote.ticks
+    result = remote.execute(WrenchSetpoint.residual(PUSH, 3.0, 0.0))
+    elapsed = scene.time - start
+    # The step's duration is the arm's time (to within the one tick its states are apart), not
+    # ticks times 1 ms (a third of it here).
+    assert result.duration == pytest.approx(elapsed, abs=0.0031)
+    assert remote.ticks - settled == pytest.approx(elapsed / 0.003, abs=1)
+    assert elapsed <= loop.rest.config.max_time + 0.003
+
+
+def test_state_clock_counts_the_stamp_differences_within_bounds() -> None:
+    class Stamps:
+        t = 10.0
+
+        def state_time(self) -> float:
+            return self.t
+
+    stamps = Stamps()
+    clock = StateClock(stamps, max_period=0.02)
+    clock.restart()
+    for t, period, time in ((10.003, 0.003, 0.003),   # missed two states
+                            (10.003, 0.0, 0.003),     # the same state again
+                            (11.0, 0.02, 0.023),      # a stall counts max_period
+                            (10.9, 0.0, 0.023)):      # an older state: no time passes
+        stamps.t = t
+        assert clock.period() == pytest.approx(period)
+        clock.advance(clock.period())
+        assert clock.time == pytest.approx(time)
+    with pytest.raises(ValueError, match="max_period"):
+        StateClock(stamps, max_period=0.0)
+
+
+def test_tick_clock_is_ticks_times_the_period() -> None:
+    clock = TickClock(0.001)
+    for _ in range(250):
+        clock.advance(clock.period())
+    assert clock.time == 250 * 0.001    # a product, as before the clocks: runs repeat exactly
+    clock.restart()
+    assert clock.time == 0.0

@@ -23,8 +23,8 @@ import numpy as np
 from qg_common.params import ParameterSection
 from qg_common.types import GroundTruth, JointState
 
-__all__ = ["TorqueInterface", "PositionInterface", "ForceTorqueSensor", "SimulationInterface",
-           "ToolDescription",
+__all__ = ["TorqueInterface", "PositionInterface", "StampedStates", "ForceTorqueSensor",
+           "SimulationInterface", "ToolDescription",
            "RobotDescription", "Robot", "RobotPlugin", "RobotChoice", "ROBOT_SECTION",
            "ROBOT_PLUGIN_GROUP", "robot_names", "robot_plugin", "load_robot"]
 
@@ -55,6 +55,16 @@ class PositionInterface(Protocol):
 
     def write(self, q: np.ndarray) -> None:
         """Hold joint position targets [rad] for one control period."""
+        ...
+
+
+class StampedStates(Protocol):
+    """Hardware whose states carry the time they were measured: a robot behind a network (the
+    separate sim process over topics), where the loop can miss states or get them late, so a
+    tick may cover more or less than one control period."""
+
+    def state_time(self) -> float:
+        """[s] when the state the last ``read`` returned was measured, on the robot's clock."""
         ...
 
 

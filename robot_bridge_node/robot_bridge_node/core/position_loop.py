@@ -71,13 +71,14 @@ class PositionLoop(RobotLoop):
         """Nothing to feed: a position robot holds its last target by itself."""
 
     def tick(self) -> bool:
-        """One millisecond. True when the current step has come to rest or timed out."""
-        dt = self.config.dt
+        """One control period. True when the current step has come to rest or timed out."""
         state = self.hardware.read()
+        dt = self.clock.period()
         if self.estimator is not None:
             self.wrench_estimate = self.estimator.update(state.q, state.dq, state.tau, dt)
         self.hardware.write(self.controller.step(state.q, self.reference))
         self.ticks += 1
+        self.clock.advance(dt)
         state = self.hardware.read()
         tool = self.controller.measure(state.q, state.dq)
         return self.rest.update(tool.linear_speed, tool.angular_speed, dt)

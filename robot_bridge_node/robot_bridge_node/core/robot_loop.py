@@ -17,14 +17,15 @@ from qg_common.params import config_from_dict
 from qg_common.types import NO_GROUND_TRUTH, GroundTruth, JointState, StepResult, WrenchSetpoint
 
 from robot_bridge_node.core.hardware_interface import (Robot, SimulationInterface,
-                                                       ToolDescription, TorqueInterface)
+                                                       StampedStates, ToolDescription,
+                                                       TorqueInterface)
 from robot_bridge_node.core.impedance import HybridImpedanceController, ImpedanceConfig
 from robot_bridge_node.core.panda_model import PandaModel
 from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
 from robot_bridge_node.core.safety import SafetyFilter, SafetyLimits
 
-__all__ = ["WrenchEstimator", "MeasuredWrench", "LoopConfig", "RobotLoop", "tool_model",
-           "build_loop"]
+__all__ = ["WrenchEstimator", "MeasuredWrench", "LoopConfig", "LoopClock", "TickClock",
+           "StateClock", "RobotLoop", "tool_model", "build_loop"]
 
 
 class WrenchEstimator(Protocol):
@@ -77,6 +78,84 @@ class LoopConfig:
         return config_from_dict(cls, params)
 
 
+class LoopClock(Protocol):
+    """The loop's time since the last reset, which the controller's, the safety filter's and the
+    rest detector's ``dt``, the watchdog and a step's time limit all run on."""
+
+    @property
+    def time(self) -> float:
+        """[s] since the last reset, up to the last tick ``advance``d."""
+        ...
+
+    def restart(self) -> None:
+        """Time 0 is now (the hardware's state was just read after a reset)."""
+        ...
+
+    def period(self) -> float:
+        """[s] how much time the tick under way covers (its state was just read)."""
+        ...
+
+    def advance(self, dt: float) -> None:
+        """The tick under way, of ``period`` ``dt``, is done."""
+        ...
+
+
+class TickClock:
+    """Every tick is one control period: the robot's state advances by exactly ``dt`` between
+    reads (an in-process simulation steps in ``write``; a real arm's 1 kHz loop)."""
+
+    def __init__(self, dt: float) -> None:
+        self.dt = dt
+        self.ticks = 0
+
+    @property
+    def time(self) -> float:
+        return self.ticks * self.dt
+
+    def restart(self) -> None:
+        self.ticks = 0
+
+    def period(self) -> float:
+        return self.dt
+
+    def advance(self, dt: float) -> None:
+        del dt
+        self.ticks += 1
+
+
+class StateClock:
+    """The time of the states read: a tick covers the time from the previous state's stamp to
+    its own. A loop that misses states (a busy machine, states over topics) still ends a step
+    at its time limit of the robot's time instead of after that many ticks.
+
+    :param hardware: reports when the state it returned was measured.
+    :param max_period: [s] the most one tick counts: a longer gap (the robot's process stalled,
+        or the loop did) is counted as this long, so one hiccup cannot end a step.
+    """
+
+    def __init__(self, hardware: StampedStates, max_period: float) -> None:
+        if max_period <= 0.0:
+            raise ValueError(f"max_period must be > 0, got {max_period}")
+        self.hardware = hardware
+        self.max_period = max_period
+        self.time = 0.0
+        self._last = 0.0       # stamp of the last tick's state
+        self._current = 0.0    # stamp of the state the tick under way read
+
+    def restart(self) -> None:
+        self.time = 0.0
+        self._last = self._current = self.hardware.state_time()
+
+    def period(self) -> float:
+        """The stamp difference, in ``[0, max_period]`` (0: the same state read again)."""
+        self._current = max(self._last, self.hardware.state_time())
+        return min(self._current - self._last, self.max_period)
+
+    def advance(self, dt: float) -> None:
+        self.time += dt
+        self._last = self._current
+
+
 _HOLD = WrenchSetpoint(np.zeros(6))
 
 
@@ -87,12 +166,14 @@ class RobotLoop:
     :param estimator: contact-wrench estimator updated every tick; ``None`` runs without one.
     :param simulation: resets to start poses and ground truth; ``None`` on real hardware, where
         ``reset`` is refused and the ground truth reads as zeros.
+    :param clock: the loop's time; default ``TickClock``: every tick one ``config.dt``.
     """
 
     def __init__(self, hardware: TorqueInterface, controller: HybridImpedanceController,
                  safety: SafetyFilter, rest_detector: RestDetector,
                  estimator: WrenchEstimator | None = None, config: LoopConfig | None = None,
-                 simulation: SimulationInterface | None = None) -> None:
+                 simulation: SimulationInterface | None = None,
+                 clock: LoopClock | None = None) -> None:
         self.hardware = hardware
         self.simulation = simulation
         self.controller = controller
@@ -100,6 +181,7 @@ class RobotLoop:
         self.rest = rest_detector
         self.estimator = estimator
         self.config = config or LoopConfig()
+        self.clock: LoopClock = clock or TickClock(self.config.dt)
         self.setpoint = _HOLD
         self.wrench_estimate: np.ndarray | None = None
         self.holding = False
@@ -107,8 +189,8 @@ class RobotLoop:
 
     @property
     def time(self) -> float:
-        """[s] robot time since the last reset: ticks times the period."""
-        return self.ticks * self.config.dt
+        """[s] robot time since the last reset, on the loop's ``clock``."""
+        return self.clock.time
 
     def reset(self, initial_pose: int, housing_yaw: float = 0.0) -> None:
         """New episode: the simulation at start ``initial_pose``, then settle holding that pose.
@@ -130,6 +212,7 @@ class RobotLoop:
         self.simulation.reset(initial_pose, housing_yaw)
         self.ticks = 0
         state = self.hardware.read()
+        self.clock.restart()
         if self.estimator is not None:
             self.estimator.reset(state.q)
         return state
@@ -157,9 +240,9 @@ class RobotLoop:
         self.safety.feed_watchdog(self.time)
 
     def tick(self) -> bool:
-        """One millisecond. True when the current step has come to rest or timed out."""
-        dt = self.config.dt
+        """One control period. True when the current step has come to rest or timed out."""
         state = self.hardware.read()
+        dt = self.clock.period()
         if self.estimator is not None:
             self.wrench_estimate = self.estimator.update(state.q, state.dq, state.tau, dt)
         if (self.config.realtime and not self.holding
@@ -175,6 +258,7 @@ class RobotLoop:
         tau = self.safety.limit_torques(self.controller.step(state.q, state.dq, setpoint, dt), dt)
         self.hardware.write(tau)
         self.ticks += 1
+        self.clock.advance(dt)
         tool = self.controller.tool
         return self.rest.update(tool.linear_speed, tool.angular_speed, dt)
 
