@@ -1,0 +1,17 @@
+"""The studies behind docs/learning.md run what their names say, on the thesis profile."""
+from qg_learning_node.experiments.learning_studies import study_specs
+
+
+def test_the_cap_study_is_the_starved_cell_with_the_thesis_training_cap():
+    specs = study_specs("thesis")
+    cap = specs["cap"]
+    assert [s.seed for s in cap] == [0, 1, 2]
+    assert {(s.algorithm, s.critic_lr, s.iterations, s.train_max_steps, s.experiment)
+            for s in cap} == {("qgddpg", 1e-4, 10, 1000, "cap")}
+    # Everything else is the grid's protocol: 40 training and 8 test episodes, test cap 200.
+    grid_run = next(s for s in specs["graph"] if s.algorithm == "qgddpg" and s.seed == 0
+                    and not s.graph_resolution)
+    assert grid_run.train_max_steps == 50
+    assert {(s.train_episodes, s.test_episodes, s.test_max_steps, s.observation) for s in cap} \
+        == {(grid_run.train_episodes, grid_run.test_episodes, grid_run.test_max_steps,
+             grid_run.observation)}
