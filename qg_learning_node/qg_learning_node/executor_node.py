@@ -214,14 +214,15 @@ class ExecutorNode(Node):
             self.at_rest[int(msg.seq)] = msg
         self.at_rest_event.set()
 
-    def _wait_until(self, condition: Callable[[], bool], timeout: float) -> bool:
-        """Poll ``condition`` (the episode thread; callbacks run elsewhere) until it holds, for
-        at most ``timeout`` seconds or until a stop is requested; whether it held."""
+    def _wait_until(self, condition: Callable[[], bool], timeout: float,
+                    poll: float = 0.01) -> bool:
+        """Poll ``condition`` every ``poll`` seconds (the episode thread; callbacks run
+        elsewhere) until it holds, for at most ``timeout`` seconds or until a stop is
+        requested; whether it held."""
         deadline = time.monotonic() + timeout
         while not condition():
-            if time.monotonic() >= deadline or self.stop_requested.is_set():
+            if time.monotonic() >= deadline or self.stop_requested.wait(poll):
                 return False
-            time.sleep(0.01)
         return True
 
     def _await_first_learner_contact(self, timeout: float) -> None:
@@ -365,13 +366,11 @@ class ExecutorNode(Node):
         request = ResetSim.Request(initial_pose=episode.initial_pose, housing_yaw=0.0,
                                    session=episode.episode_id)
         future = self.reset_client.call_async(request)
-        deadline = time.monotonic() + self.config.reset_timeout
-        while not future.done():
-            if time.monotonic() > deadline:
-                raise EpisodeAborted(
-                    f"/sim/reset did not answer within {self.config.reset_timeout} s")
-            if self.stop_requested.wait(0.002):
+        if not self._wait_until(future.done, self.config.reset_timeout, poll=0.002):
+            if self.stop_requested.is_set():
                 raise EpisodeAborted(f"{self.stop_reason} during reset")
+            raise EpisodeAborted(
+                f"/sim/reset did not answer within {self.config.reset_timeout} s")
         result = future.result()
         if result is None or not result.success:
             raise EpisodeAborted(f"reset refused: {getattr(result, 'message', 'no answer')}")
