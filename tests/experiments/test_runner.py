@@ -93,6 +93,14 @@ def test_tiny_suite_writes_results_figures_and_report(tmp_path) -> None:
     before = {p: p.stat().st_mtime_ns for p in out.glob("*/*.json")}
     run_suite(profile, tmp_path / "runs", tmp_path / "docs", workers=1, command="test")
     assert {p: p.stat().st_mtime_ns for p in out.glob("*/*.json")} == before
+    # A run of another setting left in the folder (say, another observation) stays there but
+    # is not reported: without the filter it would add a cell at critic lr 0.25.
+    stale = json.loads(next((out / "grid").glob("ddpg_*.json")).read_text())
+    stale["spec"]["critic_lr"] = 0.25
+    (out / "grid" / "ddpg_stale_setting.json").write_text(json.dumps(stale))
+    page = run_suite(profile, tmp_path / "runs", tmp_path / "docs", workers=1,
+                     command="test").read_text()
+    assert "| 0.25 |" not in page and "| 0.001 |" in page
 
 
 def test_monte_carlo_check_uses_exact_returns_of_goal_episodes_only() -> None:

@@ -51,6 +51,21 @@ def test_thesis_and_tilt_states() -> None:
         tilt.state(_obs(wrench))
 
 
+@pytest.mark.parametrize("observation, expected", [
+    ("tilt_force", [0.5, -1.0, -0.2, 0.6]),      # no torques: they echo the last action
+    ("tilt_only", [-0.2, 0.6]),
+])
+def test_states_without_the_torque_echo(observation, expected) -> None:
+    """The smaller tilt states take the same components, with the same scales, as ``tilt``."""
+    wrench = [10.0, -40.0, -15.0, 1.5, 0.3, 0.0]
+    rotation = (DOWN * Rotation.from_rotvec([0.1, -0.3, 0.0])).as_matrix()
+    task = ResidualTask(TaskConfig(observation=observation, tilt_range=0.5))
+    assert task.state_dim == state_dim(observation) == len(expected)
+    np.testing.assert_allclose(task.state(_obs(wrench, rotation)), expected, atol=1e-12)
+    with pytest.raises(ValueError, match="tool orientation"):
+        task.state(_obs(wrench))
+
+
 @pytest.mark.parametrize("bad", [{"observation": "pose"}, {"push_axis": (0.0, 0.0, 0.0)},
                                  {"push_axis": (0.0, 1.0)}, {"tilt_range": 0.0}])
 def test_bad_observation_settings_are_refused(bad) -> None:

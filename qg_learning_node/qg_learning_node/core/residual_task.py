@@ -8,6 +8,10 @@ One definition for the ROS executor and the fast in-process runner, so both run 
   ``tilt``: the same four numbers plus the tool's tilt away from the push axis, (ex, ey) of the
   rotation that would align the tool z axis with it, in the EEF frame, from forward kinematics of
   the measured joints (a real arm has it); scaled by ``tilt_range``.
+  ``tilt_only``: the tilt alone; ``tilt_force``: the tilt and (Fx, Fy). Both leave out the
+  torques (Tx, Ty), which at rest echo the last action: with them the actor reads its own
+  previous output, and without exploration noise that loop can hold it at a fixed point
+  (docs/learning.md, section 2).
 - action: actor output in [-1, 1]^2 scaled to residual torques (tx, ty) of at most 3 Nm, on top
   of the constant base push Fz = -15 N: the feed-forward wrench [0, 0, Fz, tx, ty, 0];
 - reward: sparse (-1 per step, 0 at the goal) or dense (pose error to the inserted pose);
@@ -21,11 +25,20 @@ from typing import Any
 import numpy as np
 from qg_common.types import WrenchSetpoint
 
-__all__ = ["TaskConfig", "Observation", "ResidualTask", "OBSERVATIONS", "STATE_DIM", "ACTION_DIM",
-           "state_dim", "tilt_from_push_axis"]
+__all__ = ["TaskConfig", "Observation", "ResidualTask", "OBSERVATIONS", "OBSERVATION_COMPONENTS",
+           "STATE_DIM", "ACTION_DIM", "state_dim", "tilt_from_push_axis"]
 
-#: State definitions (see the module docstring) and their lengths.
-OBSERVATIONS = {"thesis": 4, "tilt": 6}
+#: The components of each state definition (see the module docstring), in order: wrench
+#: components (tool frame) and the tilt (ex, ey) away from the push axis.
+OBSERVATION_COMPONENTS = {
+    "thesis": ("fx", "fy", "tx", "ty"),
+    "tilt": ("fx", "fy", "tx", "ty", "ex", "ey"),
+    "tilt_force": ("fx", "fy", "ex", "ey"),
+    "tilt_only": ("ex", "ey"),
+}
+#: State definitions and their lengths.
+OBSERVATIONS = {name: len(parts) for name, parts in OBSERVATION_COMPONENTS.items()}
+_WRENCH_INDEX = {"fx": 0, "fy": 1, "tx": 3, "ty": 4}
 STATE_DIM = OBSERVATIONS["thesis"]
 ACTION_DIM = 2
 
@@ -128,20 +141,25 @@ class ResidualTask:
         self.config = config
         c = config
         self.state_dim = state_dim(c.observation)
-        self._state_scale = np.array([c.force_range, c.force_range, c.torque_range, c.torque_range,
-                                      c.tilt_range, c.tilt_range])[:self.state_dim]
+        parts = OBSERVATION_COMPONENTS[c.observation]
+        scales = {"fx": c.force_range, "fy": c.force_range, "tx": c.torque_range,
+                  "ty": c.torque_range, "ex": c.tilt_range, "ey": c.tilt_range}
+        self._state_scale = np.array([scales[part] for part in parts])
+        self._wrench_index = [_WRENCH_INDEX[part] for part in parts if part in _WRENCH_INDEX]
+        self._uses_tilt = "ex" in parts
         self._push_axis = np.asarray(c.push_axis)
 
     def state(self, obs: Observation) -> np.ndarray:
-        """(Fx, Fy, Tx, Ty[, ex, ey]) scaled to [-1, 1] (clipped).
+        """The observation's components (:data:`OBSERVATION_COMPONENTS`) scaled to [-1, 1] (clipped).
 
-        :raises ValueError: for the ``tilt`` observation without the tool orientation.
+        :raises ValueError: for a tilt observation without the tool orientation.
         """
         w = np.asarray(obs.wrench, dtype=np.float64)
-        raw = [w[0], w[1], w[3], w[4]]
-        if self.state_dim > 4:
+        raw = [w[i] for i in self._wrench_index]
+        if self._uses_tilt:
             if obs.tool_rotation is None:
-                raise ValueError("the tilt observation needs the tool orientation")
+                raise ValueError(f"the {self.config.observation} observation needs the tool "
+                                 "orientation")
             raw.extend(tilt_from_push_axis(obs.tool_rotation, self._push_axis))
         return np.clip(np.array(raw) / self._state_scale, -1.0, 1.0)
 

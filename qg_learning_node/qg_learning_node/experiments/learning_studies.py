@@ -16,6 +16,12 @@ summarises, all with the thesis protocol of the ``thesis`` profile (40 training 
 * ``cap``: the thesis's training cap of 1000 steps (the grid's deviation is 50) at the cell the
   grid leaves update-starved, lr 1e-4 with 10 iterations: do longer training episodes, and so
   more updates, let the test actor beat random there?
+* ``echo``: the tilt state with and without the wrench components that echo the last action
+  (``tilt``, ``tilt_force``, ``tilt_only``), QG-DDPG at lr 1e-3 with 10 iterations, the cell
+  whose deterministic test actor stalled with the 6-D tilt state.
+
+The first five studies run with the 6-D ``tilt`` state (``STUDY_OBSERVATION``), the state they
+were measured with, whatever the profile's grid now uses.
 
 Results go to ``<out>/<study>/``; ``docs/data/learning_studies.json`` and two figures to
 ``docs``.
@@ -48,11 +54,16 @@ THESIS_TRAIN_CAP = 1000
 RESOLUTION = 0.1
 #: [rad] Fixture tilt of the housing in the second generalisation test (issue 12's example).
 HOUSING_TILT = math.radians(10.0)
+#: The state of the observation, graph, housing, schedule and cap studies.
+STUDY_OBSERVATION = "tilt"
+#: The ``echo`` study's cell, and the states it compares.
+ECHO_CELL = (1e-3, 10)
+ECHO_OBSERVATIONS = ("tilt", "tilt_force", "tilt_only")
 
 
 def study_specs(profile_name: str = "thesis") -> dict[str, list[RunSpec]]:
     """The runs of every study, built on the grid of ``profile_name``."""
-    grid = load_profile(profile_name).grid
+    grid = dataclasses.replace(load_profile(profile_name).grid, observation=STUDY_OBSERVATION)
     at = dataclasses.replace(grid, cells=(CELL,))
     observation = [dataclasses.replace(s, observation="thesis", experiment="observation")
                    for s in grid_specs(at)]
@@ -71,8 +82,12 @@ def study_specs(profile_name: str = "thesis") -> dict[str, list[RunSpec]]:
     cap = [dataclasses.replace(s, experiment="cap", train_max_steps=THESIS_TRAIN_CAP)
            for s in grid_specs(dataclasses.replace(grid, cells=(STARVED_CELL,),
                                                    algorithms=("qgddpg",)))]
+    echo = [dataclasses.replace(s, experiment="echo", observation=state)
+            for state in ECHO_OBSERVATIONS
+            for s in grid_specs(dataclasses.replace(grid, cells=(ECHO_CELL,),
+                                                    algorithms=("qgddpg",)))]
     return {"observation": observation, "graph": graph, "housing": housing,
-            "schedule": schedule, "cap": cap}
+            "schedule": schedule, "cap": cap, "echo": echo}
 
 
 def _label(spec: dict[str, Any]) -> str:
@@ -155,7 +170,7 @@ def _mc_figure(results: list[dict[str, Any]], path: Path) -> None:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m qg_learning_node.experiments."
                                      "learning_studies", description=__doc__)
-    parser.add_argument("--only", default="observation,graph,housing,schedule,cap")
+    parser.add_argument("--only", default="observation,graph,housing,schedule,cap,echo")
     parser.add_argument("--out", type=Path, default=Path("runs/experiments/studies"))
     parser.add_argument("--docs", type=Path, default=Path("docs"))
     parser.add_argument("--workers", type=int, default=DEFAULT_WORKERS)

@@ -422,19 +422,27 @@ def _comparison(random_rows: list[dict[str, Any]], grid_rows: list[dict[str, Any
 
 
 def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None = None,
-                 planned: dict[str, int] | None = None) -> Path:
+                 planned: dict[str, int] | None = None,
+                 current: dict[str, set[str]] | None = None) -> Path:
     """Write the CSVs, the figures and ``docs/results.md`` for the runs saved under ``out``.
 
     :param planned: runs per experiment of the complete profile, to show what is unfinished.
+    :param current: per experiment, the names of the runs to report (``suite.current_runs``);
+        ``None`` reports every saved run.
     """
     out, docs = Path(out), Path(docs)
     figures = docs / "figures"
     figures.mkdir(parents=True, exist_ok=True)
-    random_results = load_results(out, "random")
-    grid_results = load_results(out, "grid")
-    variant_results = load_results(out, "variants")
-    peg_results = load_results(out, "peg")
-    nextage_results = load_results(out, "nextage")
+
+    def saved(experiment: str) -> list[dict[str, Any]]:
+        return load_results(out, experiment, None if current is None else
+                            current.get(experiment, set()))
+
+    random_results = saved("random")
+    grid_results = saved("grid")
+    variant_results = saved("variants")
+    peg_results = saved("peg")
+    nextage_results = saved("nextage")
     random_rows = summarize_baselines(random_results) if random_results else []
     test_cap = (grid_results[0]["spec"]["test_max_steps"] if grid_results
                 else profile.grid.test_max_steps)

@@ -14,9 +14,10 @@ from typing import Any
 
 from qg_learning_node.experiments import grid, peg, random_baselines, report
 from qg_learning_node.experiments.profile import Profile
-from qg_learning_node.experiments.tasks import DEFAULT_WORKERS, load_results, run_specs
+from qg_learning_node.experiments.tasks import (DEFAULT_WORKERS, load_results, run_specs,
+                                                unsaved)
 
-__all__ = ["EXPERIMENTS", "run_suite", "all_specs", "planned_runs"]
+__all__ = ["EXPERIMENTS", "run_suite", "all_specs", "planned_runs", "current_runs"]
 
 EXPERIMENTS = ("random", "grid", "variants", "peg", "nextage")
 
@@ -57,18 +58,41 @@ def run_suite(profile: Profile, out: Path, docs: Path, only: tuple[str, ...] = E
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     specs = all_specs(profile, only, config_dir)
-    if specs:
-        step = "+".join(o for o in only if o != "variants")
+    step = "+".join(o for o in only if o != "variants")
+    # A step whose runs are all saved keeps the time recorded when they ran.
+    if specs and unsaved(specs, out):
         run_specs(specs, out, workers, f"{profile.name}: {step}", backend, address)
         _record_time(out, step, time.perf_counter() - start, command)
     if "variants" in only and (profile.variants.rewards or profile.variants.replay_capacities):
         start = time.perf_counter()
-        rows = grid.cell_table(load_results(out, "grid"), None)
-        specs = grid.variant_specs(profile.grid, profile.variants, grid.best_cells(rows),
-                                   profile.estimator, config_dir)
-        run_specs(specs, out, workers, f"{profile.name}: variants", backend, address)
-        _record_time(out, "variants", time.perf_counter() - start, command)
-    return report.write_report(profile, out, Path(docs), config_dir, planned_runs(profile))
+        specs = _variant_specs(profile, out, config_dir)
+        if unsaved(specs, out):
+            run_specs(specs, out, workers, f"{profile.name}: variants", backend, address)
+            _record_time(out, "variants", time.perf_counter() - start, command)
+    return report.write_report(profile, out, Path(docs), config_dir, planned_runs(profile),
+                               current_runs(profile, out, config_dir))
+
+
+def _variant_specs(profile: Profile, out: Path, config_dir: str | None) -> list[Any]:
+    """The variant runs at each algorithm's best cell among the profile's saved grid runs."""
+    names = {s.name for s in all_specs(profile, ("grid",), config_dir)}
+    rows = grid.cell_table(load_results(out, "grid", names), None)
+    return grid.variant_specs(profile.grid, profile.variants, grid.best_cells(rows),
+                              profile.estimator, config_dir)
+
+
+def current_runs(profile: Profile, out: Path,
+                 config_dir: str | None = None) -> dict[str, set[str]]:
+    """Names of the runs ``profile`` makes now, per experiment: what the report shows.
+
+    A saved run of an earlier setting (another observation, say) stays in ``out`` for reference
+    but is not one of these, so it does not mix into a cell.
+    """
+    names: dict[str, set[str]] = {}
+    for spec in all_specs(profile, EXPERIMENTS, config_dir):
+        names.setdefault(spec.experiment, set()).add(spec.name)
+    names["variants"] = {s.name for s in _variant_specs(profile, out, config_dir)}
+    return names
 
 
 def planned_runs(profile: Profile) -> dict[str, int]:

@@ -14,7 +14,7 @@ import dataclasses
 import json
 import multiprocessing
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Collection, Iterable, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -24,7 +24,7 @@ from tqdm import tqdm
 from qg_learning_node.experiments.runner import config_digest
 
 __all__ = ["RunnableSpec", "BACKENDS", "DEFAULT_WORKERS", "result_path", "run_specs",
-           "run_one", "load_results"]
+           "run_one", "load_results", "unsaved"]
 
 #: Where runs execute: a process pool on this machine, or a Ray cluster (local or remote).
 BACKENDS = ("process", "ray")
@@ -72,6 +72,11 @@ def _pool_results(todo: Sequence[RunnableSpec], workers: int
         return
     with multiprocessing.get_context("spawn").Pool(workers) as pool:
         yield from pool.imap_unordered(run_one, todo)
+
+
+def unsaved(specs: Sequence[RunnableSpec], out: Path) -> list[RunnableSpec]:
+    """The specs that have no saved result under ``out`` (or only one of another setting)."""
+    return [spec for spec in specs if _saved(out, spec) is None]
 
 
 def run_specs(specs: Sequence[RunnableSpec], out: Path, workers: int = DEFAULT_WORKERS,
@@ -122,7 +127,13 @@ def run_specs(specs: Sequence[RunnableSpec], out: Path, workers: int = DEFAULT_W
     return [results[f"{s.experiment}/{s.name}"] for s in specs]
 
 
-def load_results(out: Path, experiment: str) -> list[dict[str, Any]]:
-    """Every saved result of ``experiment`` under ``out`` (sorted by name)."""
+def load_results(out: Path, experiment: str,
+                 names: Collection[str] | None = None) -> list[dict[str, Any]]:
+    """The saved results of ``experiment`` under ``out`` (sorted by name).
+
+    :param names: only the runs of these names (``spec.name``), e.g. a profile's current runs,
+        so that runs of an earlier setting left in the folder do not mix in; ``None``: all.
+    """
     folder = Path(out) / experiment
-    return [json.loads(p.read_text()) for p in sorted(folder.glob("*.json"))]
+    return [json.loads(p.read_text()) for p in sorted(folder.glob("*.json"))
+            if names is None or p.stem in names]
