@@ -64,28 +64,31 @@ ECHO_OBSERVATIONS = ("tilt", "tilt_force", "tilt_only")
 def study_specs(profile_name: str = "thesis") -> dict[str, list[RunSpec]]:
     """The runs of every study, built on the grid of ``profile_name``."""
     grid = dataclasses.replace(load_profile(profile_name).grid, observation=STUDY_OBSERVATION)
-    at = dataclasses.replace(grid, cells=(CELL,))
+
+    def runs(cell: tuple[float, int], algorithms: tuple[str, ...] = grid.algorithms,
+             **changes: Any) -> list[RunSpec]:
+        """The grid's runs of one cell, for ``algorithms``, with ``changes`` to the grid."""
+        return grid_specs(dataclasses.replace(grid, cells=(cell,), algorithms=algorithms,
+                                              **changes))
+
+    qgddpg = ("qgddpg",)
+    both_at_cell, qgddpg_at_cell = runs(CELL), runs(CELL, qgddpg)
     observation = [dataclasses.replace(s, observation="thesis", experiment="observation")
-                   for s in grid_specs(at)]
-    graph = [dataclasses.replace(s, experiment="graph") for s in grid_specs(at)]
+                   for s in both_at_cell]
+    graph = [dataclasses.replace(s, experiment="graph") for s in both_at_cell]
     graph += [dataclasses.replace(s, experiment="graph", graph_resolution=RESOLUTION)
-              for s in grid_specs(dataclasses.replace(at, algorithms=("qgddpg",)))]
+              for s in qgddpg_at_cell]
     housing = [dataclasses.replace(s, experiment="housing", test_housing_yaw=math.pi / 2,
                                    test_housing_tilt=tilt)
-               for tilt in (0.0, HOUSING_TILT)
-               for s in grid_specs(dataclasses.replace(at, algorithms=("qgddpg",)))]
-    timed = dataclasses.replace(at, algorithms=("qgddpg",), test_max_steps=50)
+               for tilt in (0.0, HOUSING_TILT) for s in qgddpg_at_cell]
     schedule = [dataclasses.replace(s, experiment="schedule", eval_every=4, **extra)
                 for extra in ({}, {"schedule": "async", "updates_per_step": 10.0,
                                    "publish_every": 20})
-                for s in grid_specs(timed)]
+                for s in runs(CELL, qgddpg, test_max_steps=50)]
     cap = [dataclasses.replace(s, experiment="cap", train_max_steps=THESIS_TRAIN_CAP)
-           for s in grid_specs(dataclasses.replace(grid, cells=(STARVED_CELL,),
-                                                   algorithms=("qgddpg",)))]
+           for s in runs(STARVED_CELL, qgddpg)]
     echo = [dataclasses.replace(s, experiment="echo", observation=state)
-            for state in ECHO_OBSERVATIONS
-            for s in grid_specs(dataclasses.replace(grid, cells=(ECHO_CELL,),
-                                                    algorithms=("qgddpg",)))]
+            for state in ECHO_OBSERVATIONS for s in runs(ECHO_CELL, qgddpg)]
     return {"observation": observation, "graph": graph, "housing": housing,
             "schedule": schedule, "cap": cap, "echo": echo}
 
