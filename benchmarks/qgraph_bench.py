@@ -24,7 +24,7 @@ sys.path.insert(0, str(ROOT / 'tests' / 'qg_core'))
 sys.path.insert(0, str(ROOT / 'qg_learning_node'))
 from reference_solver import exact_edge_values  # noqa: E402
 
-from qg_learning_node.qgraph import QGraph  # noqa: E402
+from qg_learning_node.learner.qgraph import QGraph  # noqa: E402
 
 GAMMA = 0.99
 GRID = 120

@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 import yaml
-from qg_learning_node.core.residual_task import ACTION_DIM
+from qg_learning_node.executor.residual_task import ACTION_DIM
 from qg_learning_node.experiments.runner import PandaTask, StackSettings
 
 

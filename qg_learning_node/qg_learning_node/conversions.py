@@ -5,8 +5,8 @@ import numpy as np
 from qg_interfaces.msg import ActorParameters, AtRest, Transition
 from scipy.spatial.transform import Rotation
 
-from qg_learning_node.core.episode import TransitionRecord
-from qg_learning_node.core.residual_task import Observation
+from qg_learning_node.executor.episode import TransitionRecord
+from qg_learning_node.executor.residual_task import Observation
 
 __all__ = ["observation_from_msg", "transition_to_msg",
            "actor_to_msg", "actor_tensors_from_msg"]

@@ -32,13 +32,13 @@ from rclpy.node import Node
 
 from qg_learning_node.conversions import (actor_tensors_from_msg, observation_from_msg,
                                           transition_to_msg)
-from qg_learning_node.core.episode import Episode
-from qg_learning_node.core.episode_id import episode_id as make_episode_id
-from qg_learning_node.core.episode_request import N_POSES, EpisodeRequest
-from qg_learning_node.core.noise import ActionNoise, NoiseConfig
-from qg_learning_node.core.peg_task import PegTask, PegTaskConfig
-from qg_learning_node.core.residual_task import ResidualTask, TaskConfig
-from qg_learning_node.ddpg import ActorMLP
+from qg_learning_node.executor.episode import Episode
+from qg_learning_node.executor.episode_id import episode_id as make_episode_id
+from qg_learning_node.executor.episode_request import N_POSES, EpisodeRequest
+from qg_learning_node.executor.noise import ActionNoise, NoiseConfig
+from qg_learning_node.executor.peg_task import PegTask, PegTaskConfig
+from qg_learning_node.executor.residual_task import ResidualTask, TaskConfig
+from qg_learning_node.learner.ddpg import ActorMLP
 
 
 
@@ -278,7 +278,7 @@ class ExecutorNode(Node):
         self.episodes_started += 1
         pose = req.initial_pose if req.initial_pose >= 0 else index % N_POSES
         reward = req.reward or self.task.config.reward
-        # Under many robots the id names its robot (robot0_..., core/episode_id.py).
+        # Under many robots the id names its robot (robot0_..., executor/episode_id.py).
         episode_id = make_episode_id(self.get_namespace(), index, req.mode, pose)
         seed = req.seed if req.seed != 0 else 1000 + index
         self.episode = Episode(episode_id, req.mode, pose, reward, self.task,

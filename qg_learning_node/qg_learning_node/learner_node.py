@@ -30,11 +30,11 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 
 from qg_learning_node.conversions import actor_to_msg
-from qg_learning_node.core.episode import TransitionRecord
-from qg_learning_node.core.learner_params import learner_config_from_params
-from qg_learning_node.core.peg_task import PEG_ACTION_DIM, PEG_STATE_DIM
-from qg_learning_node.core.residual_task import ACTION_DIM, state_dim
-from qg_learning_node.learner_core import LearnerConfig, LearnerCore
+from qg_learning_node.executor.episode import TransitionRecord
+from qg_learning_node.learner.learner_params import learner_config_from_params
+from qg_learning_node.executor.peg_task import PEG_ACTION_DIM, PEG_STATE_DIM
+from qg_learning_node.executor.residual_task import ACTION_DIM, state_dim
+from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore
 
 CHECKPOINT_NAME = "learner.pt"
 #: [s] how long to wait for the last transitions of an ended episode before checkpointing.
@@ -67,7 +67,7 @@ class LearnerNodeConfig:
 
 
 #: The learner's parameters, all read-only: a running learner keeps its networks' settings.
-#: (ROS parameters cannot be null: 0 / [] stand for "none", see ``core/learner_params.py``.)
+#: (ROS parameters cannot be null: 0 / [] stand for "none", see ``learner/learner_params.py``.)
 LEARNER_SECTIONS = (
     ParameterSection("", LearnerNodeConfig),
     ParameterSection("learner", LearnerConfig, ranges={

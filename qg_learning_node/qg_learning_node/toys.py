@@ -21,7 +21,7 @@ import pathlib
 import numpy as np
 import torch
 
-from qg_learning_node.qgraph import QGraph
+from qg_learning_node.learner.qgraph import QGraph
 
 __all__ = ['ToyTransition', 'baird_star', 'chain_std', 'chain_transitions', 'main', 'plot_chain',
            'plot_transition_types', 'three_state_subsets', 'train_critics', 'transition_type_std']

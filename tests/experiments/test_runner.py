@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from qg_common.types import GroundTruth, StepResult
 
-from qg_learning_node.core.observation import observation_from_step
+from qg_learning_node.executor.observation import observation_from_step
 from qg_learning_node.experiments import grid, peg
 from qg_learning_node.experiments.profile import load_profile
 from qg_learning_node.experiments.runner import RunSpec, run_training
@@ -104,7 +104,7 @@ def test_tiny_suite_writes_results_figures_and_report(tmp_path) -> None:
 
 
 def test_monte_carlo_check_uses_exact_returns_of_goal_episodes_only() -> None:
-    from qg_learning_node.core.episode import TransitionRecord
+    from qg_learning_node.executor.episode import TransitionRecord
     from qg_learning_node.experiments.runner import MonteCarloCheck
 
     def step(i, r, terminal=False, timeout=False):

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from qg_learning_node.ddpg import ActorMLP, DDPG, DDPGConfig, realisable_range
-from qg_learning_node.replay import Batch, ReplayMemory
+from qg_learning_node.learner.ddpg import ActorMLP, DDPG, DDPGConfig, realisable_range
+from qg_learning_node.learner.replay import Batch, ReplayMemory
 
 torch.set_num_threads(1)
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from qg_learning_node.ddpg import DDPGConfig
-from qg_learning_node.learner_core import LearnerConfig, LearnerCore
+from qg_learning_node.learner.ddpg import DDPGConfig
+from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore
 
 torch.set_num_threads(1)
 

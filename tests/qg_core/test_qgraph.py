@@ -13,7 +13,7 @@ from hypothesis import given, settings, strategies as st
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 from reference_solver import exact_edge_values  # noqa: E402
 
-from qg_learning_node.qgraph import QGraph  # noqa: E402
+from qg_learning_node.learner.qgraph import QGraph  # noqa: E402
 
 ZERO = np.array([0.0, 0.0])
 

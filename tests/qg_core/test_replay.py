@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from qg_learning_node.replay import ReplayMemory
+from qg_learning_node.learner.replay import ReplayMemory
 
 
 def chain(memory: ReplayMemory, n: int, start: int = 0, zero_loops: bool = False) -> None:

@@ -5,7 +5,7 @@ import csv
 
 import pytest
 
-from qg_learning_node.training_log import EPISODE_WINDOW, TrainingLog
+from qg_learning_node.learner.training_log import EPISODE_WINDOW, TrainingLog
 
 
 def test_scalars_are_readable_by_tensorboard_with_sb3_tags(tmp_path) -> None:

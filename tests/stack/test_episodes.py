@@ -99,9 +99,9 @@ def test_train_episode_is_recorded_and_replays_into_the_same_graph(stack, tmp_pa
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
-    from qg_learning_node.core.learner_params import learner_config_from_params
-    from qg_learning_node.learner_core import LearnerCore
-    from qg_learning_node.offline import rebuild_from_bags
+    from qg_learning_node.learner.learner_params import learner_config_from_params
+    from qg_learning_node.learner.learner_core import LearnerCore
+    from qg_learning_node.learner.offline import rebuild_from_bags
     from qg_common.params import config_file, load_ros_params
 
     checkpoints = tmp_path / "checkpoints"
@@ -348,13 +348,13 @@ def test_executor_without_robot_refuses_with_a_clear_message(stack):
 def test_in_process_runner_repeats_the_ros_stack_episode(stack, tmp_path):
     """The experiments' fast runner must agree with the ROS stack: the same test episode (same
     start pose, the learner's initial actor, no noise) gives the same transitions in both."""
-    from qg_learning_node.core.episode import Episode
-    from qg_learning_node.core.learner_params import learner_config_from_params
+    from qg_learning_node.executor.episode import Episode
+    from qg_learning_node.learner.learner_params import learner_config_from_params
     from qg_learning_node.experiments.runner import (LivePolicy, PandaTask, StackSettings,
                                                      run_episode)
-    from qg_learning_node.learner_core import LearnerCore
-    from qg_learning_node.core.residual_task import ACTION_DIM
-    from qg_learning_node.offline import iter_transitions
+    from qg_learning_node.learner.learner_core import LearnerCore
+    from qg_learning_node.executor.residual_task import ACTION_DIM
+    from qg_learning_node.learner.offline import iter_transitions
     from qg_common.params import config_file, load_ros_params
 
     steps, pose = 4, 3

@@ -113,8 +113,8 @@ def updates_lasting(seconds: float) -> int:
     import numpy as np
 
     from qg_common.params import config_file, load_ros_params
-    from qg_learning_node.core.learner_params import learner_config_from_params
-    from qg_learning_node.learner_core import LearnerCore
+    from qg_learning_node.learner.learner_params import learner_config_from_params
+    from qg_learning_node.learner.learner_core import LearnerCore
     params = load_ros_params(config_file("learner.yaml"), "learner")["learner"]
     params.update(cycle_steps=1, iterations_per_cycle=10)
     core = LearnerCore(learner_config_from_params(params), 6, 2)

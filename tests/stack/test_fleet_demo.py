@@ -53,7 +53,7 @@ def demo_run(tmp_path_factory: pytest.TempPathFactory) -> DemoRun:
 
 
 def test_two_robots_train_at_once_into_one_learner_then_robot0_tests(demo_run: DemoRun) -> None:
-    from qg_learning_node.offline import iter_transitions
+    from qg_learning_node.learner.offline import iter_transitions
 
     train = [o for o in demo_run.outcomes if o["mode"] == "train"]
     tests = [o for o in demo_run.outcomes if o["mode"] == "test"]

@@ -14,9 +14,8 @@ CORE_FILES = [
     *(p for p in ROOT.glob("ros_ws/src/qg_common/qg_common/*.py")
       if p.name not in ("conversions.py", "node_parameters.py", "node_runtime.py", "topics.py")),
     *ROOT.glob("robot_bridge_node/robot_bridge_node/core/**/*.py"),
-    *ROOT.glob("qg_learning_node/qg_learning_node/core/**/*.py"),
-    *(ROOT / "qg_learning_node/qg_learning_node" / f for f in
-      ("qgraph.py", "ddpg.py", "replay.py", "learner_core.py")),
+    *ROOT.glob("qg_learning_node/qg_learning_node/executor/**/*.py"),
+    *ROOT.glob("qg_learning_node/qg_learning_node/learner/**/*.py"),
 ]
 
 

@@ -71,7 +71,7 @@ def two_robots(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TwoRobots]:
 
 
 def test_two_robots_run_concurrent_episodes_into_one_learner(two_robots: TwoRobots):
-    from qg_learning_node.offline import iter_transitions
+    from qg_learning_node.learner.offline import iter_transitions
 
     run, cli = two_robots, two_robots.cli
     episodes, started, finals, stack = run.episodes, run.started, run.finals, run.stack
@@ -110,9 +110,9 @@ def test_offline_rebuild_of_both_robots_bags_gives_the_learners_memory(two_robot
     """The learner checkpoints after every training episode: then its memory holds both
     robots' transitions, one trajectory chain per robot. The rebuild from the two robots' bags
     (`qgl replay --into-learner`) must hold the same transitions, chains and graph."""
-    from qg_learning_node.core.learner_params import learner_config_from_params
-    from qg_learning_node.learner_core import LearnerCore
-    from qg_learning_node.offline import rebuild_from_bags
+    from qg_learning_node.learner.learner_params import learner_config_from_params
+    from qg_learning_node.learner.learner_core import LearnerCore
+    from qg_learning_node.learner.offline import rebuild_from_bags
     from qg_common.params import config_file, load_ros_params
 
     run = two_robots

@@ -22,7 +22,7 @@ def declared(cli, node: str) -> set[str]:
 def test_the_peg_task_and_the_nextage_scene_agree_on_the_geometry():
     """The executor computes the tip from the tool pose with its own copy of the geometry."""
     from qg_common.params import config_file, load_ros_params
-    from qg_learning_node.core.peg_task import PegTaskConfig
+    from qg_learning_node.executor.peg_task import PegTaskConfig
     peg = PegTaskConfig.from_dict(load_ros_params(config_file("executor_nextage.yaml"))["peg"])
     assert peg == PegTaskConfig()
     scene = load_ros_params(config_file("nextage.yaml"))["scene"]
@@ -79,7 +79,7 @@ def test_a_nextage_peg_episode_runs_through_the_ros_stack_and_is_recorded(stack)
     from qg_recording.bag_reader import read_bag
 
     from qg_common.params import package_config
-    from qg_learning_node.core.peg_task import PegTaskConfig
+    from qg_learning_node.executor.peg_task import PegTaskConfig
     executor_file = package_config("qg_learning_node", "executor_nextage.yaml")
     learner_file = package_config("qg_learning_node", "learner_nextage.yaml")
     stack.start(("robot", "robot_bridge_node", "robot", ("--ros-args", "-p", "robot:=sim_nextage")),

@@ -2,7 +2,7 @@
 do, for our episode bags.
 
 `replay --into-learner` does not publish: it rebuilds replay memory and Q-Graph from the
-recorded transitions (see `qg_learning_node.offline`), prints the graph census and can train and save
+recorded transitions (see `qg_learning_node.learner.offline`), prints the graph census and can train and save
 a learner checkpoint. rclpy and torch are imported only by the subcommand that needs them, so
 `qgl info` works without a ROS environment.
 """
@@ -103,7 +103,7 @@ def cmd_reindex(args: argparse.Namespace) -> int:
 def _learner_config(path: str) -> object:
     """The learner's LearnerConfig from a parameter file like config/learner.yaml (its
     `learner` section under `ros__parameters`) or a plain mapping of LearnerConfig fields."""
-    from qg_learning_node.core.learner_params import learner_config_from_params
+    from qg_learning_node.learner.learner_params import learner_config_from_params
 
     data = yaml.safe_load(Path(path).read_text()) or {}
     if isinstance(data, dict) and len(data) == 1:
@@ -116,7 +116,7 @@ def _learner_config(path: str) -> object:
 
 
 def _into_learner(args: argparse.Namespace, paths: list[Path]) -> int:
-    from qg_learning_node.offline import rebuild_from_bags
+    from qg_learning_node.learner.offline import rebuild_from_bags
 
     try:
         config = _learner_config(args.learner_config or str(config_file("learner.yaml")))

@@ -29,7 +29,7 @@ from qg_learning_node.cli.episode_schedule import (EpisodeJob, EpisodeOutcome, r
 from qg_learning_node.cli.fleet import fleet_specs, robot_namespace
 from qg_learning_node.cli.launcher import Launcher, ProcessSpec, load_stack_config
 from qg_learning_node.cli.ros_env import stack_env
-from qg_learning_node.training_log import TrainingLog
+from qg_learning_node.learner.training_log import TrainingLog
 
 __all__ = ["add_parser", "DemoSettings", "EpisodeOutcome", "StepMonitor", "demo_schedule",
            "run_episode_by_service", "start_stack", "wait_for_stack"]
@@ -245,7 +245,7 @@ def demo_schedule(train_episodes: int, test_poses: int, seed: int,
     another on one robot: the learner keeps training on test transitions, so running them
     concurrently would test other actors than one robot does.
     """
-    from qg_learning_node.core.episode_request import N_POSES
+    from qg_learning_node.executor.episode_request import N_POSES
     train = [EpisodeJob(i, "train", -1 if len(robots) == 1 else i % N_POSES, seed + i)
              for i in range(train_episodes)]
     tests = [EpisodeJob(train_episodes + p, "test", p, seed + train_episodes + p)

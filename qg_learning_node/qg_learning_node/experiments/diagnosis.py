@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from qg_learning_node.core.episode import Episode
-from qg_learning_node.core.residual_task import ACTION_DIM
+from qg_learning_node.executor.episode import Episode
+from qg_learning_node.executor.residual_task import ACTION_DIM
 from qg_learning_node.experiments.runner import PandaTask, StackSettings, run_episode
 
 __all__ = ["pose_states", "random_walk", "scripted_policy_steps", "main"]

@@ -21,9 +21,9 @@ from qg_common.types import StepResult
 from robot_bridge_node.core.hardware_interface import load_robot
 from robot_bridge_node.core.position_loop import PositionLoop, build_position_loop
 
-from qg_learning_node.core.observation import observation_from_step
-from qg_learning_node.core.peg_task import PEG_ACTION_DIM, PEG_STATE_DIM, PegTask, PegTaskConfig
-from qg_learning_node.core.residual_task import Observation
+from qg_learning_node.executor.observation import observation_from_step
+from qg_learning_node.executor.peg_task import PEG_ACTION_DIM, PEG_STATE_DIM, PegTask, PegTaskConfig
+from qg_learning_node.executor.residual_task import Observation
 
 __all__ = ["NextagePeg"]
 

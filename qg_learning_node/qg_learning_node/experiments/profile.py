@@ -12,7 +12,7 @@ from typing import Any
 import yaml
 from qg_common.params import config_file
 
-from qg_learning_node.core.residual_task import state_dim
+from qg_learning_node.executor.residual_task import state_dim
 from qg_learning_node.experiments.runner import ALGORITHMS, ESTIMATORS
 
 __all__ = ["RandomBudget", "GridBudget", "VariantBudget", "PegBudget", "Profile", "load_profile"]

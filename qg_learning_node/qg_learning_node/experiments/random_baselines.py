@@ -15,9 +15,9 @@ from typing import Any
 import numpy as np
 from qg_common.types import N_START_POSES
 
-from qg_learning_node.core.episode import Episode
-from qg_learning_node.core.noise import KINDS, ActionNoise
-from qg_learning_node.core.residual_task import ACTION_DIM
+from qg_learning_node.executor.episode import Episode
+from qg_learning_node.executor.noise import KINDS, ActionNoise
+from qg_learning_node.executor.residual_task import ACTION_DIM
 from qg_learning_node.experiments.profile import RandomBudget
 from qg_learning_node.experiments.runner import (ESTIMATORS, PandaTask, StackSettings,
                                                  config_digest, episode_noise_seed, run_episode,

@@ -30,14 +30,14 @@ from robot_bridge_node.core.hardware_interface import load_robot
 from robot_bridge_node.core.robot_loop import MeasuredWrench, RobotLoop, build_loop
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
 
-from qg_learning_node.core.episode import Actor, Episode, TransitionRecord
-from qg_learning_node.core.learner_params import learner_config_from_params
-from qg_learning_node.core.noise import ActionNoise, NoiseConfig
-from qg_learning_node.core.observation import observation_from_step
-from qg_learning_node.core.residual_task import (ACTION_DIM, Observation,
+from qg_learning_node.executor.episode import Actor, Episode, TransitionRecord
+from qg_learning_node.learner.learner_params import learner_config_from_params
+from qg_learning_node.executor.noise import ActionNoise, NoiseConfig
+from qg_learning_node.executor.observation import observation_from_step
+from qg_learning_node.executor.residual_task import (ACTION_DIM, Observation,
                                                  ResidualTask, TaskConfig)
-from qg_learning_node.ddpg import ActorMLP, DDPG
-from qg_learning_node.learner_core import LearnerConfig, LearnerCore
+from qg_learning_node.learner.ddpg import ActorMLP, DDPG
+from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore
 
 __all__ = ["ALGORITHMS", "ESTIMATORS", "StackSettings", "PandaTask", "LivePolicy", "RunSpec",
            "MonteCarloCheck",

@@ -1,7 +1,7 @@
 """Every saved experiment run as TensorBoard scalars and a ``progress.csv``, SB3's tag names.
 
 The runs save JSON (episodes, training cycles); this module replays each one into a
-:class:`~qg_learning_node.training_log.TrainingLog`, the writer the demo uses, so an experiment
+:class:`~qg_learning_node.learner.training_log.TrainingLog`, the writer the demo uses, so an experiment
 and a demo run can be compared in one TensorBoard (and with runs of Stable-Baselines3 code).
 Scalars are indexed by RL steps: episodes at the step they ended, training cycles at the step
 they ran, the test phase (SB3's ``eval/`` tags) at the end of training.
@@ -13,7 +13,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from qg_learning_node.training_log import TrainingLog
+from qg_learning_node.learner.training_log import TrainingLog
 
 __all__ = ["export_run", "export_runs"]
 

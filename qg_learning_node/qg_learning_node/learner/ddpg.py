@@ -26,7 +26,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from qg_learning_node.replay import Batch, NStepContext
+from qg_learning_node.learner.replay import Batch, NStepContext
 
 __all__ = ['ActorMLP', 'BOUND_MODES', 'DDPG', 'DDPGConfig', 'build_mlp', 'realisable_range']
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from qg_common.types import StepResult
 
-from qg_learning_node.core.residual_task import Observation
+from qg_learning_node.executor.residual_task import Observation
 
 __all__ = ["observation_from_step"]
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from qg_learning_node.learner_core import LearnerConfig
+from qg_learning_node.learner.learner_core import LearnerConfig
 
 __all__ = ["learner_config_from_params"]
 

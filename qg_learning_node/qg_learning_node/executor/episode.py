@@ -11,9 +11,9 @@ from typing import Any
 
 import numpy as np
 
-from qg_learning_node.core.noise import ActionNoise
-from qg_learning_node.core.peg_task import PegTask
-from qg_learning_node.core.residual_task import Observation, ResidualTask
+from qg_learning_node.executor.noise import ActionNoise
+from qg_learning_node.executor.peg_task import PegTask
+from qg_learning_node.executor.residual_task import Observation, ResidualTask
 
 __all__ = ["Episode", "TransitionRecord", "Actor"]
 

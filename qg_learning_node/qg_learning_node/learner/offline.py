@@ -8,7 +8,7 @@ optional. Used by `qgl replay --into-learner` and by analysis scripts.
 Under many robots (`qgl up --robots N`) each robot records its own episodes, and the one
 learner received the robots' transitions interleaved, each tagged with its robot, which keeps
 one trajectory chain per robot in replay memory. The rebuild does the same: the robot of a bag
-is the one its episode id names (`robot1_...`, `core/episode_id.py`; "" for a robot at the
+is the one its episode id names (`robot1_...`, `executor/episode_id.py`; "" for a robot at the
 root), each robot's bags are read one after another in the order given, and the robots' streams
 are merged by recorded log time, so the rebuilt memory interleaves them as the learner's did and
 links each step only to its own robot's previous one. A bag's log time is its robot's loop
@@ -30,8 +30,8 @@ from typing import Any
 from qg_recording.bag_reader import read_bag
 from tqdm import tqdm
 
-from qg_learning_node.core.episode import TransitionRecord
-from qg_learning_node.core.episode_id import robot_of_episode
+from qg_learning_node.executor.episode import TransitionRecord
+from qg_learning_node.executor.episode_id import robot_of_episode
 
 __all__ = ["OfflineResult", "iter_transitions", "robot_transitions", "rebuild_from_bags"]
 
@@ -119,7 +119,7 @@ def rebuild_from_bags(
     :param progress: show progress bars (per bag, then per training cycle) with rate and ETA.
     :raises ValueError: if the bags hold no transition and no learner core was given.
     """
-    from qg_learning_node.learner_core import LearnerConfig, LearnerCore  # torch: only when used
+    from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore  # torch: only when used
 
     if train_iterations < 0:
         raise ValueError(f"train_iterations must be >= 0, got {train_iterations}")

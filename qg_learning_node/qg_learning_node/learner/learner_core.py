@@ -32,9 +32,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from qg_learning_node.ddpg import DDPG, DIAGNOSTIC_KEYS, DDPGConfig
-from qg_learning_node.qgraph import TRANSITION_KINDS, QGraph
-from qg_learning_node.replay import ReplayMemory
+from qg_learning_node.learner.ddpg import DDPG, DIAGNOSTIC_KEYS, DDPGConfig
+from qg_learning_node.learner.qgraph import TRANSITION_KINDS, QGraph
+from qg_learning_node.learner.replay import ReplayMemory
 
 __all__ = ['LearnerConfig', 'LearnerCore', 'SCHEDULES']
 

@@ -22,7 +22,7 @@ import numpy as np
 from qg_common.params import config_from_dict
 from qg_common.types import PoseReference, WrenchSetpoint
 
-from qg_learning_node.core.residual_task import Observation
+from qg_learning_node.executor.residual_task import Observation
 
 __all__ = ["PegTaskConfig", "PegTask", "PEG_STATE_DIM", "PEG_ACTION_DIM"]
 
