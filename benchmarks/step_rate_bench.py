@@ -25,7 +25,7 @@ import time
 from pathlib import Path
 
 import torch
-from qg_learning_node.experiments.runner import RunSpec
+from qg_experiments.runner import RunSpec
 
 CRITIC_LR, ITERATIONS, CAP = 1e-4, 50, 50
 

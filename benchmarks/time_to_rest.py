@@ -22,7 +22,7 @@ import time
 import numpy as np
 import yaml
 from qg_learning_node.executor.residual_task import ACTION_DIM
-from qg_learning_node.experiments.runner import PandaTask, StackSettings
+from qg_experiments.runner import PandaTask, StackSettings
 
 
 def _override(params: dict, assignment: str) -> None:

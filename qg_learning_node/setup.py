@@ -6,7 +6,7 @@ package_name = 'qg_learning_node'
 # The repository's config/ is the one source of the numbers; this package installs its
 # nodes' files from there to share/qg_learning_node/config (symlinked by --symlink-install).
 config_files = [os.path.join('..', 'config', name) for name in (
-    'executor.yaml', 'learner.yaml', 'experiments.yaml', 'stack.yaml',
+    'executor.yaml', 'learner.yaml', 'stack.yaml',
     'executor_nextage.yaml', 'learner_nextage.yaml', 'stack_nextage.yaml')]
 
 setup(

@@ -5,7 +5,7 @@
 #   scripts/experiments.sh                  the thesis profile (about an hour on 2 cores)
 #   scripts/experiments.sh --profile small  a reduced set (about an hour)
 #   scripts/experiments.sh --profile tiny   every code path in a minute (also a CI test)
-# Further arguments go to `python -m qg_learning_node.experiments` (e.g. --only random,grid,
+# Further arguments go to `python -m qg_experiments` (e.g. --only random,grid,
 # --report-only). Saved runs are reused, so an interrupted suite resumes where it stopped.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -15,4 +15,4 @@ export QG_ROS_INSTALL="$ROOT/ros_ws/install"    # the workspace the Python side 
 eval "$(.venv/bin/python -m qg_learning_node.cli.ros_env)"   # config files via the ament index
 args=("$@")
 [[ " ${args[*]-} " == *" --profile "* ]] || args=(--profile thesis "${args[@]}")
-exec .venv/bin/python -m qg_learning_node.experiments "${args[@]}"
+exec .venv/bin/python -m qg_experiments "${args[@]}"

@@ -33,8 +33,8 @@ setup(
             'sim_panda = sim_robot_node.plugins:SIM_PANDA',
             'sim_nextage = sim_robot_node.plugins:SIM_NEXTAGE',
         ],
-        # Environments of the in-process experiments (qg_learning_node.environments).
-        'qg_learning_node.environments': [
+        # Environments of the in-process experiments (qg_experiments.environments).
+        'qg_experiments.environments': [
             'peg = sim_robot_node.core.peg_env:make_peg_env',
         ],
     },

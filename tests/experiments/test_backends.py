@@ -14,11 +14,11 @@ from pathlib import Path
 
 import pytest
 
-from qg_learning_node.experiments import grid, peg
-from qg_learning_node.experiments.__main__ import main
-from qg_learning_node.experiments.profile import load_profile
-from qg_learning_node.experiments.runner import STACK_CONFIG_FILES
-from qg_learning_node.experiments.tasks import DEFAULT_WORKERS, result_path, run_specs
+from qg_experiments import grid, peg
+from qg_experiments.__main__ import main
+from qg_experiments.profile import load_profile
+from qg_experiments.runner import STACK_CONFIG_FILES
+from qg_experiments.tasks import DEFAULT_WORKERS, result_path, run_specs
 
 
 def _small_specs() -> list:
@@ -76,10 +76,10 @@ def test_a_ray_worker_that_reads_other_config_files_saves_nothing(tmp_path: Path
 def test_qgl_and_the_pool_never_import_ray(tmp_path: Path) -> None:
     """Ray is optional: the CLI, the suite and a pool run work without loading it."""
     code = ("import sys\n"
-            "import qg_learning_node.cli.main, qg_learning_node.experiments.__main__\n"
-            "from qg_learning_node.experiments.tasks import run_specs\n"
-            "from qg_learning_node.experiments import peg\n"
-            "from qg_learning_node.experiments.profile import load_profile\n"
+            "import qg_learning_node.cli.main, qg_experiments.__main__\n"
+            "from qg_experiments.tasks import run_specs\n"
+            "from qg_experiments import peg\n"
+            "from qg_experiments.profile import load_profile\n"
             "spec = peg.peg_specs(load_profile('tiny').peg, None)[0]\n"
             f"run_specs([spec], {str(tmp_path)!r}, workers=1)\n"
             "print(sorted(m for m in sys.modules if m == 'ray' or m.startswith('ray.')))\n")

@@ -1,5 +1,5 @@
 """The studies behind docs/learning.md run what their names say, on the thesis profile."""
-from qg_learning_node.experiments.learning_studies import study_specs
+from qg_experiments.learning_studies import study_specs
 
 
 def test_the_cap_study_is_the_starved_cell_with_the_thesis_training_cap():

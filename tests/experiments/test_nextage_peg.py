@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from qg_common.params import config_file, load_ros_params
 
-from qg_learning_node.experiments.nextage_peg import NextagePeg
+from qg_experiments.nextage_peg import NextagePeg
 
 
 @pytest.fixture(scope="module")

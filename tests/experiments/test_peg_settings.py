@@ -3,8 +3,8 @@ from __future__ import annotations
 
 from qg_common.params import config_file, load_ros_params
 
-from qg_learning_node.experiments.peg import peg_specs
-from qg_learning_node.experiments.profile import PegBudget, load_profile
+from qg_experiments.peg import peg_specs
+from qg_experiments.profile import PegBudget, load_profile
 
 
 def test_peg_runs_take_the_budgets_discount_not_the_panda_learners():

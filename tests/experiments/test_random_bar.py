@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import pytest
-from qg_learning_node.experiments.random_baselines import random_bar
+from qg_experiments.random_baselines import random_bar
 
 
 def _row(label: str, steps: list[int]) -> dict:

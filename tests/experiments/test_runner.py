@@ -13,10 +13,10 @@ import pytest
 from qg_common.types import GroundTruth, StepResult
 
 from qg_learning_node.executor.observation import observation_from_step
-from qg_learning_node.experiments import grid, peg
-from qg_learning_node.experiments.profile import load_profile
-from qg_learning_node.experiments.runner import RunSpec, run_training
-from qg_learning_node.experiments.suite import run_suite
+from qg_experiments import grid, peg
+from qg_experiments.profile import load_profile
+from qg_experiments.runner import RunSpec, run_training
+from qg_experiments.suite import run_suite
 
 
 def _truth(success: bool) -> GroundTruth:
@@ -105,7 +105,7 @@ def test_tiny_suite_writes_results_figures_and_report(tmp_path) -> None:
 
 def test_monte_carlo_check_uses_exact_returns_of_goal_episodes_only() -> None:
     from qg_learning_node.executor.episode import TransitionRecord
-    from qg_learning_node.experiments.runner import MonteCarloCheck
+    from qg_experiments.runner import MonteCarloCheck
 
     def step(i, r, terminal=False, timeout=False):
         return TransitionRecord("e", i, np.full(2, float(i)), np.zeros(2), r, np.zeros(2),

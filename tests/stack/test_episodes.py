@@ -350,8 +350,8 @@ def test_in_process_runner_repeats_the_ros_stack_episode(stack, tmp_path):
     start pose, the learner's initial actor, no noise) gives the same transitions in both."""
     from qg_learning_node.executor.episode import Episode
     from qg_learning_node.learner.learner_params import learner_config_from_params
-    from qg_learning_node.experiments.runner import (LivePolicy, PandaTask, StackSettings,
-                                                     run_episode)
+    from qg_experiments.runner import (LivePolicy, PandaTask, StackSettings,
+                                       run_episode)
     from qg_learning_node.learner.learner_core import LearnerCore
     from qg_learning_node.executor.residual_task import ACTION_DIM
     from qg_learning_node.learner.offline import iter_transitions

@@ -1,8 +1,8 @@
 """`qgl info`, `qgl replay` and `qgl bag reindex`: what rosbag2's `ros2 bag info/play/reindex`
 do, for our episode bags.
 
-`replay --into-learner` does not publish: it rebuilds replay memory and Q-Graph from the
-recorded transitions (see `qg_learning_node.learner.offline`), prints the graph census and can train and save
+`replay --into-learner` does not publish: it rebuilds replay memory and Q-Graph from the recorded
+transitions (see `qg_learning_node.learner.offline`), prints the graph census and can train and save
 a learner checkpoint. rclpy and torch are imported only by the subcommand that needs them, so
 `qgl info` works without a ROS environment.
 """

@@ -21,7 +21,7 @@ from qg_common.params import runs_dir
 __all__ = ["install_dir", "stack_env", "exports", "PACKAGES", "DEFAULT_DOMAIN_ID"]
 
 PACKAGES = ("qg_interfaces", "qg_common", "qg_recording", "sim_robot_node", "robot_bridge_node",
-            "qg_learning_node")
+            "qg_learning_node", "qg_experiments")
 #: A private DDS domain, so the stack never meets other ROS graphs on the machine.
 DEFAULT_DOMAIN_ID = "42"
 

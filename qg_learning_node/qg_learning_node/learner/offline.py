@@ -119,7 +119,8 @@ def rebuild_from_bags(
     :param progress: show progress bars (per bag, then per training cycle) with rate and ETA.
     :raises ValueError: if the bags hold no transition and no learner core was given.
     """
-    from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore  # torch: only when used
+    # torch: only when used
+    from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore
 
     if train_iterations < 0:
         raise ValueError(f"train_iterations must be >= 0, got {train_iterations}")

@@ -25,7 +25,7 @@ __all__ = ["ConfigError", "ParameterSection", "POSITIVE", "CONFIG_PACKAGES", "co
            "load_ros_params", "package_config", "runs_dir", "unflatten"]
 
 #: The packages that install config files (``share/<package>/config``), searched in this order.
-CONFIG_PACKAGES = ("robot_bridge_node", "sim_robot_node", "qg_learning_node")
+CONFIG_PACKAGES = ("robot_bridge_node", "sim_robot_node", "qg_learning_node", "qg_experiments")
 
 
 class ConfigError(ValueError):

@@ -25,11 +25,11 @@ from qg_common.params import config_file, load_ros_params
 
 from qg_learning_node.learner.learner_params import learner_config_from_params
 from qg_learning_node.executor.noise import ActionNoise, NoiseConfig
-from qg_learning_node.environments import make_environment
-from qg_learning_node.experiments.nextage_peg import NextagePeg
-from qg_learning_node.experiments.profile import PegBudget
-from qg_learning_node.experiments.runner import (ALGORITHMS, algorithm_config, config_digest,
-                                                 episode_noise_seed)
+from qg_experiments.environments import make_environment
+from qg_experiments.nextage_peg import NextagePeg
+from qg_experiments.profile import PegBudget
+from qg_experiments.runner import (ALGORITHMS, algorithm_config, config_digest,
+                                   episode_noise_seed)
 from qg_learning_node.learner.learner_core import LearnerCore
 
 __all__ = ["PegRunSpec", "peg_specs", "run_peg", "GRID_STATES", "GRID_ACTIONS",

@@ -19,11 +19,11 @@ import os
 from collections.abc import Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
-from qg_learning_node.experiments.runner import config_digest
-from qg_learning_node.experiments.tasks import run_one
+from qg_experiments.runner import config_digest
+from qg_experiments.tasks import run_one
 
 if TYPE_CHECKING:
-    from qg_learning_node.experiments.tasks import RunnableSpec
+    from qg_experiments.tasks import RunnableSpec
 
 __all__ = ["CONFIG_ENV", "ray_results"]
 

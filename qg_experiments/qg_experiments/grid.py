@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from qg_learning_node.experiments.profile import GridBudget, VariantBudget
-from qg_learning_node.experiments.runner import RunSpec
+from qg_experiments.profile import GridBudget, VariantBudget
+from qg_experiments.runner import RunSpec
 
 __all__ = ["grid_specs", "variant_specs", "cell_table", "best_cells", "test_steps"]
 

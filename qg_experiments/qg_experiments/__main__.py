@@ -1,4 +1,4 @@
-"""Command line: ``python -m qg_learning_node.experiments [--profile small] [--only ...]``.
+"""Command line: ``python -m qg_experiments [--profile small] [--only ...]``.
 
 Runs go to a pool of one process per core (``--workers`` to change), or with ``--backend ray``
 to a local Ray (``--address`` joins a Ray cluster); the results are the same either way.
@@ -10,13 +10,13 @@ import shlex
 import sys
 from pathlib import Path
 
-from qg_learning_node.experiments.profile import load_profile
-from qg_learning_node.experiments.suite import EXPERIMENTS, run_suite
-from qg_learning_node.experiments.tasks import BACKENDS, DEFAULT_WORKERS
+from qg_experiments.profile import load_profile
+from qg_experiments.suite import EXPERIMENTS, run_suite
+from qg_experiments.tasks import BACKENDS, DEFAULT_WORKERS
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m qg_learning_node.experiments",
+    parser = argparse.ArgumentParser(prog="python -m qg_experiments",
                                      description=__doc__)
     parser.add_argument("--profile", default="small", help="thesis | small | tiny "
                         "(config/experiments.yaml)")
@@ -52,7 +52,7 @@ def main(argv: list[str] | None = None) -> None:
     if unknown:
         parser.error(f"unknown experiments {sorted(unknown)}")
     profile = load_profile(args.profile, args.profiles_file, args.estimator)
-    command = "python -m qg_learning_node.experiments " + shlex.join(
+    command = "python -m qg_experiments " + shlex.join(
         sys.argv[1:] if argv is None else argv)
     path = run_suite(profile, args.out, args.docs, () if args.report_only else only,
                      args.workers, command, args.config_dir, args.backend, args.address)

@@ -1,6 +1,6 @@
 """What the learner can see: the thesis's 4-D wrench state against the tilt state, in numbers.
 
-``python -m qg_learning_node.experiments.diagnosis`` runs the in-process Panda task and writes
+``python -m qg_experiments.diagnosis`` runs the in-process Panda task and writes
 ``docs/data/diagnosis.json`` and two figures for ``docs/learning.md``:
 
 1. the scaled state after the settled reset and after one zero-residual step, per start pose: the
@@ -24,7 +24,7 @@ import numpy as np
 
 from qg_learning_node.executor.episode import Episode
 from qg_learning_node.executor.residual_task import ACTION_DIM
-from qg_learning_node.experiments.runner import PandaTask, StackSettings, run_episode
+from qg_experiments.runner import PandaTask, StackSettings, run_episode
 
 __all__ = ["pose_states", "random_walk", "scripted_policy_steps", "main"]
 
@@ -139,7 +139,7 @@ def _figures(poses: list[dict[str, Any]], walk: dict[str, Any], out: Path) -> No
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m qg_learning_node.experiments.diagnosis",
+    parser = argparse.ArgumentParser(prog="python -m qg_experiments.diagnosis",
                                      description=__doc__)
     parser.add_argument("--docs", type=Path, default=Path("docs"))
     parser.add_argument("--episodes", type=int, default=8, help="random episodes for the R^2")

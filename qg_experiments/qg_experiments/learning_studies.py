@@ -1,6 +1,6 @@
 """The studies behind docs/learning.md, beside the thesis grid: which lever makes the robot learn.
 
-``python -m qg_learning_node.experiments.learning_studies`` runs (resumably, on every core) and
+``python -m qg_experiments.learning_studies`` runs (resumably, on every core) and
 summarises, all with the thesis protocol of the ``thesis`` profile (40 training episodes capped at
 50 steps, 8 test episodes capped at 200, 3 seeds):
 
@@ -37,10 +37,10 @@ from typing import Any
 
 import numpy as np
 
-from qg_learning_node.experiments.grid import grid_specs, test_steps
-from qg_learning_node.experiments.profile import load_profile
-from qg_learning_node.experiments.runner import RunSpec
-from qg_learning_node.experiments.tasks import DEFAULT_WORKERS, run_specs
+from qg_experiments.grid import grid_specs, test_steps
+from qg_experiments.profile import load_profile
+from qg_experiments.runner import RunSpec
+from qg_experiments.tasks import DEFAULT_WORKERS, run_specs
 
 __all__ = ["study_specs", "summarise", "main"]
 
@@ -171,7 +171,7 @@ def _mc_figure(results: list[dict[str, Any]], path: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m qg_learning_node.experiments."
+    parser = argparse.ArgumentParser(prog="python -m qg_experiments."
                                      "learning_studies", description=__doc__)
     parser.add_argument("--only", default="observation,graph,housing,schedule,cap,echo")
     parser.add_argument("--out", type=Path, default=Path("runs/experiments/studies"))

@@ -1,9 +1,9 @@
 """Every saved experiment run as TensorBoard scalars and a ``progress.csv``, SB3's tag names.
 
 The runs save JSON (episodes, training cycles); this module replays each one into a
-:class:`~qg_learning_node.learner.training_log.TrainingLog`, the writer the demo uses, so an experiment
-and a demo run can be compared in one TensorBoard (and with runs of Stable-Baselines3 code).
-Scalars are indexed by RL steps: episodes at the step they ended, training cycles at the step
+:class:`~qg_learning_node.learner.training_log.TrainingLog`, the writer the demo uses, so an
+experiment and a demo run can be compared in one TensorBoard (and with runs of Stable-Baselines3
+code). Scalars are indexed by RL steps: episodes at the step they ended, training cycles at the step
 they ran, the test phase (SB3's ``eval/`` tags) at the end of training.
 """
 from __future__ import annotations

@@ -18,10 +18,10 @@ from qg_common.types import N_START_POSES
 from qg_learning_node.executor.episode import Episode
 from qg_learning_node.executor.noise import KINDS, ActionNoise
 from qg_learning_node.executor.residual_task import ACTION_DIM
-from qg_learning_node.experiments.profile import RandomBudget
-from qg_learning_node.experiments.runner import (ESTIMATORS, PandaTask, StackSettings,
-                                                 config_digest, episode_noise_seed, run_episode,
-                                                 zero_policy)
+from qg_experiments.profile import RandomBudget
+from qg_experiments.runner import (ESTIMATORS, PandaTask, StackSettings,
+                                   config_digest, episode_noise_seed, run_episode,
+                                   zero_policy)
 
 __all__ = ["BaselineSpec", "baseline_specs", "run_baseline", "summarize_baselines", "random_bar"]
 

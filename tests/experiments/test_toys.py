@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from qg_learning_node import toys
+from qg_experiments import toys
 
 torch.set_num_threads(1)
 

@@ -13,7 +13,7 @@ import yaml
 from qg_common.params import config_file
 
 from qg_learning_node.executor.residual_task import state_dim
-from qg_learning_node.experiments.runner import ALGORITHMS, ESTIMATORS
+from qg_experiments.runner import ALGORITHMS, ESTIMATORS
 
 __all__ = ["RandomBudget", "GridBudget", "VariantBudget", "PegBudget", "Profile", "load_profile"]
 

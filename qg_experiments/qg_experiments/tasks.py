@@ -21,7 +21,7 @@ from typing import Any, Protocol
 import torch
 from tqdm import tqdm
 
-from qg_learning_node.experiments.runner import config_digest
+from qg_experiments.runner import config_digest
 
 __all__ = ["RunnableSpec", "BACKENDS", "DEFAULT_WORKERS", "result_path", "run_specs",
            "run_one", "load_results", "unsaved"]
@@ -117,7 +117,7 @@ def run_specs(specs: Sequence[RunnableSpec], out: Path, workers: int = DEFAULT_W
     if not todo:
         finished: Iterable[tuple[RunnableSpec, dict[str, Any]]] = ()
     elif backend == "ray":          # imported here: the pool and `qgl` never import ray
-        from qg_learning_node.experiments.ray_backend import ray_results
+        from qg_experiments.ray_backend import ray_results
         finished = ray_results(todo, workers, address)
     else:
         finished = _pool_results(todo, workers)

@@ -35,7 +35,7 @@ from qg_learning_node.learner.learner_params import learner_config_from_params
 from qg_learning_node.executor.noise import ActionNoise, NoiseConfig
 from qg_learning_node.executor.observation import observation_from_step
 from qg_learning_node.executor.residual_task import (ACTION_DIM, Observation,
-                                                 ResidualTask, TaskConfig)
+                                                     ResidualTask, TaskConfig)
 from qg_learning_node.learner.ddpg import ActorMLP, DDPG
 from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore
 

@@ -12,10 +12,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-from qg_learning_node.experiments import grid, peg, random_baselines, report
-from qg_learning_node.experiments.profile import Profile
-from qg_learning_node.experiments.tasks import (DEFAULT_WORKERS, load_results, run_specs,
-                                                unsaved)
+from qg_experiments import grid, peg, random_baselines, report
+from qg_experiments.profile import Profile
+from qg_experiments.tasks import (DEFAULT_WORKERS, load_results, run_specs,
+                                  unsaved)
 
 __all__ = ["EXPERIMENTS", "run_suite", "all_specs", "planned_runs", "current_runs"]
 

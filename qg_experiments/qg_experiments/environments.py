@@ -1,7 +1,7 @@
-"""Learning environments found by name, so the learning package never imports a simulator.
+"""Learning environments found by name, so the experiments never import a simulator.
 
 A package registers a factory ``make(params: dict, **overrides) -> env`` under the entry-point
-group ``qg_learning_node.environments`` (``sim_robot_node`` registers ``peg``, the free
+group ``qg_experiments.environments`` (``sim_robot_node`` registers ``peg``, the free
 clearance-fit peg of experiment 5). An environment has ``state_dim``, ``action_dim``,
 ``reset(seed) -> state``, ``step(action) -> (state, reward, terminal)``, ``truncated`` and
 ``close()``.
@@ -13,7 +13,7 @@ from typing import Any
 
 __all__ = ["ENVIRONMENT_GROUP", "make_environment"]
 
-ENVIRONMENT_GROUP = "qg_learning_node.environments"
+ENVIRONMENT_GROUP = "qg_experiments.environments"
 
 
 def make_environment(name: str, params: dict[str, Any], **overrides: Any) -> Any:
