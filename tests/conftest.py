@@ -1,36 +1,90 @@
-"""Shared fixtures: real node processes on a private ROS domain, always torn down."""
+"""Shared fixtures: real node processes on a private ROS domain, always torn down.
+
+Tests marked ``ros`` need the stack's ROS environment (what ``scripts/test.sh`` sets up). Started
+any other way (``.venv/bin/python -m pytest``), pytest re-executes itself once in that
+environment, built as ``scripts/test.sh`` builds it (``qg_learning_node.cli.ros_env``): the
+interface libraries must be on ``LD_LIBRARY_PATH`` before Python starts, so setting variables
+here would not do. If the environment cannot be built (no ``scripts/setup.sh`` yet), the header
+says why and every ``ros`` test fails with that reason.
+"""
 from __future__ import annotations
 
 import itertools
 import os
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
+ROOT = Path(__file__).resolve().parents[1]
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 ROS_READY = os.environ.get("QG_STACK_ENV") == "1"
+#: Why the stack environment could not be set up (None: it is set up, or about to be).
+_NO_STACK_ENV: str | None = None
+#: The test being set up: a Stack started for a test without the ``ros`` mark is refused.
+_current_test: pytest.Item | None = None
 
 # Domains 150..229 are ours; each test that starts processes takes the next one, so a straggler
 # of one test can never answer another test's service calls.
 _DOMAINS = itertools.cycle(range(150 + os.getpid() % 40, 230))
 
 
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+def _run_as_the_pytest_command() -> bool:
+    """True for ``python -m pytest`` and the ``pytest`` script; False when another program
+    called ``pytest.main()``, whose process is not ours to replace."""
+    return Path(sys.argv[0]).name in ("pytest", "py.test", "__main__.py") \
+        and len(sys.orig_argv) > 1
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Outside the stack environment, re-execute this pytest run inside it (once: the new
+    process has ``QG_STACK_ENV=1``)."""
+    global _NO_STACK_ENV
     if ROS_READY:
         return
-    # Outside scripts/test.sh the ROS environment is missing: fail loudly, never skip silently.
-    for item in items:
-        if "ros" in item.keywords:
-            item.add_marker(pytest.mark.xfail(
-                reason="needs the stack environment: run `bash scripts/test.sh`", run=False,
-                strict=True))
+    try:
+        from qg_learning_node.cli.ros_env import stack_env
+        # what scripts/test.sh exports before it builds the same environment
+        os.environ.setdefault("QG_ROS_INSTALL", str(ROOT / "ros_ws" / "install"))
+        os.environ.setdefault("ROS_LOG_DIR", str(ROOT / "runs" / "ros_log"))
+        env = stack_env()
+    except Exception as exc:   # whatever is missing is the reason the ros tests give
+        _NO_STACK_ENV = (f"{type(exc).__name__}: {exc} (run `bash scripts/setup.sh`, or the "
+                         "tests through `bash scripts/test.sh`)")
+        return
+    if not _run_as_the_pytest_command():
+        _NO_STACK_ENV = ("pytest was started by another program, which cannot be restarted in "
+                         "the stack environment: run `bash scripts/test.sh` or "
+                         "`.venv/bin/python -m pytest`")
+        return
+    capture = config.pluginmanager.getplugin("capturemanager")
+    if capture is not None:
+        capture.stop_global_capturing()   # give the new process this one's stdout and stderr
+    os.execve(sys.executable, [sys.executable, *sys.orig_argv[1:]], env)
+
+
+def pytest_report_header(config: pytest.Config) -> str:
+    if _NO_STACK_ENV is not None:
+        return f"stack environment: MISSING, every `ros` test fails: {_NO_STACK_ENV}"
+    return "stack environment: set up (QG_STACK_ENV=1)"
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    global _current_test
+    _current_test = item
+    if "ros" in item.keywords and not ROS_READY:
+        pytest.fail(f"needs the stack environment: {_NO_STACK_ENV}", pytrace=False)
 
 
 class Stack:
     """Node processes started for one test (see :class:`qg_learning_node.cli.launcher.Launcher`)."""
 
     def __init__(self, tmp_path: Path) -> None:
+        if _current_test is not None and "ros" not in _current_test.keywords:
+            pytest.fail(f"{_current_test.nodeid} starts ROS processes: mark it `ros` (the fast "
+                        "tier, -m 'not ros', must not start any)", pytrace=False)
         from qg_learning_node.cli.launcher import Launcher
         from qg_learning_node.cli.ros_env import stack_env
         self.domain_id = next(_DOMAINS)

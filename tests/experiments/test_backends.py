@@ -33,6 +33,7 @@ def _without_wall_time(path: Path) -> dict:
     return result
 
 
+@pytest.mark.ros                     # full tier only: starts a local Ray (its own processes)
 @pytest.mark.slow                    # 22-33 s on the 2 loaded cores, most of it starting Ray
 def test_ray_runs_give_the_pools_results_and_resume(tmp_path: Path) -> None:
     specs = _small_specs()
@@ -50,6 +51,7 @@ def test_ray_runs_give_the_pools_results_and_resume(tmp_path: Path) -> None:
     assert {p: p.stat().st_mtime_ns for p in (tmp_path / "ray").glob("*/*.json")} == saved
 
 
+@pytest.mark.ros                     # full tier only: starts a local Ray (its own processes)
 @pytest.mark.slow                    # about 21 s on the loaded cores: a second local Ray
 def test_a_ray_worker_that_reads_other_config_files_saves_nothing(tmp_path: Path) -> None:
     """A cluster whose workers see other config files than this machine: the sweep stops."""
