@@ -9,6 +9,7 @@ A hand-written "tilt back towards vertical" policy (using ground truth) gives th
 could approach. Prints tables; the last line is one JSON object.
 
 Usage: python benchmarks/force_depth.py [--seeds 1] [--max-steps 1000] [--zero-steps 200]
+       [--arm realistic|ideal]
 """
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ import numpy as np
 from robot_bridge_node.core.hardware_interface import load_robot
 from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from qg_common.types import N_START_POSES, PoseReference, WrenchSetpoint
-from qg_common.params import config_file, load_ros_params
+from qg_common.params import config_file, load_ros_params, merge_params
 
 PUSH = -15.0
 UPRIGHT = np.diag([1.0, -1.0, -1.0])
@@ -112,13 +113,19 @@ def main() -> None:
     parser.add_argument("--max-steps", type=int, default=1000, help="random episode cap")
     parser.add_argument("--zero-steps", type=int, default=200, help="zero-residual episode cap")
     parser.add_argument("--force-only", action="store_true", help="only the force-vs-depth part")
+    parser.add_argument("--arm", choices=("realistic", "ideal"), default="realistic",
+                        help="the simulated arm: config/panda_scene.yaml's imperfections, or "
+                             "config/panda_ideal.yaml on top (none)")
     args = parser.parse_args()
     wall = time.perf_counter()
     # the stack's own numbers (config/panda_scene.yaml, config/bridge.yaml: rest.max_time & co)
-    scene = load_ros_params(config_file("panda_scene.yaml"))["panda_scene"]
+    scene = load_ros_params(config_file("panda_scene.yaml"))
+    if args.arm == "ideal":
+        scene = merge_params(scene, load_ros_params(config_file("panda_ideal.yaml")))
+    scene = scene["panda_scene"]
     loop = build_loop(load_robot("sim_panda", {"panda_scene": scene}),
                       load_ros_params(config_file("bridge.yaml")))
-    out: dict = {"rest_max_time": loop.rest.config.max_time}
+    out: dict = {"arm": args.arm, "rest_max_time": loop.rest.config.max_time}
     if args.force_only:
         out.update(force_depth(loop))
         out["wall_s"] = round(time.perf_counter() - wall, 1)

@@ -6,7 +6,7 @@ package_name = 'sim_robot_node'
 # The repository's config/ is the one source of the numbers; this package installs its
 # nodes' files from there to share/sim_robot_node/config (symlinked by --symlink-install).
 config_files = [os.path.join('..', 'config', name) for name in (
-    'panda_scene.yaml', 'nextage.yaml', 'peg_env.yaml')]
+    'panda_scene.yaml', 'panda_ideal.yaml', 'nextage.yaml', 'peg_env.yaml')]
 
 setup(
     name=package_name,

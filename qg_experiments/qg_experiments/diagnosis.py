@@ -1,7 +1,8 @@
 """What the learner can see: the thesis's 4-D wrench state against the tilt state, in numbers.
 
-``python -m qg_experiments.diagnosis`` runs the in-process Panda task and writes
-``docs/data/diagnosis.json`` and two figures for ``docs/learning.md``:
+``python -m qg_experiments.diagnosis`` runs the in-process Panda task, on the realistic arm and on
+the ideal one, and writes ``docs/data/diagnosis.json`` and two figures (the realistic arm's) for
+``docs/learning.md``:
 
 1. the scaled state after the settled reset and after one zero-residual step, per start pose: the
    wrench part is the same for all 8 tilt directions (statics: at rest the contact wrench balances
@@ -24,9 +25,9 @@ import numpy as np
 
 from qg_learning_node.executor.episode import Episode
 from qg_learning_node.executor.residual_task import ACTION_DIM
-from qg_experiments.runner import PandaTask, StackSettings, run_episode
+from qg_experiments.runner import ARMS, PandaTask, StackSettings, run_episode
 
-__all__ = ["pose_states", "random_walk", "scripted_policy_steps", "main"]
+__all__ = ["pose_states", "random_walk", "scripted_policy_steps", "diagnose", "main"]
 
 
 def _task(settings: StackSettings, cap: int) -> PandaTask:
@@ -138,6 +139,17 @@ def _figures(poses: list[dict[str, Any]], walk: dict[str, Any], out: Path) -> No
     plt.close(fig)
 
 
+def diagnose(arm: str, episodes: int, steps: int, cap: int) -> dict[str, Any]:
+    """Sections 1-3 of the module docstring on one simulated arm (``runner.ARMS``)."""
+    env = _task(StackSettings.load(arm=arm), cap)
+    poses = pose_states(env)
+    walk = random_walk(env, episodes, steps, seed=0)
+    return {"arm": arm, "poses": poses, "random_walk": walk,
+            "scripted": {name: scripted_policy_steps(env, name, cap)
+                         for name in ("torque", "tilt")},
+            "step_timeouts": env.step_timeouts, "rl_steps": env.steps}
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m qg_experiments.diagnosis",
                                      description=__doc__)
@@ -146,19 +158,15 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--steps", type=int, default=30, help="steps per random episode")
     parser.add_argument("--cap", type=int, default=40, help="step cap of the scripted policies")
     args = parser.parse_args(argv)
-    env = _task(StackSettings.load(), args.cap)
-    poses = pose_states(env)
-    walk = random_walk(env, args.episodes, args.steps, seed=0)
-    result = {"poses": poses, "random_walk": walk,
-              "scripted": {name: scripted_policy_steps(env, name, args.cap)
-                           for name in ("torque", "tilt")},
-              "step_timeouts": env.step_timeouts, "rl_steps": env.steps}
+    # The realistic arm (the default, drawn in the figures) and the ideal one beside it.
+    result = {arm: diagnose(arm, args.episodes, args.steps, args.cap) for arm in ARMS}
     (args.docs / "data").mkdir(parents=True, exist_ok=True)
     (args.docs / "figures").mkdir(parents=True, exist_ok=True)
     (args.docs / "data" / "diagnosis.json").write_text(json.dumps(result, indent=1))
-    _figures(poses, walk, args.docs / "figures")
-    summary = {k: v for k, v in walk.items() if k != "trace"}
-    summary["scripted"] = result["scripted"]
+    realistic = result["realistic"]
+    _figures(realistic["poses"], realistic["random_walk"], args.docs / "figures")
+    summary = {arm: {**{k: v for k, v in r["random_walk"].items() if k != "trace"},
+                     "scripted": r["scripted"]} for arm, r in result.items()}
     print(json.dumps(summary))
 
 

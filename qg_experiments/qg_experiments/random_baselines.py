@@ -40,6 +40,7 @@ class BaselineSpec:
     estimator: str = "ekf"
     config_dir: str | None = None
     experiment: str = "random"
+    arm: str = "realistic"
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS or self.kind == "none":
@@ -56,7 +57,8 @@ class BaselineSpec:
     @property
     def name(self) -> str:
         sigma = "" if self.kind == "uniform" else f"_sigma{self.sigma:g}"
-        return f"{self.kind}{sigma}_s{self.seed}"
+        arm = "_ideal" if self.arm == "ideal" else ""
+        return f"{self.kind}{sigma}{arm}_s{self.seed}"
 
     def run(self) -> dict[str, Any]:
         return run_baseline(self)
@@ -65,7 +67,7 @@ class BaselineSpec:
 def run_baseline(spec: BaselineSpec) -> dict[str, Any]:
     """Run the episodes; per-episode records plus simulated/wall time."""
     start = time.perf_counter()
-    settings = StackSettings.load(spec.config_dir)
+    settings = StackSettings.load(spec.config_dir, spec.arm).with_arm_seed(spec.seed)
     settings = dataclasses.replace(
         settings, task=dataclasses.replace(settings.task, train_max_steps=spec.max_steps))
     noise_config = dataclasses.replace(settings.noise, kind=spec.kind, sigma=spec.sigma)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -23,7 +24,7 @@ from typing import Any
 
 import numpy as np
 import torch
-from qg_common.params import config_file, load_ros_params
+from qg_common.params import config_file, load_ros_params, merge_params
 from qg_common.rotations import housing_rotation
 from qg_common.types import N_START_POSES, WrenchSetpoint
 from robot_bridge_node.core.hardware_interface import load_robot
@@ -39,7 +40,7 @@ from qg_learning_node.executor.residual_task import (ACTION_DIM, Observation,
 from qg_learning_node.learner.ddpg import ActorMLP, DDPG
 from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore
 
-__all__ = ["ALGORITHMS", "ESTIMATORS", "StackSettings", "PandaTask", "LivePolicy", "RunSpec",
+__all__ = ["ALGORITHMS", "ARMS", "ESTIMATORS", "StackSettings", "PandaTask", "LivePolicy", "RunSpec",
            "MonteCarloCheck",
            "algorithm_config", "run_episode", "run_training", "episode_noise_seed", "zero_policy",
            "config_digest", "STACK_CONFIG_FILES", "tilted_housing"]
@@ -62,17 +63,30 @@ def algorithm_config(base: LearnerConfig, algorithm: str, action_dim: int) -> Le
     raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
 
 
-#: The files of ``config/`` whose numbers the runs use.
-STACK_CONFIG_FILES = ("panda_scene.yaml", "bridge.yaml", "wrench_estimator.yaml", "executor.yaml",
-                      "learner.yaml", "peg_env.yaml")
+#: The files of ``config/`` whose numbers the runs use (the Panda's, the free peg's and the
+#: Nextage peg's), each with the sections the runs read (``None``: all of it). Node-only
+#: settings (timeouts, checkpoint folders) are not the runs' numbers.
+STACK_CONFIG_FILES: dict[str, tuple[str, ...] | None] = {
+    "panda_scene.yaml": None, "panda_ideal.yaml": None, "bridge.yaml": None,
+    "wrench_estimator.yaml": None, "executor.yaml": ("task", "noise"),
+    "learner.yaml": ("learner",), "peg_env.yaml": None, "nextage.yaml": None,
+    "executor_nextage.yaml": ("task", "peg", "noise")}
+
+#: The simulated arm: ``realistic`` (``panda_scene.yaml``'s imperfections, the default) or
+#: ``ideal`` (``panda_ideal.yaml`` on top: the arm exactly as the bridge models it).
+ARMS = ("realistic", "ideal")
 
 
 def config_digest(directory: str | Path | None = None) -> str:
-    """Short hash of the stack's config files: a saved run is reused only under the same one."""
-    digest = hashlib.sha256()
-    for name in STACK_CONFIG_FILES:
-        digest.update(name.encode() + b"\0" + config_file(name, directory).read_bytes())
-    return digest.hexdigest()[:12]
+    """Short hash of the numbers in the stack's config files: a saved run is reused only under
+    the same ones. The files are hashed as parsed (key, value), so a comment or the layout of a
+    file does not count as a new setting; a changed value does."""
+    parsed = {}
+    for name, sections in STACK_CONFIG_FILES.items():
+        params = load_ros_params(config_file(name, directory))
+        parsed[name] = params if sections is None else {k: params.get(k) for k in sections}
+    text = json.dumps(parsed, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
 def episode_noise_seed(run_seed: int, index: int) -> int:
@@ -96,15 +110,28 @@ class StackSettings:
     learner: LearnerConfig
 
     @classmethod
-    def load(cls, directory: Path | None = None) -> StackSettings:
+    def load(cls, directory: Path | None = None, arm: str = "realistic") -> StackSettings:
+        """The config files of ``directory`` (default: the installed ones), with ``arm``."""
+        if arm not in ARMS:
+            raise ValueError(f"arm must be one of {ARMS}, got {arm!r}")
+        robot = load_ros_params(config_file("panda_scene.yaml", directory))
+        if arm == "ideal":
+            robot = merge_params(robot, load_ros_params(config_file("panda_ideal.yaml", directory)))
         executor = load_ros_params(config_file("executor.yaml", directory))
-        return cls(robot=load_ros_params(config_file("panda_scene.yaml", directory)),
+        return cls(robot=robot,
                    bridge=load_ros_params(config_file("bridge.yaml", directory)),
                    ekf=load_ros_params(config_file("wrench_estimator.yaml", directory))["ekf"],
                    task=TaskConfig.from_dict(executor["task"]),
                    noise=NoiseConfig.from_dict(executor.get("noise", {})),
                    learner=learner_config_from_params(
                        load_ros_params(config_file("learner.yaml", directory))["learner"]))
+
+    def with_arm_seed(self, seed: int) -> StackSettings:
+        """The same settings on robot ``seed``: the arm's biases, housing error and noise
+        streams (``panda_scene.imperfections.seed``). A run's seed picks its arm, so DDPG and
+        QG-DDPG of one seed, and the random baseline of that seed, meet the same robot."""
+        return dataclasses.replace(self, robot=merge_params(
+            self.robot, {"panda_scene": {"imperfections": {"seed": int(seed)}}}))
 
 
 class PandaTask:
@@ -201,6 +228,8 @@ class RunSpec:
     :param eval_every: > 0: after every this many training episodes, test on the test poses
         (``evaluations`` in the result, simulated robot time included) and stop at the first
         evaluation that solves them all; the final test phase is then left out.
+    :param arm: ``realistic`` | ``ideal`` (:data:`ARMS`); the arm's seed is ``seed``.
+    :param gamma: the discount; ``None`` keeps ``learner.yaml``'s.
     """
     algorithm: str
     critic_lr: float
@@ -224,8 +253,14 @@ class RunSpec:
     updates_per_step: float = 10.0
     publish_every: int = 20
     eval_every: int = 0
+    arm: str = "realistic"
+    gamma: float | None = None
 
     def __post_init__(self) -> None:
+        if self.arm not in ARMS:
+            raise ValueError(f"arm must be one of {ARMS}, got {self.arm!r}")
+        if self.gamma is not None and not 0.0 < self.gamma < 1.0:
+            raise ValueError(f"gamma must be in (0, 1), got {self.gamma}")
         if self.algorithm not in ALGORITHMS:
             raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {self.algorithm!r}")
         if self.estimator not in ESTIMATORS:
@@ -246,12 +281,15 @@ class RunSpec:
         extra += (f"_async{self.updates_per_step:g}x{self.publish_every}"
                   if self.schedule == "async" else "")
         extra += f"_eval{self.eval_every}" if self.eval_every else ""
+        extra += f"_g{self.gamma:g}" if self.gamma is not None else ""
+        extra += "_ideal" if self.arm == "ideal" else ""
         return f"{self.algorithm}_lr{self.critic_lr:g}_it{self.iterations}{extra}_s{self.seed}"
 
     def learner_config(self, base: LearnerConfig) -> LearnerConfig:
         config = algorithm_config(base, self.algorithm, ACTION_DIM)
         ddpg = dataclasses.replace(config.ddpg, critic_lr=self.critic_lr, actor_lr=None,
-                                   seed=self.seed)
+                                   seed=self.seed,
+                                   gamma=config.ddpg.gamma if self.gamma is None else self.gamma)
         return dataclasses.replace(
             config, ddpg=ddpg, iterations_per_cycle=self.iterations, seed=self.seed,
             graph_resolution=self.graph_resolution, schedule=self.schedule,
@@ -309,7 +347,7 @@ def run_training(spec: RunSpec) -> dict[str, Any]:
     """
     torch.set_num_threads(1)
     start = time.perf_counter()
-    settings = StackSettings.load(spec.config_dir)
+    settings = StackSettings.load(spec.config_dir, spec.arm).with_arm_seed(spec.seed)
     task_config = dataclasses.replace(settings.task, train_max_steps=spec.train_max_steps,
                                       test_max_steps=spec.test_max_steps,
                                       observation=spec.observation or settings.task.observation)

@@ -18,6 +18,7 @@ from robot_bridge_node.core.hardware_interface import (Robot, RobotDescription, 
 
 from sim_robot_node.core.nextage_scene import (NextagePegScene, NextageSceneConfig,
                                                PegHoleGeometry, nextage_urdf_path, sample_start)
+from sim_robot_node.core.arm_imperfections import ArmImperfections
 from sim_robot_node.core.panda_scene import PandaSceneConfig, PandaShaftScene
 
 __all__ = ["SimPanda", "SIM_PANDA", "SimNextage", "SIM_NEXTAGE", "NEXTAGE_JOINT_NAMES"]
@@ -74,10 +75,14 @@ def _create_panda(params: dict[str, Any]) -> Robot:
     return Robot(hardware=sim, simulation=sim, description=_describe_panda(params))
 
 
-#: The Panda scene's parameters: every length, mass and friction positive.
+#: The Panda scene's parameters: every length, mass and friction positive, every imperfection
+#: >= 0 (0: off).
 _PANDA_SCENE = ParameterSection("panda_scene", PandaSceneConfig, ranges={
     **{name: POSITIVE for name, kind in PandaSceneConfig.__annotations__.items()
        if kind == "float"},
+    **{f"imperfections.{name}": POSITIVE
+       for name, kind in ArmImperfections.__annotations__.items() if kind == "float"},
+    "imperfections.seed": (0, 2 ** 31 - 1),
     "time_step": (0.0, 0.01), "solver_iterations": (1, 10000), "bore_segments": (8, 10000)})
 
 #: ``robot:=sim_panda``: the Panda pressing a shaft into a bearing (config/panda_scene.yaml).

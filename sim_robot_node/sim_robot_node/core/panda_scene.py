@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 import shutil
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree
@@ -28,9 +28,11 @@ import numpy as np
 import pybullet as p
 from qg_common.panda_description import Q_READY, panda_urdf_path
 from qg_common.params import config_from_dict
-from qg_common.rotations import (axis_angle_matrix, housing_rotation, rotation_log,
-                                 tilt_from_down)
+from qg_common.rotations import (axis_angle_matrix, housing_rotation,
+                                 quaternion_from_matrix, rotation_log, tilt_from_down)
 from qg_common.types import N_START_POSES, GroundTruth, JointState
+
+from sim_robot_node.core.arm_imperfections import ArmImperfections, ImperfectArm
 
 __all__ = ["PandaSceneConfig", "PandaShaftScene"]
 
@@ -65,6 +67,7 @@ class PandaSceneConfig:
     max_lateral_offset: float = 0.015           # episode ends if the tip leaves the axis by more
     housing_tilt: float = 0.0                   # [rad] fixture tilt of the bore axis (about the
                                                 # housing's x axis, after its yaw)
+    imperfections: ArmImperfections = field(default_factory=ArmImperfections)  # the real arm
 
     def __post_init__(self) -> None:
         if not 0.0 < self.time_step <= 0.01:
@@ -92,8 +95,12 @@ class PandaSceneConfig:
 
     @classmethod
     def from_dict(cls, params: dict[str, Any]) -> PandaSceneConfig:
-        """From the ``ros__parameters`` of ``config/panda_scene.yaml``."""
-        return config_from_dict(cls, params)
+        """From the ``ros__parameters`` of ``config/panda_scene.yaml`` (``imperfections``
+        nested)."""
+        values = dict(params)
+        if isinstance(values.get("imperfections"), dict):
+            values["imperfections"] = ArmImperfections.from_dict(values["imperfections"])
+        return config_from_dict(cls, values)
 
     @property
     def full_depth(self) -> float:
@@ -124,6 +131,11 @@ class PandaShaftScene:
 
     def __init__(self, config: PandaSceneConfig | None = None) -> None:
         self.config = config or PandaSceneConfig()
+        imperfections = self.config.imperfections
+        self.arm_errors = ImperfectArm(imperfections)
+        self._friction = imperfections.has_friction
+        self._sensor_errors = imperfections.has_sensor_errors
+        self._measured: JointState | None = None   # the driver's reading of the current step
         self._tmp = Path(tempfile.mkdtemp(prefix="panda_scene_"))
         self.cid: int | None = p.connect(p.DIRECT)
         c = self.config
@@ -146,6 +158,7 @@ class PandaShaftScene:
         self._steps = 0
         self.housing_yaw = 0.0
         self._housing = housing_rotation(0.0, c.housing_tilt)   # base frame <- housing frame
+        self._hole = np.asarray(c.hole_position, float)          # bearing face centre, true
         self.reset(0)
 
     # --- construction -------------------------------------------------------------------
@@ -180,6 +193,17 @@ class PandaShaftScene:
   </link>
   <joint name="shaft_joint" type="fixed"><parent link="panda_hand_tcp"/><child link="shaft"/>
     <origin xyz="{_fmt(c.tool_offset)}"/></joint>"""
+        error = c.imperfections
+        if error.payload_mass_error > 0.0:
+            # The real arm's unmodelled load: on the hand, never in the bridge's model.
+            shaft += f"""
+  <link name="payload_error">
+    <inertial><origin xyz="{_fmt(error.payload_com_error)}"/>
+      <mass value="{error.payload_mass_error:.9f}"/>
+      <inertia ixx="1e-5" iyy="1e-5" izz="1e-5" ixy="0" ixz="0" iyz="0"/></inertial>
+  </link>
+  <joint name="payload_error_joint" type="fixed"><parent link="panda_hand_tcp"/>
+    <child link="payload_error"/><origin xyz="{_fmt(c.tool_offset)}"/></joint>"""
         for element in ElementTree.fromstring(f"<r>{shaft}</r>"):
             root.append(element)
         path = self._tmp / "panda_shaft.urdf"
@@ -253,22 +277,31 @@ class PandaShaftScene:
                 p.setCollisionFilterGroupMask(self.robot, j, 0, 0, physicsClientId=self.cid)
 
     # --- episode ------------------------------------------------------------------------
-    def start_tool_pose(self, initial_pose: int, housing_yaw: float = 0.0
+    def start_tool_pose(self, initial_pose: int, housing_yaw: float = 0.0,
+                        jitter: tuple[np.ndarray, np.ndarray] | None = None
                         ) -> tuple[np.ndarray, np.ndarray]:
         """Tool position and rotation (base frame) of start ``initial_pose`` (0..7).
 
         The shaft is tilted by ``start_tilt`` towards direction k * 45 deg (in the housing frame),
         its tip on the hole axis, its lowest rim point ``start_clearance`` above the bearing face.
+        The housing is the configured one (where the cell believes the bore is). ``jitter``:
+        ``(tilt vector change [rad], tip offset [m])`` in the housing's x/y, how far a real arm
+        misses the taught start.
         """
         if not 0 <= initial_pose < N_START_POSES:
             raise ValueError(f"initial_pose must be in 0..{N_START_POSES - 1}, got {initial_pose}")
         c = self.config
-        phi = initial_pose * 2.0 * math.pi / N_START_POSES
-        axis_up = np.array([math.sin(c.start_tilt) * math.cos(phi),
-                            math.sin(c.start_tilt) * math.sin(phi), math.cos(c.start_tilt)])
-        tip = np.array([0.0, 0.0, c.start_clearance + c.shaft_radius * math.sin(c.start_tilt)])
+        angle, phi = c.start_tilt, initial_pose * 2.0 * math.pi / N_START_POSES
+        tip = np.zeros(3)
+        if jitter is not None:
+            vector = angle * np.array([math.cos(phi), math.sin(phi)]) + jitter[0]
+            angle, phi = math.hypot(*vector.tolist()), math.atan2(vector[1], vector[0])
+            tip[:2] = jitter[1]
+        axis_up = np.array([math.sin(angle) * math.cos(phi),
+                            math.sin(angle) * math.sin(phi), math.cos(angle)])
+        tip[2] = c.start_clearance + c.shaft_radius * math.sin(angle)
         down = np.diag([1.0, -1.0, -1.0])  # tool z pointing down, hand x along base x
-        tilt = axis_angle_matrix(np.array([-math.sin(phi), math.cos(phi), 0.0]), c.start_tilt)
+        tilt = axis_angle_matrix(np.array([-math.sin(phi), math.cos(phi), 0.0]), angle)
         # The start in the housing frame, then the housing's pose (yaw, fixture tilt).
         housing = housing_rotation(housing_yaw, c.housing_tilt)
         tip = np.asarray(c.hole_position, float) + housing @ tip
@@ -280,19 +313,29 @@ class PandaShaftScene:
         The arm is placed by inverse kinematics at rest; the caller settles it under its
         controller. The plunger goes back to the top of its travel.
         """
-        position, rotation = self.start_tool_pose(initial_pose, housing_yaw)
-        p.resetBasePositionAndOrientation(
-            self.housing, self.config.hole_position,
-            p.getQuaternionFromEuler([self.config.housing_tilt, 0.0, housing_yaw]),
-            physicsClientId=self.cid)
+        c, errors = self.config, self.arm_errors
+        jitter = None
+        if c.imperfections.start_tilt_jitter or c.imperfections.start_position_jitter:
+            jitter = errors.start_jitter()
+        position, rotation = self.start_tool_pose(initial_pose, housing_yaw, jitter)
+        # The bore where the fixture really holds it: the configured pose, then its error.
+        self._housing = housing_rotation(housing_yaw, c.housing_tilt)
+        self._hole = np.asarray(c.hole_position, float)
+        orientation = p.getQuaternionFromEuler([c.housing_tilt, 0.0, housing_yaw])
+        if c.imperfections.housing_tilt_error or c.imperfections.housing_position_error:
+            self._hole = self._hole + self._housing @ errors.housing_position_error
+            self._housing = self._housing @ axis_angle_matrix(errors.housing_rotation_error, 1.0)
+            orientation = quaternion_from_matrix(self._housing)
+        p.resetBasePositionAndOrientation(self.housing, self._hole.tolist(), orientation,
+                                          physicsClientId=self.cid)
         p.resetJointState(self.housing, 0, 0.0, 0.0, physicsClientId=self.cid)
         self.housing_yaw = housing_yaw
-        self._housing = housing_rotation(housing_yaw, self.config.housing_tilt)
         q = self._inverse_kinematics(position, rotation)
         for j, qj in zip(self.arm, q):
             p.resetJointState(self.robot, j, qj, 0.0, physicsClientId=self.cid)
         self._tau = np.zeros(7)
         self._steps = 0
+        self._measure()
 
     def _inverse_kinematics(self, position: np.ndarray, rotation: np.ndarray) -> np.ndarray:
         """Joint angles putting the tool exactly at the pose (damped least squares from ready).
@@ -331,18 +374,36 @@ class PandaShaftScene:
         """Simulated time since the last reset [s]."""
         return self._steps * self.config.time_step
 
-    def joint_state(self) -> JointState:
-        """Joint positions, velocities and measured torques (= the last applied command)."""
+    def true_joint_state(self) -> JointState:
+        """The joints as they are (evaluation only), with the torque the drives realised."""
         states = p.getJointStates(self.robot, self.arm, physicsClientId=self.cid)
         return JointState(q=np.array([s[0] for s in states]), dq=np.array([s[1] for s in states]),
                           tau=self._tau.copy())
 
+    def joint_state(self) -> JointState:
+        """What the driver reports: joint positions, velocities and measured torques (the last
+        command as the torque sensors read it), with the arm's encoder and sensor errors."""
+        if self._measured is None:
+            return self.true_joint_state()
+        return self._measured
+
+    def _measure(self) -> None:
+        """Take this step's reading (once per step, so every ``joint_state`` agrees)."""
+        if not self._sensor_errors:
+            return
+        true = self.true_joint_state()
+        m = self.arm_errors.measure(true.q, true.dq, true.tau)
+        self._measured = JointState(q=m.q, dq=m.dq, tau=m.tau)
+
     def apply_torques(self, tau: np.ndarray) -> None:
-        """Joint torques for the next step [Nm]; the caller enforces limits."""
+        """Joint torques for the next step [Nm]; the caller enforces limits. With joint
+        friction, the links get the command minus the friction at their true velocities."""
         tau = np.asarray(tau, float)
         if tau.shape != (7,) or not np.all(np.isfinite(tau)):
             raise ValueError(f"tau must be 7 finite torques, got {tau}")
         self._tau = tau.copy()
+        if self._friction:
+            tau = tau - self.arm_errors.friction(self.true_joint_state().dq)
         p.setJointMotorControlArray(self.robot, self.arm, p.TORQUE_CONTROL, forces=tau.tolist(),
                                     physicsClientId=self.cid)
 
@@ -353,6 +414,7 @@ class PandaShaftScene:
                              (0.0, 0.0, 0.0), p.LINK_FRAME, physicsClientId=self.cid)
         p.stepSimulation(physicsClientId=self.cid)
         self._steps += 1
+        self._measure()
 
     # --- ground truth -------------------------------------------------------------------
     def tool_pose(self) -> tuple[np.ndarray, np.ndarray]:
@@ -389,8 +451,7 @@ class PandaShaftScene:
     def target_tool_position(self) -> np.ndarray:
         """Tool position with the shaft on the bore axis and fully inserted [m]."""
         c = self.config
-        return np.asarray(c.hole_position, float) + self._housing @ np.array(
-            [0.0, 0.0, c.grasp_height - c.full_depth])
+        return self._hole + self._housing @ np.array([0.0, 0.0, c.grasp_height - c.full_depth])
 
     def ground_truth(self) -> GroundTruth:
         """Contact wrench, insertion state and the errors the dense reward uses."""
@@ -403,7 +464,7 @@ class PandaShaftScene:
         housing = self._housing
         tilt, axis = tilt_from_down(housing.T @ rotation)
         error = rotation.T @ (housing @ axis * tilt)
-        tip_in_housing = housing.T @ (tip - np.asarray(c.hole_position, float))
+        tip_in_housing = housing.T @ (tip - self._hole)
         travel = self.plunger_travel()
         return GroundTruth(
             wrench=self.contact_wrench(),

@@ -22,7 +22,7 @@ import yaml
 from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
 
 __all__ = ["ConfigError", "ParameterSection", "POSITIVE", "CONFIG_PACKAGES", "config_file", "config_from_dict", "flatten",
-           "load_ros_params", "package_config", "runs_dir", "unflatten"]
+           "load_ros_params", "merge_params", "package_config", "runs_dir", "unflatten"]
 
 #: The packages that install config files (``share/<package>/config``), searched in this order.
 CONFIG_PACKAGES = ("robot_bridge_node", "sim_robot_node", "qg_learning_node", "qg_experiments")
@@ -95,11 +95,13 @@ def runs_dir() -> Path:
     return Path(env) if env else Path.cwd() / "runs"
 
 
-def _merge(base: dict[str, Any], extra: dict[str, Any]) -> dict[str, Any]:
+def merge_params(base: dict[str, Any], extra: dict[str, Any]) -> dict[str, Any]:
+    """``base`` with ``extra`` laid over it, nested dicts merged key by key (as a second
+    ``--params-file`` overrides only what it names)."""
     out = dict(base)
     for key, value in extra.items():
         if isinstance(value, dict) and isinstance(out.get(key), dict):
-            out[key] = _merge(out[key], value)
+            out[key] = merge_params(out[key], value)
         else:
             out[key] = value
     return out
@@ -154,7 +156,7 @@ def load_ros_params(path: Path, node_name: str | None = None) -> dict[str, Any]:
         body = data[section]
         if not isinstance(body, dict) or "ros__parameters" not in body:
             raise ConfigError(f"{path}: section {section!r} has no 'ros__parameters'")
-        params = _merge(params, _normalise(body["ros__parameters"] or {}))
+        params = merge_params(params, _normalise(body["ros__parameters"] or {}))
     return params
 
 
@@ -164,7 +166,7 @@ def _normalise(params: dict[str, Any]) -> dict[str, Any]:
     for key, value in params.items():
         if isinstance(value, dict):
             value = _normalise(value)
-        out = _merge(out, unflatten({key: value}))
+        out = merge_params(out, unflatten({key: value}))
     return out
 
 

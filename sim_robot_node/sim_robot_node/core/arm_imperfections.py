@@ -1,0 +1,201 @@
+"""What separates a real Panda from the model the bridge controls it with.
+
+The simulated arm is otherwise ideal: the bridge's Pinocchio model is the very URDF pybullet
+loads, the joint state is exact and the measured torque is the command. At rest the EKF then
+reads back exactly the commanded wrench (``docs/learning.md``, section 1), so the thesis's 4-D
+wrench state cannot show where the shaft is. A real arm differs in ways its driver cannot tell
+the bridge about; each is one parameter here, in the units a datasheet or an identification
+paper gives, with 0 switching it off:
+
+- **payload error**: mass the gravity model does not know (adapter, cables, a misentered load)
+  and its centre of mass;
+- **joint friction**: the smooth Coulomb model Gaz et al. (2019) identified on the Panda from its
+  link-side torque sensors, plus a viscous part. It acts between the torque the drive realises
+  (and the sensor reads) and the link, so the driver's measured torque does not contain it;
+- **joint-torque and encoder noise and bias**: what the driver's ``tau_J``, ``q`` and ``dq`` carry;
+- **start-pose jitter**: a taught start is reached within the arm's repeatability, not exactly;
+- **housing pose error**: the fixture holds the bore a little off the axis the cell was
+  configured with; the executor's ``task.push_axis`` is the configured one.
+
+Constants (biases, the housing's error) are drawn once per ``seed``: one seed is one robot in one
+cell. Noise is drawn once per physics step, jitter once per reset, from a second stream of the
+same seed, so a run is a pure function of the seed and the sequence of resets and steps.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+from qg_common.params import config_from_dict
+
+__all__ = ["GAZ_2019_COULOMB", "GAZ_2019_VELOCITY", "ArmImperfections", "ImperfectArm"]
+
+N_ARM_JOINTS = 7
+
+#: [Nm] Coulomb level of each joint's friction, Gaz et al. (2019), "Dynamic Identification of the
+#: Franka Emika Panda Robot With Retrieval of Feasible Parameters Using Penalty-Based
+#: Optimization", IEEE RA-L 4(4): their sigmoid ``phi1 / (1 + exp(-phi2 (dq + phi3)))`` minus its
+#: value at rest tends to ``+-phi1 / 2``; ``phi1 = (0.546, 0.872, 0.641, 1.279, 0.839, 0.303,
+#: 0.565) Nm``.
+GAZ_2019_COULOMB = (0.27308, 0.43612, 0.32034, 0.63970, 0.41952, 0.15151, 0.28245)
+#: [rad/s] velocity scale of the same sigmoid written as ``coulomb * tanh(dq / v)``:
+#: ``v = 2 / phi2`` with ``phi2 = (5.12, 9.07, 10.14, 5.59, 8.35, 17.13, 10.34) s/rad``.
+GAZ_2019_VELOCITY = (0.39077, 0.22061, 0.19732, 0.35776, 0.23961, 0.11673, 0.19350)
+
+
+@dataclass(frozen=True)
+class ArmImperfections:
+    """The real arm's departures from the model, each 0 for the ideal arm.
+
+    :param payload_mass_error: [kg] mass on the hand that the bridge's model does not carry.
+        Default 0.1 kg: an adapter and cables, about 14 % of the Franka Hand's 0.73 kg, within
+        the error of a load entered by hand (Franka's Desk asks for the end effector's mass and
+        centre of mass; libfranka ``setLoad``).
+    :param payload_com_error: (3,) [m] that mass's centre in the tool frame (z along the shaft).
+        Default 2 cm beside the flange and 3 cm towards it.
+    :param joint_coulomb_friction: (7,) [Nm] Coulomb level per joint (Gaz et al. 2019, above).
+    :param joint_friction_velocity: (7,) [rad/s] velocity at which the Coulomb part reaches 76 %
+        of its level (``tanh(1)``); Gaz et al.'s sigmoid slope. Must be > 0 where friction is on.
+    :param joint_viscous_friction: (7,) [Nms/rad] viscous friction per joint. Gaz et al. fitted
+        none beyond the sigmoid, whose slope at rest (0.7-2.0 Nms/rad) already acts viscous at the
+        task's speeds; default 0.05 Nms/rad, the order of harmonic-drive viscous terms.
+    :param torque_noise: [Nm] std of the joint-torque sensor's noise per sample. Default 0.02 Nm,
+        the Panda datasheet's torque resolution (< 0.02 Nm).
+    :param torque_bias: [Nm] std of each joint-torque sensor's offset (drawn once per seed).
+        Default 0.15 Nm, the datasheet's relative torque accuracy.
+    :param encoder_noise: [rad] std of the joint position's noise per sample. Default 1e-5 rad.
+    :param encoder_bias: [rad] std of each joint's calibration offset (drawn once per seed).
+        Default 1e-4 rad: about the datasheet's pose repeatability (+-0.1 mm) over the 0.85 m reach.
+    :param velocity_noise: [rad/s] std of the joint velocity's noise per sample. Default 1e-3
+        rad/s, the noise the wrench estimator assumes (``wrench_estimator.yaml``).
+    :param start_tilt_jitter: [rad] std of each component of the start tilt vector, drawn per
+        reset. Default 0.5 deg: a taught start reached again by an impedance controller.
+    :param start_position_jitter: [m] std of the shaft tip's lateral start position per reset.
+        Default 0.05 mm, half the datasheet's pose repeatability.
+    :param housing_tilt_error: [rad] std of each component of the bore axis' tilt from the
+        configured axis (drawn once per seed). Default 0.5 deg, ISO 2768-1 class m angular
+        tolerance for 10-50 mm features (+-0.5 deg).
+    :param housing_position_error: [m] std of the bore centre's lateral offset from the
+        configured position (drawn once per seed). Default 0.05 mm.
+    :param seed: which robot and cell: the constants above and the noise streams.
+    """
+
+    payload_mass_error: float = 0.1
+    payload_com_error: tuple[float, ...] = (0.02, 0.0, -0.03)
+    joint_coulomb_friction: tuple[float, ...] = GAZ_2019_COULOMB
+    joint_friction_velocity: tuple[float, ...] = GAZ_2019_VELOCITY
+    joint_viscous_friction: tuple[float, ...] = (0.05,) * N_ARM_JOINTS
+    torque_noise: float = 0.02
+    torque_bias: float = 0.15
+    encoder_noise: float = 1e-5
+    encoder_bias: float = 1e-4
+    velocity_noise: float = 1e-3
+    start_tilt_jitter: float = math.radians(0.5)
+    start_position_jitter: float = 5e-5
+    housing_tilt_error: float = math.radians(0.5)
+    housing_position_error: float = 5e-5
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name == "seed":
+                if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                    raise ValueError(f"seed must be an integer >= 0, got {value!r}")
+                continue
+            values = value if isinstance(value, tuple) else (value,)
+            signed = f.name == "payload_com_error"     # a position, any sign
+            if any(isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
+                   or (v < 0.0 and not signed) for v in values):
+                raise ValueError(f"{f.name} must be finite{'' if signed else ' and >= 0'}, "
+                                 f"got {value!r}")
+        if len(self.payload_com_error) != 3:
+            raise ValueError(f"payload_com_error needs 3 entries, got {self.payload_com_error}")
+        for name in ("joint_coulomb_friction", "joint_friction_velocity",
+                     "joint_viscous_friction"):
+            if len(getattr(self, name)) != N_ARM_JOINTS:
+                raise ValueError(f"{name} needs {N_ARM_JOINTS} entries, got {getattr(self, name)}")
+        if any(c > 0.0 and v <= 0.0 for c, v in zip(self.joint_coulomb_friction,
+                                                    self.joint_friction_velocity)):
+            raise ValueError("joint_friction_velocity must be > 0 on every joint with friction")
+
+    @classmethod
+    def ideal(cls, seed: int = 0) -> ArmImperfections:
+        """The arm exactly as the bridge models it (every imperfection 0)."""
+        zeros = (0.0,) * N_ARM_JOINTS
+        return cls(payload_mass_error=0.0, payload_com_error=(0.0, 0.0, 0.0),
+                   joint_coulomb_friction=zeros, joint_friction_velocity=zeros,
+                   joint_viscous_friction=zeros, torque_noise=0.0, torque_bias=0.0,
+                   encoder_noise=0.0, encoder_bias=0.0, velocity_noise=0.0,
+                   start_tilt_jitter=0.0, start_position_jitter=0.0, housing_tilt_error=0.0,
+                   housing_position_error=0.0, seed=seed)
+
+    @classmethod
+    def from_dict(cls, params: dict[str, Any]) -> ArmImperfections:
+        """From the ``panda_scene.imperfections`` section (unknown keys are an error)."""
+        return config_from_dict(cls, params)
+
+    @property
+    def has_friction(self) -> bool:
+        return any(self.joint_coulomb_friction) or any(self.joint_viscous_friction)
+
+    @property
+    def has_sensor_errors(self) -> bool:
+        return any((self.torque_noise, self.torque_bias, self.encoder_noise, self.encoder_bias,
+                    self.velocity_noise))
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """What the driver reports for one step: joint positions, velocities and torques."""
+    q: np.ndarray
+    dq: np.ndarray
+    tau: np.ndarray
+
+
+class ImperfectArm:
+    """The drawn constants and the noise streams of one :class:`ArmImperfections`.
+
+    ``friction`` is applied by the scene between the command and the links; ``measure`` turns
+    the true joint state and the command into what the driver reads, once per physics step;
+    ``start_jitter`` perturbs each start; ``housing_rotation_error`` and
+    ``housing_position_error`` are the fixture's constant misplacement (housing frame).
+    """
+
+    def __init__(self, config: ArmImperfections) -> None:
+        self.config = config
+        constants = np.random.default_rng([config.seed, 0])
+        self.torque_bias = constants.normal(0.0, 1.0, N_ARM_JOINTS) * config.torque_bias
+        self.encoder_bias = constants.normal(0.0, 1.0, N_ARM_JOINTS) * config.encoder_bias
+        tilt = constants.normal(0.0, 1.0, 2) * config.housing_tilt_error
+        offset = constants.normal(0.0, 1.0, 2) * config.housing_position_error
+        #: (3,) rotation vector of the true bore axis against the configured one (housing frame)
+        self.housing_rotation_error = np.array([tilt[0], tilt[1], 0.0])
+        #: (3,) the true bore centre against the configured one (housing frame) [m]
+        self.housing_position_error = np.array([offset[0], offset[1], 0.0])
+        self._noise = np.random.default_rng([config.seed, 1])
+        self._coulomb = np.array(config.joint_coulomb_friction, float)
+        self._velocity = np.where(self._coulomb > 0.0,
+                                  np.array(config.joint_friction_velocity, float), 1.0)
+        self._viscous = np.array(config.joint_viscous_friction, float)
+        self._sensor_noise = np.repeat([config.encoder_noise, config.velocity_noise,
+                                        config.torque_noise], N_ARM_JOINTS)
+
+    def friction(self, dq: np.ndarray) -> np.ndarray:
+        """(7,) [Nm] the joints' friction torque at true velocities ``dq`` (opposes motion)."""
+        return self._coulomb * np.tanh(dq / self._velocity) + self._viscous * dq
+
+    def measure(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray) -> Measurement:
+        """The driver's reading of the true ``q``, ``dq`` and the realised torque ``tau``."""
+        noise = self._noise.normal(0.0, 1.0, 3 * N_ARM_JOINTS) * self._sensor_noise
+        return Measurement(q=q + self.encoder_bias + noise[:N_ARM_JOINTS],
+                           dq=dq + noise[N_ARM_JOINTS:2 * N_ARM_JOINTS],
+                           tau=tau + self.torque_bias + noise[2 * N_ARM_JOINTS:])
+
+    def start_jitter(self) -> tuple[np.ndarray, np.ndarray]:
+        """One reset's ``(tilt vector change [rad] (2,), tip offset [m] (2,))``, housing frame."""
+        draw = self._noise.normal(0.0, 1.0, 4)
+        return (draw[:2] * self.config.start_tilt_jitter,
+                draw[2:] * self.config.start_position_jitter)
