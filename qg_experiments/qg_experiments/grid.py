@@ -1,9 +1,11 @@
 """Experiments 2-4: the learning-rate x iterations grid, mean Q over training, and variants.
 
 Cells are (critic learning rate, training iterations per cycle); in each, vanilla DDPG and QG-DDPG
-train for a number of episodes and are then tested without noise. A cell "beats random" when its
-mean test steps (failures counted at the test cap) are below the best random baseline's mean
-steps. Experiment 4 reruns each algorithm's best cell with the sparse reward or a small replay.
+train for a number of episodes and are then tested without noise. A cell "beats random" when the
+95 % interval of its mean test steps (failures counted at the test cap; one mean per seed) lies
+below the best random baseline's mean steps (``stats``). Experiment 4 reruns fixed cells with one
+setting changed (the sparse reward, a small replay, another discount), both algorithms on the
+same seeds, so every (cell, seed) is a pair for the paired comparison.
 """
 from __future__ import annotations
 
@@ -12,38 +14,49 @@ from typing import Any
 
 import numpy as np
 
+from qg_experiments import stats
 from qg_experiments.profile import GridBudget, VariantBudget
 from qg_experiments.runner import RunSpec
 
-__all__ = ["grid_specs", "variant_specs", "cell_table", "best_cells", "test_steps"]
+__all__ = ["grid_specs", "variant_specs", "cell_table", "test_steps", "seed_means",
+           "pairs", "variant_name", "graph_diagnostics"]
 
 
-def grid_specs(budget: GridBudget, estimator: str = "ekf",
-               config_dir: str | None = None) -> list[RunSpec]:
+def grid_specs(budget: GridBudget, estimator: str = "ekf", config_dir: str | None = None,
+               arm: str = "realistic", experiment: str = "grid") -> list[RunSpec]:
     """Every (cell, algorithm, seed) run of the grid."""
     return [RunSpec(algorithm=algorithm, critic_lr=float(lr), iterations=int(iterations),
                     seed=seed, train_episodes=budget.train_episodes,
                     test_episodes=budget.test_episodes, train_max_steps=budget.train_max_steps,
                     test_max_steps=budget.test_max_steps, cycle_steps=budget.cycle_steps,
-                    estimator=estimator, config_dir=config_dir, observation=budget.observation)
+                    estimator=estimator, config_dir=config_dir, observation=budget.observation,
+                    arm=arm, experiment=experiment)
             for lr, iterations in budget.cells for algorithm in budget.algorithms
             for seed in budget.seeds]
 
 
-def variant_specs(grid: GridBudget, variants: VariantBudget, best: dict[str, tuple[float, int]],
-                  estimator: str = "ekf", config_dir: str | None = None) -> list[RunSpec]:
-    """Sparse-reward and small-replay runs at each algorithm's ``best`` (lr, iterations) cell."""
-    base = {s.algorithm: s for s in grid_specs(dataclasses.replace(grid, seeds=variants.seeds[:1]),
-                                               estimator, config_dir)}
-    specs = []
-    for algorithm, (lr, iterations) in sorted(best.items()):
-        cell = dataclasses.replace(base[algorithm], critic_lr=lr, iterations=iterations,
-                                   experiment="variants")
-        for seed in variants.seeds:
-            specs += [dataclasses.replace(cell, seed=seed, reward=r) for r in variants.rewards]
-            specs += [dataclasses.replace(cell, seed=seed, replay_capacity=c)
-                      for c in variants.replay_capacities]
-    return specs
+def variant_specs(grid: GridBudget, variants: VariantBudget, estimator: str = "ekf",
+                  config_dir: str | None = None, arm: str = "realistic") -> list[RunSpec]:
+    """Every (setting, cell, algorithm, seed) run of experiment 4: the grid's protocol at the
+    variants' cells with the setting's fields changed."""
+    cells = dataclasses.replace(grid, cells=variants.cells, seeds=variants.seeds)
+    return [dataclasses.replace(spec, experiment="variants", **changes)
+            for _, changes in variants.overrides()
+            for spec in grid_specs(cells, estimator, config_dir, arm)]
+
+
+def variant_name(spec: dict[str, Any], default_gamma: float) -> str:
+    """Which setting a variant run changed, from its spec: ``sparse``, ``replay 300``, ..."""
+    parts = []
+    if spec.get("reward", "dense") != "dense":
+        parts.append(f"{spec['reward']} reward")
+    if spec.get("replay_capacity"):
+        parts.append(f"replay {spec['replay_capacity']}")
+    if spec.get("gamma") is not None and spec["gamma"] != default_gamma:
+        parts.append(f"gamma {spec['gamma']:g}")
+    if spec.get("observation"):
+        parts.append(f"state {spec['observation']}")
+    return ", ".join(parts) or "the grid's settings"
 
 
 def test_steps(result: dict[str, Any]) -> list[int]:
@@ -51,39 +64,75 @@ def test_steps(result: dict[str, Any]) -> list[int]:
     return [e["steps"] for e in result["episodes"] if e["mode"] == "test"]
 
 
+def seed_means(group: list[dict[str, Any]]) -> dict[int, float]:
+    """Per seed, the mean test steps of that seed's run: the independent unit of a cell."""
+    return {r["spec"]["seed"]: float(np.mean(test_steps(r))) for r in group if test_steps(r)}
+
+
+def pairs(results: list[dict[str, Any]], a: str = "qgddpg", b: str = "ddpg"
+          ) -> tuple[list[float], list[float], list[tuple]]:
+    """Per-seed mean test steps of ``a`` and ``b`` on the same (cell, setting, seed), aligned:
+    the pairs of the paired comparison, and their keys."""
+    runs: dict[tuple, dict[str, float]] = {}
+    for r in results:
+        s = r["spec"]
+        key = (s["critic_lr"], s["iterations"], s["reward"], s["replay_capacity"],
+               s.get("gamma"), s.get("observation"), s["seed"])
+        if test_steps(r):
+            runs.setdefault(key, {})[s["algorithm"]] = float(np.mean(test_steps(r)))
+    keys = sorted((k for k, v in runs.items() if a in v and b in v), key=str)
+    return [runs[k][a] for k in keys], [runs[k][b] for k in keys], keys
+
+
+def graph_diagnostics(group: list[dict[str, Any]]) -> dict[str, float]:
+    """What the bounds did in these runs: the share of TD targets a lower bound raised (mean
+    over all training cycles) and the critic's final mean |Q - Monte-Carlo return| on the
+    goal-reaching training episodes (``runner.MonteCarloCheck``), averaged over runs."""
+    raised = [c["frac_raised_lower"] for r in group for c in r["cycles"]
+              if "frac_raised_lower" in c]
+    errors = [next((c["critic_mc_error"] for c in reversed(r["cycles"])
+                    if np.isfinite(c.get("critic_mc_error", np.nan))), np.nan) for r in group]
+    errors = [e for e in errors if np.isfinite(e)]
+    return {"targets_raised": float(np.mean(raised)) if raised else float("nan"),
+            "critic_mc_error": float(np.mean(errors)) if errors else float("nan")}
+
+
 def cell_table(results: list[dict[str, Any]], random_bar: float | None) -> list[dict[str, Any]]:
-    """One row per (algorithm, cell, reward, replay): mean test steps over seeds and episodes."""
+    """One row per (algorithm, cell, setting): mean test steps over seeds and episodes, with the
+    95 % interval over the per-seed means."""
     groups: dict[tuple, list[dict[str, Any]]] = {}
     for r in results:
         s = r["spec"]
-        key = (s["algorithm"], s["critic_lr"], s["iterations"], s["reward"], s["replay_capacity"])
+        key = (s["algorithm"], s["critic_lr"], s["iterations"], s["reward"], s["replay_capacity"],
+               s.get("gamma"), s.get("observation"))
         groups.setdefault(key, []).append(r)
     rows = []
-    for (algorithm, lr, iterations, reward, capacity), group in sorted(groups.items()):
+    for (algorithm, lr, iterations, reward, capacity, gamma, observation), group in sorted(
+            groups.items(), key=lambda item: str(item[0])):
         steps = np.array([n for r in group for n in test_steps(r)], dtype=float)
         successes = [e["success"] for r in group for e in r["episodes"] if e["mode"] == "test"]
         train = [e for r in group for e in r["episodes"] if e["mode"] == "train"]
+        per_seed = seed_means(group)
+        interval = stats.mean_interval(list(per_seed.values())) if per_seed else None
         mean = float(steps.mean()) if steps.size else float("nan")
         rows.append({"algorithm": algorithm, "critic_lr": lr, "iterations": iterations,
-                     "reward": reward, "replay_capacity": capacity, "seeds": len(group),
+                     "reward": reward, "replay_capacity": capacity, "gamma": gamma,
+                     "observation": observation, "seeds": len(group),
                      "mean_test_steps": mean,
+                     "ci_low": interval.low if interval else float("nan"),
+                     "ci_high": interval.high if interval else float("nan"),
+                     "seed_means": [round(per_seed[k], 2) for k in sorted(per_seed)],
+                     "test_failures": int(sum(not s for s in successes)),
+                     "test_episodes": len(successes),
                      "test_success_rate": float(np.mean(successes)) if successes else 0.0,
                      "train_success_rate": float(np.mean([e["success"] for e in train]))
                      if train else 0.0,
-                     "beats_random": bool(random_bar is not None and mean < random_bar),
+                     "beats_random": bool(random_bar is not None and interval is not None
+                                          and stats.beats(interval, random_bar)),
                      "final_mean_q": float(np.mean([r["cycles"][-1]["mean_q"] for r in group
                                                     if r["cycles"]] or [np.nan])),
+                     **graph_diagnostics(group),
                      "wall_time": float(sum(r["wall_time"] for r in group))})
     return rows
 
 
-def best_cells(rows: list[dict[str, Any]]) -> dict[str, tuple[float, int]]:
-    """Each algorithm's (critic_lr, iterations) with the fewest mean test steps (dense, default)."""
-    best: dict[str, dict[str, Any]] = {}
-    for row in rows:
-        if row["reward"] != "dense" or row["replay_capacity"] is not None:
-            continue
-        if row["algorithm"] not in best or row["mean_test_steps"] < best[row["algorithm"]][
-                "mean_test_steps"]:
-            best[row["algorithm"]] = row
-    return {a: (r["critic_lr"], r["iterations"]) for a, r in best.items()}

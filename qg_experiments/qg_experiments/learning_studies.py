@@ -61,15 +61,22 @@ ECHO_CELL = (1e-3, 10)
 ECHO_OBSERVATIONS = ("tilt", "tilt_force", "tilt_only")
 
 
+#: The studies' arm: they were measured on the ideal arm, before the realistic one existed.
+STUDY_ARM = "ideal"
+
+
 def study_specs(profile_name: str = "thesis") -> dict[str, list[RunSpec]]:
-    """The runs of every study, built on the grid of ``profile_name``."""
-    grid = dataclasses.replace(load_profile(profile_name).grid, observation=STUDY_OBSERVATION)
+    """The runs of every study, built on the grid of ``profile_name`` with three of the tuning
+    seeds (studies are where choices are made, never on the report seeds)."""
+    profile = load_profile(profile_name)
+    grid = dataclasses.replace(profile.grid, observation=STUDY_OBSERVATION,
+                               seeds=profile.seeds.tuning[:3])
 
     def runs(cell: tuple[float, int], algorithms: tuple[str, ...] = grid.algorithms,
              **changes: Any) -> list[RunSpec]:
         """The grid's runs of one cell, for ``algorithms``, with ``changes`` to the grid."""
         return grid_specs(dataclasses.replace(grid, cells=(cell,), algorithms=algorithms,
-                                              **changes))
+                                              **changes), arm=STUDY_ARM)
 
     qgddpg = ("qgddpg",)
     both_at_cell, qgddpg_at_cell = runs(CELL), runs(CELL, qgddpg)

@@ -1,7 +1,10 @@
 """Experiment budgets by profile (``config/experiments.yaml``): thesis, small and tiny (CI).
 
 One profile fixes, for every experiment, how many runs, episodes and steps are spent; the task,
-bridge, estimator and learner numbers always come from the stack's own config files.
+bridge, estimator and learner numbers always come from the stack's own config files. Seeds are
+split once for all profiles: ``seeds.tuning`` for every probe and choice, ``seeds.report`` for
+the report only, so no number in ``results.md`` comes from a seed a choice was made on. A budget
+names its seeds as ``report``, ``tuning`` or an explicit list.
 """
 from __future__ import annotations
 
@@ -13,9 +16,34 @@ import yaml
 from qg_common.params import config_file
 
 from qg_learning_node.executor.residual_task import state_dim
-from qg_experiments.runner import ALGORITHMS, ESTIMATORS
+from qg_experiments.runner import ALGORITHMS, ARMS, ESTIMATORS
 
-__all__ = ["RandomBudget", "GridBudget", "VariantBudget", "PegBudget", "Profile", "load_profile"]
+__all__ = ["RandomBudget", "GridBudget", "VariantBudget", "PegBudget", "Profile", "Seeds",
+           "load_profile", "VARIANT_KEYS"]
+
+#: What a variant may change in a grid run (``RunSpec`` fields).
+VARIANT_KEYS = ("reward", "replay_capacity", "gamma", "observation")
+
+
+@dataclass(frozen=True)
+class Seeds:
+    """The two disjoint seed sets (``config/experiments.yaml``, ``seeds``)."""
+    tuning: tuple[int, ...]
+    report: tuple[int, ...]
+
+    def __post_init__(self) -> None:
+        if set(self.tuning) & set(self.report):
+            raise ValueError(f"tuning and report seeds overlap: "
+                             f"{sorted(set(self.tuning) & set(self.report))}")
+
+    def resolve(self, value: Any) -> tuple[int, ...]:
+        """``report``, ``tuning`` or a list of seeds."""
+        if value in ("report", "tuning"):
+            return getattr(self, value)
+        if isinstance(value, (list, tuple)) and value and all(
+                isinstance(v, int) and not isinstance(v, bool) for v in value):
+            return tuple(value)
+        raise ValueError(f"seeds must be 'report', 'tuning' or a list of integers, got {value!r}")
 
 
 def _fields(cls: type, values: dict[str, Any]) -> dict[str, Any]:
@@ -28,14 +56,16 @@ def _fields(cls: type, values: dict[str, Any]) -> dict[str, Any]:
 
 @dataclass(frozen=True)
 class RandomBudget:
-    """:param noises: ``({kind, sigma}, ...)``; :param episodes: per noise (poses rotate)."""
+    """:param noises: ``({kind, sigma}, ...)``; :param episodes: per noise and seed (poses
+    rotate); :param seeds: one run per noise and seed, each on its seed's arm."""
     noises: tuple[dict[str, Any], ...]
     episodes: int = 8
     max_steps: int = 1000
+    seeds: tuple[int, ...] = (0,)
 
     def __post_init__(self) -> None:
-        if not self.noises or self.episodes < 1 or self.max_steps < 1:
-            raise ValueError("random: needs noises, episodes >= 1 and max_steps >= 1")
+        if not self.noises or self.episodes < 1 or self.max_steps < 1 or not self.seeds:
+            raise ValueError("random: needs noises, seeds, episodes >= 1 and max_steps >= 1")
 
 
 @dataclass(frozen=True)
@@ -66,10 +96,30 @@ class GridBudget:
 
 @dataclass(frozen=True)
 class VariantBudget:
-    """Experiment 4 at each algorithm's best grid cell: other rewards, smaller replay memories."""
-    rewards: tuple[str, ...] = ()
-    replay_capacities: tuple[int, ...] = ()
+    """Experiment 4: the grid's protocol with one setting changed, at fixed cells.
+
+    :param cells: ``((critic_lr, iterations), ...)``, chosen before the report (on the tuning
+        seeds), the same for both algorithms so each (cell, seed) is a pair.
+    :param settings: ``({name, <one or more of VARIANT_KEYS>}, ...)``, e.g.
+        ``{name: sparse, reward: sparse}``.
+    """
+    cells: tuple[tuple[float, int], ...] = ()
+    settings: tuple[dict[str, Any], ...] = ()
     seeds: tuple[int, ...] = (0,)
+
+    def __post_init__(self) -> None:
+        for setting in self.settings:
+            changes = set(setting) - {"name"}
+            if "name" not in setting or not changes or changes - set(VARIANT_KEYS):
+                raise ValueError(f"variant {setting!r}: needs a name and one or more of "
+                                 f"{VARIANT_KEYS}")
+        if self.settings and not self.cells:
+            raise ValueError("variants: settings need cells")
+
+    def overrides(self) -> list[tuple[str, dict[str, Any]]]:
+        """``(name, RunSpec field changes)`` per setting."""
+        return [(s["name"], {k: v for k, v in s.items() if k != "name"})
+                for s in self.settings]
 
 
 @dataclass(frozen=True)
@@ -94,6 +144,8 @@ class PegBudget:
 
 @dataclass(frozen=True)
 class Profile:
+    """:param state_grid: the grid once more with another state (the thesis's 4-D wrench
+    state), reported beside the grid; ``None``: not run."""
     name: str
     estimator: str
     random: RandomBudget
@@ -101,10 +153,15 @@ class Profile:
     variants: VariantBudget
     peg: PegBudget
     nextage: PegBudget | None = None   # experiment 6: the peg on the simulated Nextage
+    state_grid: GridBudget | None = None
+    arm: str = "realistic"
+    seeds: Seeds = Seeds(tuning=(0,), report=(1,))
 
     def __post_init__(self) -> None:
         if self.estimator not in ESTIMATORS:
             raise ValueError(f"estimator must be one of {ESTIMATORS}, got {self.estimator!r}")
+        if self.arm not in ARMS:
+            raise ValueError(f"arm must be one of {ARMS}, got {self.arm!r}")
 
 
 def load_profile(name: str, path: Path | None = None, estimator: str | None = None) -> Profile:
@@ -113,13 +170,25 @@ def load_profile(name: str, path: Path | None = None, estimator: str | None = No
     profiles = data["profiles"]
     if name not in profiles:
         raise ValueError(f"unknown profile {name!r}; known: {sorted(profiles)}")
+    seeds = Seeds(tuning=tuple(data["seeds"]["tuning"]), report=tuple(data["seeds"]["report"]))
+
+    def section(cls: type, values: dict[str, Any]) -> Any:
+        values = dict(values)
+        if "seeds" in values:
+            values["seeds"] = seeds.resolve(values["seeds"])
+        if "noises" in values:
+            values["noises"] = tuple(dict(n) for n in values["noises"])
+        if "settings" in values:
+            values["settings"] = tuple(dict(s) for s in values["settings"])
+        return cls(**_fields(cls, values))
+
     p = profiles[name]
-    random = dict(p["random"])
-    random["noises"] = tuple(dict(n) for n in random["noises"])
     return Profile(name=name, estimator=estimator or data.get("estimator", "ekf"),
-                   random=RandomBudget(**random),
-                   grid=GridBudget(**_fields(GridBudget, p["grid"])),
-                   variants=VariantBudget(**_fields(VariantBudget, p.get("variants", {}))),
-                   peg=PegBudget(**_fields(PegBudget, p["peg"])),
-                   nextage=PegBudget(**_fields(PegBudget, p["nextage"])) if "nextage" in p
-                   else None)
+                   random=section(RandomBudget, p["random"]),
+                   grid=section(GridBudget, p["grid"]),
+                   variants=section(VariantBudget, p.get("variants", {})),
+                   peg=section(PegBudget, p["peg"]),
+                   nextage=section(PegBudget, p["nextage"]) if "nextage" in p else None,
+                   state_grid=section(GridBudget, {**p["grid"], **p["state_grid"]})
+                   if "state_grid" in p else None,
+                   arm=data.get("arm", "realistic"), seeds=seeds)

@@ -118,9 +118,10 @@ def random_bar(rows: list[dict[str, Any]], cap: int) -> tuple[float, str] | None
     return min(capped)
 
 
-def baseline_specs(budget: RandomBudget, estimator: str = "ekf",
-                   config_dir: str | None = None) -> list[BaselineSpec]:
-    """One spec per noise setting of the profile."""
+def baseline_specs(budget: RandomBudget, estimator: str = "ekf", config_dir: str | None = None,
+                   arm: str = "realistic") -> list[BaselineSpec]:
+    """One spec per noise setting and seed of the profile (each seed on its own arm)."""
     return [BaselineSpec(kind=n["kind"], sigma=float(n.get("sigma", 0.0)),
-                         episodes=budget.episodes, max_steps=budget.max_steps,
-                         estimator=estimator, config_dir=config_dir) for n in budget.noises]
+                         episodes=budget.episodes, max_steps=budget.max_steps, seed=seed,
+                         estimator=estimator, config_dir=config_dir, arm=arm)
+            for n in budget.noises for seed in budget.seeds]

@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +20,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from qg_experiments import grid, peg  # noqa: E402
+from qg_experiments import grid, peg, stats  # noqa: E402
 from qg_experiments.profile import PegBudget, Profile  # noqa: E402
 from qg_experiments.random_baselines import (random_bar,  # noqa: E402
                                              summarize_baselines)
@@ -34,6 +35,35 @@ THESIS = {"random_steps": 32, "qg_cells": 6, "ddpg_cells": 1, "cells": 8}
 
 _COLORS = {"ddpg": "tab:orange", "qgddpg": "tab:blue"}
 _NAMES = {"ddpg": "DDPG", "qgddpg": "QG-DDPG"}
+
+
+@dataclass(frozen=True)
+class Bar:
+    """The random bar: the best random setting's mean steps, its episodes cut at the test cap,
+    with the 95 % interval over those episodes."""
+    label: str
+    interval: stats.Interval
+    cap: int
+
+    @property
+    def mean(self) -> float:
+        return self.interval.mean
+
+
+def random_bar_of(rows: list[dict[str, Any]], cap: int) -> Bar | None:
+    """The :class:`Bar` of the random baselines ``rows`` (``random_baselines.random_bar``)."""
+    best = random_bar(rows, cap)
+    if best is None:
+        return None
+    row = next(r for r in rows if r["label"] == best[1])
+    return Bar(best[1], stats.mean_interval(np.minimum(row["steps"], cap)), cap)
+
+
+def _bar_text(bar: Bar | None) -> str:
+    if bar is None:
+        return "no random baseline run: nothing marked"
+    return (f"{bar.label}, {stats.format_interval(bar.interval)} steps over "
+            f"{bar.interval.n} episodes cut at the test cap of {bar.cap}")
 
 
 def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
@@ -73,66 +103,90 @@ def _speed(results: list[dict[str, Any]]) -> str:
 
 
 # --- experiment 1 ------------------------------------------------------------------------------
-def _random_section(rows: list[dict[str, Any]], results: list[dict[str, Any]],
-                    figures: Path) -> list[str]:
+def _random_section(rows: list[dict[str, Any]], results: list[dict[str, Any]], cap: int,
+                    bar: Bar | None, figures: Path) -> list[str]:
     if not rows:
         return ["## 1. Random baselines", "", "Not run in this profile.", ""]
     fig, ax = plt.subplots(figsize=(7, 3.5))
-    ax.boxplot([r["steps"] for r in rows], showmeans=True)
+    ax.boxplot([np.minimum(r["steps"], cap) for r in rows], showmeans=True)
     ax.set_xticks(range(1, len(rows) + 1), [r["label"] for r in rows], rotation=15)
     ax.axhline(THESIS["random_steps"], color="gray", ls="--", lw=1, label="thesis: 32 (real robot)")
     ax.set_ylabel("steps per episode")
-    ax.set_title("Random residuals: steps to insertion (failures at the cap)")
+    ax.set_title(f"Random residuals: steps to insertion (failures at the cap {cap})")
     ax.legend()
     fig.tight_layout()
     fig.savefig(figures / "exp1_random_steps.png", dpi=110)
     plt.close(fig)
+    seeds = sorted({r["spec"]["seed"] for r in results})
     lines = ["## 1. Random baselines", "",
              f"Base push plus a random residual; OU with theta and dt from `executor.yaml`. "
-             f"{rows[0]['episodes']} episodes per setting (poses 0..7 in turn), cap "
-             f"{rows[0]['max_steps']} steps; a failed episode counts as the cap. "
-             f"Speed: {_speed(results)}.", ""]
-    lines += _table(["residual", "episodes", "success", "mean steps", "median", "std",
-                     "steps per episode"],
-                    [[r["label"], str(r["episodes"]), f"{r['success_rate']:.0%}",
-                      _fmt(r["mean_steps"]), _fmt(r["median_steps"]), _fmt(r["std_steps"]),
-                      " ".join(map(str, r["steps"]))] for r in rows])
+             f"{rows[0]['episodes']} episodes per setting: the 8 start poses on each of "
+             f"{len(seeds)} seeds ({', '.join(map(str, seeds))}), each seed on its own arm; cap "
+             f"{rows[0]['max_steps']} steps, a failed episode counts as the cap. The interval is "
+             f"over episodes (independent draws). Speed: {_speed(results)}.", ""]
+    table = []
+    for r in rows:
+        capped = stats.mean_interval(np.minimum(r["steps"], cap))
+        mark = " (the bar)" if bar is not None and r["label"] == bar.label else ""
+        table.append([r["label"] + mark, str(r["episodes"]), f"{r['success_rate']:.0%}",
+                      stats.format_interval(capped), _fmt(r["median_steps"]),
+                      str(sum(n >= r["max_steps"] for n in r["steps"]))])
+    lines += _table(["residual", "episodes", "inserted", "mean steps [95 % CI]",
+                     "median", "failures at the cap"], table)
     lines += ["", "![random baselines](figures/exp1_random_steps.png)", ""]
     return lines
 
 
 # --- experiments 2-4 ---------------------------------------------------------------------------
-def _grid_section(rows: list[dict[str, Any]], results: list[dict[str, Any]], bar: float | None,
-                  bar_label: str) -> list[str]:
+def _cell(row: dict[str, Any] | None) -> str:
+    """``**12.3** [8.1, 17.0] (39/40)``: bold when the whole interval is below the bar."""
+    if row is None:
+        return "—"
+    mark = "**" if row["beats_random"] else ""
+    inserted = row["test_episodes"] - row["test_failures"]
+    return (f"{mark}{_fmt(row['mean_test_steps'])}{mark} [{_fmt(row['ci_low'])}, "
+            f"{_fmt(row['ci_high'])}] ({inserted}/{row['test_episodes']})")
+
+
+def _paired_line(results: list[dict[str, Any]], what: str) -> tuple[str, Any]:
+    """One sentence: QG-DDPG against DDPG on the same (cell, seed) pairs of ``results``."""
+    qg, ddpg, keys = grid.pairs(results)
+    if not keys:
+        return f"No paired runs of both algorithms in {what}.", None
+    c = stats.paired_comparison(qg, ddpg)
+    verdict = ("QG-DDPG needs significantly fewer test steps" if c.significant() else
+               "DDPG needs significantly fewer test steps" if c.wilcoxon_p < 0.05 else
+               "no significant difference")
+    return (f"QG-DDPG against DDPG on the same {c.n} (cell, seed) pairs of {what}: QG-DDPG "
+            f"needs fewer test steps in {c.wins_a}, DDPG in {c.wins_b}, {c.ties} tie(s); DDPG "
+            f"minus QG-DDPG {stats.format_interval(c.difference)} steps per test episode; "
+            f"Wilcoxon signed-rank p = {c.wilcoxon_p:.3g}, sign test p = {c.sign_p:.3g}: "
+            f"**{verdict}** at 5 %.", c)
+
+
+def _grid_section(title: str, rows: list[dict[str, Any]], results: list[dict[str, Any]],
+                  bar: Bar | None) -> list[str]:
     if not rows:
-        return ["## 2. The grid", "", "Not run in this profile.", ""]
+        return [title, "", "Not run in this profile.", ""]
     spec = results[0]["spec"]
-    cells = sorted({(r["critic_lr"], r["iterations"]) for r in rows})
-    by_key = {(r["algorithm"], r["critic_lr"], r["iterations"]): r for r in rows}
     algorithms = sorted({r["algorithm"] for r in rows})
-    table = []
-    for lr, iterations in cells:
-        line = [f"{lr:g}", f"{lr / 10:g}", str(iterations)]
-        for a in algorithms:
-            r = by_key.get((a, lr, iterations))
-            line.append("—" if r is None else
-                        f"{'**' if r['beats_random'] else ''}{_fmt(r['mean_test_steps'])}"
-                        f"{'**' if r['beats_random'] else ''} ({r['test_success_rate']:.0%}, "
-                        f"{r['seeds']} seed{'s' if r['seeds'] > 1 else ''})")
-        table.append(line)
     wins = {a: sum(r["beats_random"] for r in rows if r["algorithm"] == a) for a in algorithms}
     counts = {a: sum(1 for r in rows if r["algorithm"] == a) for a in algorithms}
-    lines = ["## 2. The grid: mean test steps per cell", "",
+    seeds = sorted({r["spec"]["seed"] for r in results})
+    lines = [title, "",
+             f"State `{spec.get('observation') or 'the stack default'}`. "
              f"{spec['train_episodes']} training episodes (cap {spec['train_max_steps']} steps, "
              f"training after every {spec['cycle_steps'] or 20} steps), then "
-             f"{spec['test_episodes']} test episodes without noise (cap {spec['test_max_steps']}). "
-             "Cell: mean test steps over episodes and seeds (failures count as the cap), test "
-             f"success rate in brackets; **bold** = fewer steps than the best random baseline "
-             f"({bar_label}). Speed: {_speed(results)}.", ""]
-    lines += _table(["critic lr", "actor lr", "iterations/cycle",
-                     *[_NAMES[a] for a in algorithms]], table)
+             f"{spec['test_episodes']} test episodes without noise (cap {spec['test_max_steps']}), "
+             f"on {len(seeds)} seeds ({', '.join(map(str, seeds))}); the actor's learning rate is "
+             "a tenth of the critic's. Cell: mean test steps over seeds and episodes (failures "
+             "count as the cap) with its 95 % bootstrap interval over the per-seed means, test "
+             "episodes inserted in brackets; **bold**: the whole interval lies below the random "
+             f"bar ({_bar_text(bar)}). Speed: {_speed(results)}.", ""]
+    lines += _grid_table(rows, "")[2:]
     lines += ["", "Cells beating random: " + ", ".join(
         f"{_NAMES[a]} {wins[a]} of {counts[a]}" for a in algorithms) + ".", ""]
+    lines += [_paired_line(results, "this grid")[0], ""]
     return lines
 
 
@@ -152,7 +206,7 @@ def _q_runs(results: list[dict[str, Any]], rows: list[dict[str, Any]]) -> dict[s
 
 
 def _learning_curves(results: list[dict[str, Any]], rows: list[dict[str, Any]],
-                     figures: Path, bar: float | None) -> list[str]:
+                     figures: Path, bar: Bar | None) -> list[str]:
     """Steps per episode (training, then test) of the best and worst cell of each algorithm:
     the mean over seeds with the standard deviation of that mean shaded, as in the thesis."""
     if not rows:
@@ -174,7 +228,9 @@ def _learning_curves(results: list[dict[str, Any]], rows: list[dict[str, Any]],
         ax.text(n_train + 0.7, 0.97, "test", transform=ax.get_xaxis_transform(), fontsize=8,
                 va="top")
         if bar is not None:
-            ax.axhline(bar, color="gray", ls="--", lw=1, label="best random (cut at test cap)")
+            ax.axhline(bar.mean, color="gray", ls="--", lw=1,
+                       label=f"random bar ({bar.label}, same seeds), 95 % CI shaded")
+            ax.axhspan(bar.interval.low, bar.interval.high, color="gray", alpha=0.15)
         ax.set_xlabel("episode (training, then test)")
         ax.set_title(f"{tag} cell of each algorithm")
         ax.legend(fontsize=7)
@@ -183,12 +239,13 @@ def _learning_curves(results: list[dict[str, Any]], rows: list[dict[str, Any]],
     fig.savefig(figures / "exp2_learning_curves.png", dpi=110)
     plt.close(fig)
     return ["Learning curves of the best and worst cell of each algorithm (mean over seeds, "
-            "shaded: standard deviation of the mean):", "",
+            "shaded: standard deviation of the mean; grey: the random bar measured on the same "
+            "seeds, with its interval):", "",
             "![learning curves](figures/exp2_learning_curves.png)", ""]
 
 
 def _q_section(results: list[dict[str, Any]], rows: list[dict[str, Any]], figures: Path,
-               q_range: tuple[float, float]) -> list[str]:
+               q_range: tuple[float, float], gamma: float) -> list[str]:
     if not rows:
         return []
     chosen = _q_runs(results, rows)
@@ -208,35 +265,121 @@ def _q_section(results: list[dict[str, Any]], rows: list[dict[str, Any]], figure
     fig.tight_layout()
     fig.savefig(figures / "exp3_mean_q.png", dpi=110)
     plt.close(fig)
-    table = []
-    for r in results:
-        q = np.array([c["mean_q"] for c in r["cycles"]]) if r["cycles"] else np.array([np.nan])
-        outside = int(np.sum((q < q_range[0]) | (q > q_range[1])))
-        table.append([_NAMES[r["spec"]["algorithm"]], f"{r['spec']['critic_lr']:g}",
-                      str(r["spec"]["iterations"]), str(r["spec"]["seed"]), str(len(r["cycles"])),
-                      _fmt(float(np.nanmin(q)), 2), _fmt(float(np.nanmax(q)), 2),
-                      _fmt(float(q[-1]), 2), str(outside)])
     lines = ["## 3. Mean predicted Q during training", "",
              "Mean of the critic's predictions on each cycle's minibatches (averaged over the "
              "cycle's iterations), best and worst cell of each algorithm by mean test steps. "
              f"The realisable range of the dense and sparse rewards is [{q_range[0]:g}, "
-             f"{q_range[1]:g}].", "", "![mean Q](figures/exp3_mean_q.png)", ""]
-    lines += _table(["algorithm", "critic lr", "it", "seed", "cycles", "min mean Q",
-                     "max mean Q", "last", "cycles outside range"], table)
-    return lines + [""]
+             f"{q_range[1]:g}]. A run's mean Q counts as diverged when it leaves that range by "
+             f"more than a tenth of its width, as overshot when by less.", "",
+             "![mean Q](figures/exp3_mean_q.png)", ""]
+    return lines + [_divergence_text(results, gamma), ""]
 
 
-def _variant_section(rows: list[dict[str, Any]], bar: float | None) -> list[str]:
-    lines = ["## 4. Sparse reward and a 300-transition replay memory", ""]
-    if not rows:
+def _variant_section(results: list[dict[str, Any]], bar: Bar | None,
+                     gamma: float) -> list[str]:
+    lines = ["## 4. Where the thesis says the graph matters: sparse reward, a 300-transition "
+             "replay memory, the discount 0.99", ""]
+    if not results:
         return lines + ["Not run in this profile (see the budget table).", ""]
-    lines += ["Each algorithm at its best grid cell; same episode budget as the grid.", ""]
-    lines += _table(["algorithm", "critic lr", "it", "reward", "replay", "mean test steps",
-                     "test success", "beats random"],
-                    [[_NAMES[r["algorithm"]], f"{r['critic_lr']:g}", str(r["iterations"]),
-                      r["reward"], str(r["replay_capacity"] or "unbounded"),
-                      _fmt(r["mean_test_steps"]), f"{r['test_success_rate']:.0%}",
-                      "yes" if r["beats_random"] else "no"] for r in rows])
+    cells = sorted({(r["spec"]["critic_lr"], r["spec"]["iterations"]) for r in results})
+    lines += ["The grid's protocol with one setting changed, at the fixed cells "
+              + ", ".join(f"lr {lr:g} / {it} iterations" for lr, it in cells)
+              + ", both algorithms on the same seeds. Cells as in the grid's table.", ""]
+    for name, group in _by_variant(results, gamma).items():
+        rows = grid.cell_table(group, None if bar is None else bar.mean)
+        lines += _grid_table(rows, f"**{name}**")
+        lines += ["", _paired_line(group, f"{name}")[0], ""]
+    return lines
+
+
+def _by_variant(results: list[dict[str, Any]], gamma: float) -> dict[str, list[dict[str, Any]]]:
+    groups: dict[str, list[dict[str, Any]]] = {}
+    for r in results:
+        groups.setdefault(grid.variant_name(r["spec"], gamma), []).append(r)
+    return dict(sorted(groups.items()))
+
+
+def _grid_table(rows: list[dict[str, Any]], caption: str) -> list[str]:
+    """The cells of ``rows``, one line per cell, an algorithm per column."""
+    cells = sorted({(r["critic_lr"], r["iterations"]) for r in rows})
+    algorithms = sorted({r["algorithm"] for r in rows})
+    by_key = {(r["algorithm"], r["critic_lr"], r["iterations"]): r for r in rows}
+    return [caption, ""] + _table(
+        ["critic lr", "iterations/cycle", *[_NAMES[a] for a in algorithms]],
+        [[f"{lr:g}", str(it), *[_cell(by_key.get((a, lr, it))) for a in algorithms]]
+         for lr, it in cells])
+
+
+def run_excess(result: dict[str, Any], gamma: float, r_min: float, r_max: float) -> float:
+    """How far the run's mean Q went outside its realisable range (its own discount)."""
+    g = result["spec"].get("gamma") or gamma
+    low, high = min(r_min, r_min / (1 - g)), max(r_max, r_max / (1 - g))
+    return max((max(c["mean_q"] - high, low - c["mean_q"]) for c in result["cycles"]),
+               default=-math.inf)
+
+
+def divergence_counts(results: list[dict[str, Any]], gamma: float, r_min: float = -1.0,
+                      r_max: float = 0.0) -> dict[str, tuple[int, int, int]]:
+    """Per algorithm: (diverged, overshot, runs) by :func:`split_by_excess`, each run against
+    the range of its own discount."""
+    counts = {}
+    for a in sorted({r["spec"]["algorithm"] for r in results}):
+        runs = [r for r in results if r["spec"]["algorithm"] == a and r["cycles"]]
+        diverged = overshot = 0
+        for r in runs:
+            g = r["spec"].get("gamma") or gamma
+            q_range = (min(r_min, r_min / (1 - g)), max(r_max, r_max / (1 - g)))
+            d, o = split_by_excess({r["name"]: run_excess(r, gamma, r_min, r_max)}, q_range)
+            diverged, overshot = diverged + len(d), overshot + len(o)
+        counts[a] = (diverged, overshot, len(runs))
+    return counts
+
+
+def _divergence_text(results: list[dict[str, Any]], gamma: float) -> str:
+    counts = divergence_counts(results, gamma)
+    return "Diverged (overshot) runs: " + "; ".join(
+        f"{_NAMES[a]} {d} ({o}) of {n}" for a, (d, o, n) in counts.items()) + "."
+
+
+def _graph_section(settings: dict[str, list[dict[str, Any]]], bar: Bar | None,
+                   gamma: float) -> list[str]:
+    """One row per setting: the paired comparison, the cells beating random, divergence, and
+    what the graph did (targets raised, critic error against the Monte-Carlo return)."""
+    table = []
+    for name, results in settings.items():
+        if not results:
+            continue
+        _, comparison = _paired_line(results, name)
+        rows = grid.cell_table(results, None if bar is None else bar.mean)
+        wins = {a: (sum(r["beats_random"] for r in rows if r["algorithm"] == a),
+                    sum(1 for r in rows if r["algorithm"] == a)) for a in ("qgddpg", "ddpg")}
+        counts = divergence_counts(results, gamma)
+        diag = {a: grid.graph_diagnostics([r for r in results if r["spec"]["algorithm"] == a])
+                for a in ("qgddpg", "ddpg")}
+        table.append([
+            name, "—" if comparison is None else str(comparison.n),
+            "—" if comparison is None else f"{comparison.wins_a} / {comparison.wins_b} / "
+                                           f"{comparison.ties}",
+            "—" if comparison is None else stats.format_interval(comparison.difference),
+            "—" if comparison is None else f"{comparison.wilcoxon_p:.3g}",
+            *[f"{wins[a][0]} of {wins[a][1]}" for a in ("qgddpg", "ddpg")],
+            *[f"{counts.get(a, (0, 0, 0))[0]} of {counts.get(a, (0, 0, 0))[2]}"
+              for a in ("qgddpg", "ddpg")],
+            f"{diag['qgddpg']['targets_raised']:.1%}",
+            f"{_fmt(diag['qgddpg']['critic_mc_error'], 2)} / "
+            f"{_fmt(diag['ddpg']['critic_mc_error'], 2)}"])
+    lines = ["## 7. QG-DDPG against DDPG, setting by setting", "",
+             "Per setting: the (cell, seed) pairs of both algorithms; QG-DDPG better / DDPG "
+             "better / ties; DDPG minus QG-DDPG in mean test steps with its 95 % interval "
+             "(positive: QG-DDPG needs fewer); the two-sided Wilcoxon signed-rank p; the cells "
+             "whose interval lies below the random bar; the runs whose mean Q diverged; the "
+             "share of TD targets the graph's lower bound raised (mean over training cycles); "
+             "the critic's mean |Q - Monte-Carlo return| on the goal-reaching training "
+             "episodes at the end of training (QG-DDPG / DDPG).", ""]
+    lines += _table(["setting", "pairs", "QG / DDPG / ties", "DDPG - QG [95 % CI]",
+                     "Wilcoxon p", "QG-DDPG beats random", "DDPG beats random",
+                     "QG-DDPG diverged", "DDPG diverged", "targets raised",
+                     "critic error vs MC"], table)
     return lines + [""]
 
 
@@ -349,51 +492,57 @@ def split_by_excess(excess: dict[str, float], q_range: tuple[float, float]
     return ([n for n in ordered if excess[n] > margin], [n for n in ordered if excess[n] <= margin])
 
 
-def _comparison(random_rows: list[dict[str, Any]], grid_rows: list[dict[str, Any]],
-                grid_results: list[dict[str, Any]], variant_rows: list[dict[str, Any]],
-                peg_data: list[dict], q_range: tuple[float, float]) -> list[str]:
+def _peg_paired(results: list[dict[str, Any]], tail: int) -> str:
+    """QG-DDPG against DDPG on the same seeds of a peg experiment: late-episode return."""
+    late: dict[tuple[float, int], dict[str, float]] = {}
+    for r in results:
+        s = r["spec"]
+        late.setdefault((s["lr"], s["seed"]), {})[s["algorithm"]] = float(
+            np.mean([e["return"] for e in r["episodes"][-tail:]]))
+    keys = sorted(k for k, v in late.items() if {"qgddpg", "ddpg"} <= set(v))
+    if not keys:
+        return ""
+    # Lower is better in paired_comparison: compare the negated returns.
+    c = stats.paired_comparison([-late[k]["qgddpg"] for k in keys],
+                                [-late[k]["ddpg"] for k in keys])
+    return (f"QG-DDPG against DDPG on the same {c.n} (lr, seed) pairs, mean return of the last "
+            f"{tail} episodes: QG-DDPG higher in {c.wins_a}, DDPG in {c.wins_b}, {c.ties} "
+            f"tie(s); QG-DDPG minus DDPG {stats.format_interval(c.difference, 2)}; Wilcoxon "
+            f"p = {c.wilcoxon_p:.3g} (with 5 pairs the smallest two-sided p is 0.0625).")
+
+
+def _comparison(random_rows: list[dict[str, Any]], bar: Bar | None,
+                grids: dict[str, list[dict[str, Any]]], variant_results: list[dict[str, Any]],
+                peg_data: list[dict], gamma: float) -> list[str]:
     notes = ["## Where our numbers agree and disagree with the thesis", ""]
-    if random_rows:
-        uniform = [r for r in random_rows if r["kind"] == "uniform"]
-        if uniform:
-            u = uniform[0]
-            notes.append(f"- Random baseline: uniform residuals needed {u['mean_steps']:.1f} steps "
-                         f"on average (median {u['median_steps']:.0f}, {u['success_rate']:.0%} "
-                         f"success) against 32 on the real robot: "
-                         + ("about the same." if abs(u["mean_steps"] - 32) <= 8 else
-                            "the simulated task is " + ("easier" if u["mean_steps"] < 32
-                                                        else "harder") + " for random search."))
-    if grid_rows:
+    uniform = [r for r in random_rows if r["kind"] == "uniform"]
+    if uniform and bar is not None:
+        u = uniform[0]
+        interval = stats.mean_interval(np.minimum(u["steps"], bar.cap))
+        notes.append(f"- Random baseline: uniform residuals needed "
+                     f"{stats.format_interval(interval)} steps ({u['episodes']} episodes, "
+                     f"{u['success_rate']:.0%} inserted) against 32 on the real robot: "
+                     + ("32 lies inside the interval." if interval.low <= 32 <= interval.high
+                        else "the simulated task is " + ("easier" if interval.high < 32
+                                                         else "harder") + " for random search."))
+    for title, results in grids.items():
+        rows = grid.cell_table(results, None if bar is None else bar.mean)
         for a, thesis in (("qgddpg", THESIS["qg_cells"]), ("ddpg", THESIS["ddpg_cells"])):
-            mine = [r for r in grid_rows if r["algorithm"] == a]
+            mine = [r for r in rows if r["algorithm"] == a]
             if mine:
-                wins = sum(r["beats_random"] for r in mine)
-                notes.append(f"- {_NAMES[a]} beat the best random baseline in {wins} of "
-                             f"{len(mine)} cells run (thesis, real robot: {thesis} of 8).")
-        for a in ("ddpg", "qgddpg"):
-            runs = [r for r in grid_results if r["spec"]["algorithm"] == a and r["cycles"]]
-            if runs:
-                excess = {r["name"]: max(max(c["mean_q"] - q_range[1], q_range[0] - c["mean_q"])
-                                         for c in r["cycles"]) for r in runs}
-                diverged, overshot = split_by_excess(excess, q_range)
-                margin = divergence_margin(q_range)
-                text = (f"- {_NAMES[a]}: mean Q diverged (left the realisable range "
-                        f"[{q_range[0]:g}, {q_range[1]:g}] by more than {margin:.3g}, a tenth of "
-                        f"its width) in {len(diverged)} of {len(runs)} runs")
-                if diverged:
-                    text += f", by up to {excess[diverged[-1]]:.3g} ({diverged[-1]})"
-                if overshot:
-                    text += (f"; {len(overshot)} run(s) overshot it by less, at most "
-                             f"{excess[overshot[-1]]:.3g} ({overshot[-1]})")
-                notes.append(text + (" (thesis: DDPG diverges under bad hyperparameters)."
-                                     if a == "ddpg" else " (thesis: QG-DDPG never diverges)."))
-    if variant_rows:
-        for r in variant_rows:
-            notes.append(f"- {_NAMES[r['algorithm']]} with "
-                         + (f"the {r['reward']} reward" if r["reward"] != "dense"
-                            else f"a replay of {r['replay_capacity']}")
-                         + f": {'beat' if r['beats_random'] else 'did not beat'} random "
-                         "(thesis: QG-DDPG did, DDPG did not).")
+                notes.append(f"- {title}: {_NAMES[a]} beat the random bar (whole interval "
+                             f"below it) in {sum(r['beats_random'] for r in mine)} of "
+                             f"{len(mine)} cells (thesis, real robot: {thesis} of 8).")
+        if results:
+            notes.append(f"- {title}: {_divergence_text(results, gamma)} (thesis: DDPG "
+                         "diverges under bad hyperparameters, QG-DDPG never).")
+    for name, group in _by_variant(variant_results, gamma).items():
+        rows = grid.cell_table(group, None if bar is None else bar.mean)
+        text = "; ".join(f"{_NAMES[a]} beat random in "
+                         f"{sum(r['beats_random'] for r in rows if r['algorithm'] == a)} of "
+                         f"{sum(1 for r in rows if r['algorithm'] == a)} cells"
+                         for a in ("qgddpg", "ddpg"))
+        notes.append(f"- {name}: {text} (thesis: QG-DDPG did, DDPG did not).")
     for data in peg_data:
         if not data.get("curves"):
             continue
@@ -406,18 +555,12 @@ def _comparison(random_rows: list[dict[str, Any]], grid_rows: list[dict[str, Any
             rd = float(np.mean(d["return_mean"][-tail:]))
             rq = float(np.mean(q["return_mean"][-tail:]))
             sd, sq = spread.get(("ddpg", lr)), spread.get(("qgddpg", lr))
-            text = (f"- {label}, lr {lr:g}: late-episode return QG-DDPG {rq:.1f} vs DDPG {rd:.1f} ("
-                    + ("about equal" if abs(rq - rd) < 0.02 * max(abs(rq), abs(rd))
-                       else "QG-DDPG better" if rq > rd else "DDPG better")
-                    + "; thesis: QG never worse, largest gain at poor learning rates)")
+            text = (f"- {label}, lr {lr:g}: late-episode return QG-DDPG {rq:.1f} vs DDPG {rd:.1f}"
+                    " (thesis: QG never worse, largest gain at poor learning rates)")
             if sd is not None and sq is not None:
                 text += (f"; median Q spread across seeds QG-DDPG {np.median(sq):.3g} vs DDPG "
                          f"{np.median(sd):.3g} (thesis at lr 1e-4: clearly smaller with QG)")
             notes.append(text + ".")
-    seeds = sorted({r["spec"]["seed"] for r in grid_results})
-    notes.append(f"- Budgets are far below the thesis's (see the budget table), with "
-                 f"{len(seeds)} seed(s) per grid cell: differences of a few steps between cells "
-                 "are within seed noise.")
     return notes + [""]
 
 
@@ -438,39 +581,34 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
         return load_results(out, experiment, None if current is None else
                             current.get(experiment, set()))
 
-    random_results = saved("random")
-    grid_results = saved("grid")
-    variant_results = saved("variants")
-    peg_results = saved("peg")
-    nextage_results = saved("nextage")
+    results_by = {name: saved(name) for name in
+                  ("random", "grid", "variants", "state_grid", "peg", "nextage")}
+    random_results, grid_results = results_by["random"], results_by["grid"]
+    variant_results, state_results = results_by["variants"], results_by["state_grid"]
     random_rows = summarize_baselines(random_results) if random_results else []
     test_cap = (grid_results[0]["spec"]["test_max_steps"] if grid_results
                 else profile.grid.test_max_steps)
-    best = random_bar(random_rows, test_cap)
-    bar = best[0] if best else None
-    bar_label = (f"{best[1]}, {bar:.1f} steps with its episodes cut at the test cap of "
-                 f"{test_cap}" if best else "no random baseline run: nothing marked")
-    grid_rows = grid.cell_table(grid_results, bar)
-    variant_rows = grid.cell_table(variant_results, bar)
+    bar = random_bar_of(random_rows, test_cap)
+    bar_mean = None if bar is None else bar.mean
+    grid_rows = grid.cell_table(grid_results, bar_mean)
+    state_rows = grid.cell_table(state_results, bar_mean)
     # The tables' data beside the page (small, versioned); the per-run JSON stays under ``out``.
     data = docs / "data" / profile.name
     data.mkdir(parents=True, exist_ok=True)
     _write_csv(data / "random_summary.csv", random_rows)
     _write_csv(data / "grid_summary.csv", grid_rows)
-    _write_csv(data / "variants_summary.csv", variant_rows)
-    for name, results in (("random", random_results), ("grid", grid_results),
-                          ("variants", variant_results), ("peg", peg_results),
-                          ("nextage", nextage_results)):
+    _write_csv(data / "state_grid_summary.csv", state_rows)
+    _write_csv(data / "variants_summary.csv", grid.cell_table(variant_results, bar_mean))
+    for name, results in results_by.items():
         if results:
             _episodes_csv(data / f"{name}_episodes.csv", results)
-    tensorboard = export_runs((*grid_results, *variant_results, *peg_results, *nextage_results),
-                              out / "tensorboard")
+    tensorboard = export_runs((*grid_results, *variant_results, *state_results,
+                               *results_by["peg"], *results_by["nextage"]), out / "tensorboard")
     settings = StackSettings.load(config_dir)
-    g = settings.learner.ddpg.gamma
-    q_range = (settings.learner.ddpg.r_min / (1 - g), settings.learner.ddpg.r_max)
-    digests = sorted({r.get("config_digest", "?") for r in
-                      (*random_results, *grid_results, *variant_results, *peg_results,
-                       *nextage_results)})
+    gamma = settings.learner.ddpg.gamma
+    q_range = (settings.learner.ddpg.r_min / (1 - gamma), settings.learner.ddpg.r_max)
+    digests = sorted({r.get("config_digest", "?") for results in results_by.values()
+                      for r in results})
     timing_path = out / "timing.json"
     timing = json.loads(timing_path.read_text()) if timing_path.exists() else {}
     estimator = {"ekf": "the EKF wrench estimator (as in the ROS stack)",
@@ -483,33 +621,47 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
              "--report-only", "```", "",
              f"Profile **{profile.name}** of `config/experiments.yaml`; every run used the "
              f"fast in-process runner (the ROS stack's cores and config files, no DDS) with "
-             f"{estimator[profile.estimator]}. Stack config files: "
+             f"{estimator[profile.estimator]}, on the **{profile.arm}** simulated Panda "
+             f"(`panda_scene.imperfections`; each seed is its own robot: its biases, housing "
+             f"error and noise). Stack config files: "
              f"`{config_dir or 'config/'}`, digest(s) {', '.join(f'`{d}`' for d in digests)} "
              f"(`runner.config_digest`). Every episode and every table row as CSV: "
              f"[`data/{profile.name}/`](data/{profile.name}/); per-run JSON: `{out}`; "
              f"TensorBoard scalars of every learning run (Stable-Baselines3's tag names): "
              f"`tensorboard --logdir {tensorboard}`.", "",
+             f"**Seeds.** Every table below is computed on the report seeds "
+             f"{', '.join(map(str, profile.seeds.report))}; every choice of the setup (the state, "
+             f"the discount, the variants' cells) was made on the tuning seeds "
+             f"{', '.join(map(str, profile.seeds.tuning))} ([learning.md](learning.md)). "
+             "**Statistics** (`qg_experiments/stats.py`): 95 % BCa bootstrap intervals (SciPy, "
+             "10,000 resamples) over the per-seed means of a cell, over episodes for the random "
+             "baselines; a cell beats random only when its whole interval lies below the random "
+             "bar; QG-DDPG against DDPG is a paired comparison over the same (cell, seed) runs "
+             "with the Wilcoxon signed-rank test and the sign test.", "",
              "| step | command | wall time | finished |", "|---|---|---|---|"]
     lines += [f"| {k} | `{v['command']}` | {v['wall_time'] / 60:.1f} min | {v['finished']} |"
               for k, v in timing.items()]
     lines += ["", "Budget of this profile against the thesis:", ""]
     pg, pr, pp, pv = profile.grid, profile.random, profile.peg, profile.variants
-    results_by = {"random": random_results, "grid": grid_results, "variants": variant_results,
-                  "peg": peg_results, "nextage": nextage_results}
     budget = {
         "random": ("random baselines", "several noises, 1000-step cap, up to 3000 steps each",
-                   f"{len(pr.noises)} settings x {pr.episodes} episodes, cap {pr.max_steps}"),
+                   f"{len(pr.noises)} settings x {len(pr.seeds)} seeds x {pr.episodes} episodes, "
+                   f"cap {pr.max_steps}"),
         "grid": ("grid", "8 cells x 2 algorithms x 3 seeds, 40 train + 8 test episodes (cap 200)",
                  f"{len(pg.cells)} cells x {len(pg.algorithms)} algorithms x {len(pg.seeds)} "
                  f"seed(s), {pg.train_episodes} train (cap {pg.train_max_steps}) + "
                  f"{pg.test_episodes} test episodes (cap {pg.test_max_steps})"),
-        "variants": ("variants", "sparse reward; replay 300",
-                     ", ".join([*pv.rewards, *(f"replay {c}" for c in pv.replay_capacities)])
-                     or "none"),
+        "variants": ("variants", "sparse reward; replay 300 (each algorithm's best cell)",
+                     ", ".join(n for n, _ in pv.overrides()) + f" at {len(pv.cells)} cell(s) x "
+                     f"{len(pv.seeds)} seeds" if pv.settings else "none"),
         "peg": ("peg", "300 episodes x 10 seeds, 3 lrs, 750 updates/episode",
                 _peg_budget(pp))}
+    if profile.state_grid is not None:
+        budget["state_grid"] = ("grid, thesis's 4-D state", "the grid above (the thesis's state)",
+                                f"the grid with `observation: {profile.state_grid.observation}`")
     if profile.nextage is not None:
-        budget["nextage"] = ("Nextage peg", "(the real Nextage: ch. 8.3)", _peg_budget(profile.nextage))
+        budget["nextage"] = ("Nextage peg", "(the real Nextage: ch. 8.3)",
+                             _peg_budget(profile.nextage))
     planned = planned or {}
     lines += _table(["experiment", "thesis", f"profile {profile.name}", "runs finished"],
                     [[*row, f"{len(results_by[k])} of {planned.get(k, '?')}"]
@@ -524,22 +676,32 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
               f"bounds, zero action (0, 0) whose self-loops go into graph and replay. Exploration "
               f"in training: {noise.kind} noise, sigma {noise.sigma:g} (actor units). State: "
               f"the `{pg.observation or settings.task.observation}` observation "
-              "(`residual_task.OBSERVATIONS`; why, and the thesis's 4-D state beside it: "
-              "[learning.md](learning.md)). Runs are deterministic per seed (tested in "
-              "`tests/experiments/test_runner.py`).", ""]
-    lines += _random_section(random_rows, random_results, figures)
-    lines += _grid_section(grid_rows, grid_results, bar, bar_label)
+              f"(`residual_task.OBSERVATIONS`), discount {gamma:g}, both chosen on the tuning "
+              "seeds ([learning.md](learning.md)); the thesis's 4-D state in section 2b. Runs are "
+              "deterministic per seed (tested in `tests/experiments/test_runner.py`).", ""]
+    lines += _random_section(random_rows, random_results, test_cap, bar, figures)
+    lines += _grid_section("## 2. The grid: mean test steps per cell", grid_rows, grid_results,
+                           bar)
     lines += _learning_curves(grid_results, grid_rows, figures, bar)
-    lines += _q_section(grid_results, grid_rows, figures, q_range)
-    lines += _variant_section(variant_rows, bar)
+    if profile.state_grid is not None or state_results:
+        lines += _grid_section("## 2b. The grid with the thesis's 4-D wrench state", state_rows,
+                               state_results, bar)
+    lines += _q_section(grid_results, grid_rows, figures, q_range, gamma)
+    lines += _variant_section(variant_results, bar, gamma)
     peg_data = []
-    for experiment, results in (("peg", peg_results), ("nextage", nextage_results)):
+    for experiment in ("peg", "nextage"):
+        results = results_by[experiment]
         if experiment == "nextage" and profile.nextage is None and not results:
             continue
         section, data = _peg_section(results, figures, experiment)
         lines += section
+        if data:
+            lines += [_peg_paired(results, data["tail"]), ""]
         peg_data.append(data)
-    lines += _comparison(random_rows, grid_rows, grid_results, variant_rows, peg_data, q_range)
+    grids = {f"grid (`{pg.observation or settings.task.observation}`, the default)": grid_results,
+             "grid with the thesis's 4-D state": state_results}
+    lines += _graph_section({**grids, **_by_variant(variant_results, gamma)}, bar, gamma)
+    lines += _comparison(random_rows, bar, grids, variant_results, peg_data, gamma)
     path = docs / "results.md"
     path.write_text("\n".join(lines))
     return path

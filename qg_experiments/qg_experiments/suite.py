@@ -1,8 +1,8 @@
 """The whole experiment set of one profile: run what is missing, then write the report.
 
-Random baselines, the grid and the peg runs (free and on the Nextage) are independent and share
-one pool of workers (a process per core, or Ray: ``tasks.BACKENDS``); the variants of
-experiment 4 need the grid's best cells, so they run after it.
+Random baselines, the grid, the variants of experiment 4 (at fixed cells), the grid with the
+thesis's state and the peg runs (free and on the Nextage) are independent and share one pool of
+workers (a process per core, or Ray: ``tasks.BACKENDS``).
 Results land in ``<out>/<profile>/<experiment>/`` and wall times in ``timing.json`` there.
 """
 from __future__ import annotations
@@ -14,26 +14,34 @@ from typing import Any
 
 from qg_experiments import grid, peg, random_baselines, report
 from qg_experiments.profile import Profile
-from qg_experiments.tasks import (DEFAULT_WORKERS, load_results, run_specs,
-                                  unsaved)
+from qg_experiments.tasks import DEFAULT_WORKERS, run_specs, unsaved
 
 __all__ = ["EXPERIMENTS", "run_suite", "all_specs", "planned_runs", "current_runs"]
 
-EXPERIMENTS = ("random", "grid", "variants", "peg", "nextage")
+EXPERIMENTS = ("random", "grid", "variants", "state_grid", "peg", "nextage")
 
 
 def all_specs(profile: Profile, only: tuple[str, ...] = EXPERIMENTS,
               config_dir: str | None = None) -> list[Any]:
-    """The independent runs (grid, peg, random) of ``profile`` selected by ``only``."""
+    """The runs of ``profile`` selected by ``only``, longest first (the workers then finish
+    closer together)."""
     specs: list[Any] = []
-    if "grid" in only:        # the longest runs first: the workers finish closer together
-        specs += grid.grid_specs(profile.grid, profile.estimator, config_dir)
+    arm = profile.arm
+    if "state_grid" in only and profile.state_grid is not None:  # failures run to the caps
+        specs += grid.grid_specs(profile.state_grid, profile.estimator, config_dir, arm,
+                                 experiment="state_grid")
+    if "grid" in only:
+        specs += grid.grid_specs(profile.grid, profile.estimator, config_dir, arm)
+    if "variants" in only:
+        specs += grid.variant_specs(profile.grid, profile.variants, profile.estimator,
+                                    config_dir, arm)
     if "nextage" in only and profile.nextage is not None:   # slower per step than the free peg
         specs += peg.peg_specs(profile.nextage, config_dir, robot="sim_nextage")
     if "peg" in only:
         specs += peg.peg_specs(profile.peg, config_dir)
     if "random" in only:
-        specs += random_baselines.baseline_specs(profile.random, profile.estimator, config_dir)
+        specs += random_baselines.baseline_specs(profile.random, profile.estimator, config_dir,
+                                                 arm)
     return specs
 
 
@@ -58,31 +66,16 @@ def run_suite(profile: Profile, out: Path, docs: Path, only: tuple[str, ...] = E
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     specs = all_specs(profile, only, config_dir)
-    step = "+".join(o for o in only if o != "variants")
+    step = "+".join(only)
     # A step whose runs are all saved keeps the time recorded when they ran.
     if specs and unsaved(specs, out):
         run_specs(specs, out, workers, f"{profile.name}: {step}", backend, address)
         _record_time(out, step, time.perf_counter() - start, command)
-    if "variants" in only and (profile.variants.rewards or profile.variants.replay_capacities):
-        start = time.perf_counter()
-        specs = _variant_specs(profile, out, config_dir)
-        if unsaved(specs, out):
-            run_specs(specs, out, workers, f"{profile.name}: variants", backend, address)
-            _record_time(out, "variants", time.perf_counter() - start, command)
     return report.write_report(profile, out, Path(docs), config_dir, planned_runs(profile),
-                               current_runs(profile, out, config_dir))
+                               current_runs(profile, config_dir))
 
 
-def _variant_specs(profile: Profile, out: Path, config_dir: str | None) -> list[Any]:
-    """The variant runs at each algorithm's best cell among the profile's saved grid runs."""
-    names = {s.name for s in all_specs(profile, ("grid",), config_dir)}
-    rows = grid.cell_table(load_results(out, "grid", names), None)
-    return grid.variant_specs(profile.grid, profile.variants, grid.best_cells(rows),
-                              profile.estimator, config_dir)
-
-
-def current_runs(profile: Profile, out: Path,
-                 config_dir: str | None = None) -> dict[str, set[str]]:
+def current_runs(profile: Profile, config_dir: str | None = None) -> dict[str, set[str]]:
     """Names of the runs ``profile`` makes now, per experiment: what the report shows.
 
     A saved run of an earlier setting (another observation, say) stays in ``out`` for reference
@@ -91,7 +84,6 @@ def current_runs(profile: Profile, out: Path,
     names: dict[str, set[str]] = {}
     for spec in all_specs(profile, EXPERIMENTS, config_dir):
         names.setdefault(spec.experiment, set()).add(spec.name)
-    names["variants"] = {s.name for s in _variant_specs(profile, out, config_dir)}
     return names
 
 
@@ -100,7 +92,4 @@ def planned_runs(profile: Profile) -> dict[str, int]:
     counts: dict[str, int] = {}
     for spec in all_specs(profile):
         counts[spec.experiment] = counts.get(spec.experiment, 0) + 1
-    v = profile.variants
-    counts["variants"] = (len(profile.grid.algorithms) * len(v.seeds)
-                          * (len(v.rewards) + len(v.replay_capacities)))
     return counts

@@ -68,12 +68,14 @@ def test_tiny_suite_writes_results_figures_and_report(tmp_path) -> None:
     page = run_suite(profile, tmp_path / "runs", tmp_path / "docs", workers=1,
                      command="test").read_text()
     out = tmp_path / "runs" / "tiny"
-    for experiment, count in (("random", 2), ("grid", 2), ("variants", 4), ("peg", 4),
-                              ("nextage", 4)):
+    for experiment, count in (("random", 2), ("grid", 2), ("variants", 4), ("state_grid", 2),
+                              ("peg", 4), ("nextage", 4)):
         assert len(list((out / experiment).glob("*.json"))) == count, experiment
-    for section in ("## 1. Random baselines", "## 2. The grid", "## 3. Mean predicted Q",
-                    "## 4. Sparse reward", "## 5. Clearance-fit peg", "## 6. The peg on the "
-                    "simulated Nextage", "agree and disagree"):
+    for section in ("## 1. Random baselines", "## 2. The grid", "## 2b. The grid with the "
+                    "thesis's 4-D wrench state", "## 3. Mean predicted Q", "## 4. Where the "
+                    "thesis says the graph matters", "## 5. Clearance-fit peg", "## 6. The peg on "
+                    "the simulated Nextage", "## 7. QG-DDPG against DDPG, setting by setting",
+                    "agree and disagree", "Wilcoxon"):
         assert section in page
     for figure in ("exp1_random_steps", "exp3_mean_q", "exp5_peg_learning", "exp5_peg_q_std",
                    "exp6_nextage_learning"):
