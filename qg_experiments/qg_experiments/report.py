@@ -596,6 +596,11 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
     data = docs / "data" / profile.name
     data.mkdir(parents=True, exist_ok=True)
     _write_csv(data / "random_summary.csv", random_rows)
+    if bar is not None:        # the demo's learning curve draws this bar (qgl demo)
+        (data / "random_bar.json").write_text(json.dumps(
+            {"label": bar.label, "mean": bar.mean, "low": bar.interval.low,
+             "high": bar.interval.high, "episodes": bar.interval.n, "cap": bar.cap,
+             "seeds": sorted({r["spec"]["seed"] for r in random_results})}, indent=1))
     _write_csv(data / "grid_summary.csv", grid_rows)
     _write_csv(data / "state_grid_summary.csv", state_rows)
     _write_csv(data / "variants_summary.csv", grid.cell_table(variant_results, bar_mean))

@@ -80,6 +80,8 @@ def test_tiny_suite_writes_results_figures_and_report(tmp_path) -> None:
     for figure in ("exp1_random_steps", "exp3_mean_q", "exp5_peg_learning", "exp5_peg_q_std",
                    "exp6_nextage_learning"):
         assert (tmp_path / "docs" / "figures" / f"{figure}.png").stat().st_size > 1000
+    bar = json.loads((tmp_path / "docs" / "data" / "tiny" / "random_bar.json").read_text())
+    assert bar["episodes"] == 1 and bar["seeds"] == [0] and bar["low"] <= bar["mean"] <= bar["high"]
     rows = grid.cell_table([json.loads(p.read_text()) for p in (out / "grid").glob("*.json")], 0.5)
     assert {r["algorithm"] for r in rows} == {"ddpg", "qgddpg"}
     assert all(r["mean_test_steps"] == 1.0 and not r["beats_random"] for r in rows)

@@ -28,7 +28,7 @@ from qg_learning_node.cli.episode_schedule import (EpisodeJob, EpisodeOutcome, r
                                                    split_over_robots)
 from qg_learning_node.cli.fleet import fleet_specs, robot_namespace
 from qg_learning_node.cli.launcher import Launcher, ProcessSpec, load_stack_config
-from qg_learning_node.cli.ros_env import stack_env
+from qg_learning_node.cli.ros_env import install_dir, stack_env
 from qg_learning_node.learner.training_log import TrainingLog
 
 __all__ = ["add_parser", "DemoSettings", "EpisodeOutcome", "StepMonitor", "demo_schedule",
@@ -179,7 +179,26 @@ def wait_for_stack(cli, timeout: float, robots: Sequence[str] = ("",)) -> None:
         cli.node.destroy_subscription(sub)
 
 
-def _plot(outcomes: list[EpisodeOutcome], path: Path) -> None:
+def default_random_bar() -> Path:
+    """The simulation's random bar on the report seeds, as ``docs/results.md`` measured it
+    (``docs/data/thesis/random_bar.json`` of the checkout this stack was built from)."""
+    try:
+        return install_dir().parent.parent / "docs" / "data" / "thesis" / "random_bar.json"
+    except FileNotFoundError:
+        return Path("docs") / "data" / "thesis" / "random_bar.json"
+
+
+def load_random_bar(path: Path) -> dict | None:
+    """``{label, mean, low, high, episodes, seeds}``, or None (with a note) if unreadable."""
+    try:
+        bar = json.loads(Path(path).read_text())
+        return {k: bar[k] for k in ("label", "mean", "low", "high", "episodes", "seeds")}
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        print(f"[qgl demo] no random bar drawn ({path}: {exc})", file=sys.stderr)
+        return None
+
+
+def _plot(outcomes: list[EpisodeOutcome], path: Path, bar: dict | None) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -191,7 +210,11 @@ def _plot(outcomes: list[EpisodeOutcome], path: Path) -> None:
             sel = [o for o in runs if o.success == success]
             ax.plot([o.index for o in sel], [o.steps for o in sel], marker, color=colour,
                     label=f"{mode}, {'inserted' if success else 'not inserted'}")
-    ax.axhline(32, color="grey", ls="--", lw=1, label="uniform random, real robot (32)")
+    if bar is not None:
+        ax.axhline(bar["mean"], color="grey", ls="--", lw=1,
+                   label=f"random bar: {bar['label']}, {bar['mean']:.1f} steps (sim, "
+                         f"{bar['episodes']} episodes on the report seeds)")
+        ax.axhspan(bar["low"], bar["high"], color="grey", alpha=0.15, label="its 95 % interval")
     ax.set_xlabel("episode")
     ax.set_ylabel("steps to insert (cap = not inserted)")
     ax.set_title("QG-DDPG on the simulated Panda, through the ROS stack")
@@ -323,7 +346,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         codes = launcher.stop()
         log.close()
     (run_dir / "episodes.json").write_text(json.dumps([asdict(o) for o in outcomes], indent=1))
-    _plot(outcomes, run_dir / "learning_curve.png")
+    _plot(outcomes, run_dir / "learning_curve.png", load_random_bar(args.random_bar or default_random_bar()))
     print(_summary(outcomes, run_dir, robots, train_wall, learner_transitions,
                    time.monotonic() - started, codes))
     return 0 if all(c == 0 for c in codes.values()) else 1
@@ -356,4 +379,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                            "to them and run concurrently; the tests run on robot0")
     demo.add_argument("--seed", type=int, default=1)
     demo.add_argument("--episode-timeout", type=float, default=900.0, help="[s]")
+    demo.add_argument("--random-bar", type=Path, default=None,
+                      help="JSON of the random bar the plot draws (default: the report's, "
+                           "docs/data/thesis/random_bar.json of this checkout)")
     demo.set_defaults(func=_cmd_demo)

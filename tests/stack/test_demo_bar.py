@@ -1,0 +1,32 @@
+"""The demo's learning curve draws the simulation's random bar from the report, not a constant."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from qg_learning_node.cli.demo import (EpisodeOutcome, _plot, default_random_bar,
+                                       load_random_bar)
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_the_default_bar_is_the_reports_and_a_bad_file_draws_none(tmp_path: Path,
+                                                                  capsys) -> None:
+    assert default_random_bar() == ROOT / "docs" / "data" / "thesis" / "random_bar.json"
+    good = tmp_path / "bar.json"
+    good.write_text(json.dumps({"label": "uniform", "mean": 52.5, "low": 41.0, "high": 66.0,
+                                "episodes": 40, "cap": 200, "seeds": [100, 101]}))
+    bar = load_random_bar(good)
+    assert bar["mean"] == 52.5 and bar["low"] == 41.0 and bar["episodes"] == 40
+    for text in ("{not json", json.dumps({"label": "uniform"})):
+        (tmp_path / "bad.json").write_text(text)
+        assert load_random_bar(tmp_path / "bad.json") is None
+    assert load_random_bar(tmp_path / "missing.json") is None
+    assert "no random bar drawn" in capsys.readouterr().err
+    outcomes = [EpisodeOutcome(index=i, mode="train", episode_id=f"e{i}", initial_pose=i % 8,
+                               steps=10 + i, episode_return=-3.0, success=True, wall_time=1.0)
+                for i in range(3)]
+    _plot(outcomes, tmp_path / "with.png", bar)
+    _plot(outcomes, tmp_path / "without.png", None)
+    assert (tmp_path / "with.png").stat().st_size > 1000
+    assert (tmp_path / "with.png").read_bytes() != (tmp_path / "without.png").read_bytes()
