@@ -44,6 +44,36 @@ def test_velocity_is_damped_in_every_direction() -> None:
         assert power < 0.0  # the controller only removes energy around the reference
 
 
+
+def test_matches_the_law_written_out_in_numpy() -> None:
+    """The compiled law is the module docstring's, term by term, away from the reference and
+    the posture (spring, damping, feed-forward, null-space projection, C dq + g)."""
+    import pinocchio as pin
+
+    model, config = PandaModel(), ImpedanceConfig()
+    controller = HybridImpedanceController(config, model)
+    rng = np.random.default_rng(1)
+    controller.reset(Q_READY + 0.05 * rng.standard_normal(7))       # the posture: elsewhere
+    stiffness = np.r_[config.k_trans, config.k_rot]
+    damping = np.r_[config.d_trans, config.d_rot]
+    for _ in range(20):
+        q, dq = Q_READY + 0.1 * rng.standard_normal(7), 0.3 * rng.standard_normal(7)
+        wrench = rng.uniform(-5.0, 5.0, 6)
+        tau = controller.step(q, dq, WrenchSetpoint(wrench), 0.001)
+        kin, ref = model.kinematics(q), controller.reference
+        rot6 = np.kron(np.eye(2), kin.rotation)            # EEF frame -> base frame, both parts
+        error = np.r_[ref.position - kin.position, pin.log3(ref.rotation @ kin.rotation.T)]
+        eef_wrench = (stiffness * (rot6.T @ error) - damping * (rot6.T @ kin.jacobian @ dq)
+                      - wrench)
+        posture = config.k_null * (controller.q_null - q) - config.d_null * dq
+        jac = kin.jacobian
+        null = posture - jac.T @ np.linalg.solve(jac @ jac.T + 1e-6 * np.eye(6), jac @ posture)
+        expected = (jac.T @ rot6 @ eef_wrench + null - config.d_joint * dq
+                    + model.nonlinear_effects(q, dq))
+        np.testing.assert_allclose(tau, expected, rtol=0.0, atol=1e-9)
+        np.testing.assert_allclose(controller.tool.twist, jac @ dq, rtol=0.0, atol=1e-12)
+        np.testing.assert_allclose(controller.tool.rotation, kin.rotation, rtol=0.0, atol=1e-12)
+
 def lift(loop: RobotLoop, seconds: float = 0.3) -> None:
     """Pull the shaft up out of the counterbore (contact convention: +Fz pulls), then stop."""
     loop.command(WrenchSetpoint.residual(8.0, 0.0, 0.0))

@@ -56,6 +56,11 @@ class PandaModel:
         self.q_lower = self.model.lowerPositionLimit.copy()
         self.q_upper = self.model.upperPositionLimit.copy()
 
+    def serialised(self) -> str:
+        """The model in Pinocchio's text serialisation: how the compiled kernels
+        (``core/native``) get exactly this model, tool frame and payload included."""
+        return self.model.saveToString()
+
     # --- kinematics -----------------------------------------------------------------------
     def kinematics(self, q: np.ndarray) -> Kinematics:
         """Forward kinematics and the tool Jacobian."""
