@@ -129,3 +129,36 @@ def test_monte_carlo_check_uses_exact_returns_of_goal_episodes_only() -> None:
     # returns from the end: 0, -1 + 0.5 * 0, -1 + 0.5 * -1
     assert sorted(check.returns) == [-1.5, -1.0, 0.0]
     assert check.error(Critic()) == pytest.approx((1.5 + 1.0 + 0.0) / 3)
+
+
+def test_the_config_digest_is_of_values_not_of_comments_or_node_only_settings(tmp_path) -> None:
+    import shutil
+
+    from qg_common.params import config_file
+    from qg_experiments.runner import STACK_CONFIG_FILES, config_digest
+    for name in STACK_CONFIG_FILES:
+        shutil.copy(config_file(name), tmp_path / name)
+    digest = config_digest(tmp_path)
+    assert digest == config_digest()
+    learner = (tmp_path / "learner.yaml").read_text()
+    (tmp_path / "learner.yaml").write_text(learner + "# a comment\n")
+    executor = (tmp_path / "executor.yaml").read_text()
+    (tmp_path / "executor.yaml").write_text(executor.replace("step_timeout: 10.0",
+                                                             "step_timeout: 12.0"))
+    assert config_digest(tmp_path) == digest        # a comment; a node-only timeout
+    (tmp_path / "learner.yaml").write_text(learner.replace("batch_size: 64", "batch_size: 32"))
+    assert config_digest(tmp_path) != digest
+
+
+def test_a_runs_seed_is_its_robot_and_the_ideal_arm_has_no_imperfections() -> None:
+    from qg_experiments.runner import StackSettings
+    realistic = StackSettings.load().with_arm_seed(103)
+    imperfections = realistic.robot["panda_scene"]["imperfections"]
+    assert imperfections["seed"] == 103 and imperfections["torque_bias"] > 0
+    ideal = StackSettings.load(arm="ideal").with_arm_seed(103)
+    zeros = ideal.robot["panda_scene"]["imperfections"]
+    assert zeros["seed"] == 103
+    assert all(not any(v) if isinstance(v, list) else v == 0.0
+               for k, v in zeros.items() if k != "seed")
+    with pytest.raises(ValueError, match="arm must be one of"):
+        StackSettings.load(arm="perfect")
