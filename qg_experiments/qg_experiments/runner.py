@@ -40,8 +40,8 @@ from qg_learning_node.executor.residual_task import (ACTION_DIM, Observation,
 from qg_learning_node.learner.ddpg import ActorMLP, DDPG
 from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore
 
-__all__ = ["ALGORITHMS", "ARMS", "ESTIMATORS", "StackSettings", "PandaTask", "LivePolicy", "RunSpec",
-           "MonteCarloCheck",
+__all__ = ["ALGORITHMS", "ARMS", "ESTIMATORS", "StackSettings", "PandaTask", "LivePolicy",
+           "RunSpec", "MonteCarloCheck",
            "algorithm_config", "run_episode", "run_training", "episode_noise_seed", "zero_policy",
            "config_digest", "STACK_CONFIG_FILES", "tilted_housing"]
 
