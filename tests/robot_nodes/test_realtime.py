@@ -95,3 +95,27 @@ def test_separate_sim_bridge_and_estimator_processes_complete_a_step(stack, robo
         assert gaps[gaps > 0].min() < 2e6, f"closest states {gaps[gaps > 0].min() / 1e6} ms apart"
     codes = stack.stop(grace=5.0)
     assert codes == {"sim": 0, "bridge": 0, "wrench_estimator": 0}, stack.logs()
+
+
+def test_a_position_robot_runs_as_separate_sim_and_bridge_processes(stack):
+    """The Nextage (interface kind ``position``): the sim applies ``joint_commands.position``
+    and publishes its wrist sensor on ``wrench_estimate``; no estimator process is needed."""
+    from geometry_msgs.msg import WrenchStamped
+    args = ("--ros-args", "-p", "robot:=sim_nextage")
+    stack.start(("sim", "sim_robot_node", "sim", args),
+                ("bridge", "robot_bridge_node", "bridge", args))
+    with stack.client() as cli:
+        sensed: list[WrenchStamped] = []
+        cli.node.create_subscription(WrenchStamped, "/wrench_estimate", sensed.append, DEEP)
+        robot = RobotClient(cli)
+        reply = robot.reset(2, timeout=30.0)
+        assert reply.success, reply.message + stack.logs()
+        event = robot.step(1, (0.0,) * 6, timeout=20.0, resend=0.004)
+        assert event is not None, stack.logs()
+        assert event.duration <= 0.25 + 0.02
+        assert sensed and np.all(np.isfinite(wrench(sensed[-1].wrench)))
+        # The peg hangs where the reset put it: the bridge's targets hold it (< 1 mm).
+        start, end = reply.observation.ee_pose.position, event.ee_pose.position
+        assert np.linalg.norm([end.x - start.x, end.y - start.y, end.z - start.z]) < 0.001, \
+            stack.logs()
+    assert stack.stop(grace=5.0) == {"sim": 0, "bridge": 0}, stack.logs()
