@@ -33,7 +33,8 @@ sys.path.insert(0, str(ROOT / "tests" / "robot"))
 from ekf_harness import (DT, PandaTorqueHarness, Trace, descend_reference, rmse,  # noqa: E402
                          settling_time, sine_reference, step_wrench)
 
-from robot_bridge_node.core.panda_model import Q_READY, PandaModel  # noqa: E402
+from qg_common.panda_description import Q_READY, panda_arm  # noqa: E402
+from robot_bridge_node.core.arm_model import ArmModel  # noqa: E402
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig  # noqa: E402
 from qg_common.params import config_file, load_ros_params  # noqa: E402
 
@@ -117,7 +118,7 @@ def run_all(harness: PandaTorqueHarness, config: WrenchEKFConfig, exact: bool
 def main() -> None:
     params = load_ros_params(config_file("wrench_estimator.yaml"))
     config = WrenchEKFConfig.from_dict(params["ekf"])
-    model = PandaModel()
+    model = ArmModel.of_arm(panda_arm())
     result: dict[str, object] = {"config": params["ekf"], "dt": DT}
     costs = []
     for name, noise in NOISE.items():

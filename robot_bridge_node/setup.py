@@ -22,13 +22,19 @@ setup(
     zip_safe=True,
     maintainer='QG developers',
     maintainer_email='dev@qg.local',
-    description='Hardware bridge: 1 kHz hybrid force/impedance (Panda) or task-space position (Nextage) control with safety limits, and the EKF contact-wrench estimator.',
+    description='Hardware bridge: 1 kHz hybrid force/impedance (torque arms from their URDF) or task-space position (Nextage) control with safety limits, and the EKF contact-wrench estimator.',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
             'bridge = robot_bridge_node.bridge_node:main',
             'wrench_estimator = robot_bridge_node.estimator_node:main',
             'robot = robot_bridge_node.robot_process:main',
+        ],
+        # The hardware interface kinds the bridge drives, looked up by the name a robot plugin
+        # gives (robot_bridge_node.core.interface_kinds).
+        'robot_bridge_node.interfaces': [
+            'torque = robot_bridge_node.core.torque_kind:TORQUE',
+            'position = robot_bridge_node.core.position_kind:POSITION',
         ],
     },
 )

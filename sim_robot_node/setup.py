@@ -6,7 +6,7 @@ package_name = 'sim_robot_node'
 # The repository's config/ is the one source of the numbers; this package installs its
 # nodes' files from there to share/sim_robot_node/config (symlinked by --symlink-install).
 config_files = [os.path.join('..', 'config', name) for name in (
-    'panda_scene.yaml', 'panda_ideal.yaml', 'nextage.yaml', 'peg_env.yaml')]
+    'panda_scene.yaml', 'panda_ideal.yaml', 'xarm_scene.yaml', 'nextage.yaml', 'peg_env.yaml')]
 
 setup(
     name=package_name,
@@ -22,7 +22,7 @@ setup(
     zip_safe=True,
     maintainer='QG developers',
     maintainer_email='dev@qg.local',
-    description='Simulated hardware: pybullet Panda with a shaft/bearing press fit and a Nextage arm with peg-in-hole, 1 kHz, ground truth for evaluation.',
+    description='Simulated hardware: pybullet torque arms (Panda, xArm 7) with a shaft/bearing press fit and a Nextage arm with peg-in-hole, 1 kHz, ground truth for evaluation.',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
@@ -31,6 +31,7 @@ setup(
         # The robots this package simulates, loaded by name by robot_bridge_node's robot process.
         'robot_bridge_node.robots': [
             'sim_panda = sim_robot_node.plugins:SIM_PANDA',
+            'sim_xarm7 = sim_robot_node.plugins:SIM_XARM7',
             'sim_nextage = sim_robot_node.plugins:SIM_NEXTAGE',
         ],
         # Environments of the in-process experiments (qg_experiments.environments).

@@ -6,13 +6,15 @@ takes ``wrench_setpoint`` in, and publishes the tool pose and twist and
 the ``ee_at_rest`` event that ends an RL step. In the composed ``robot`` process the loop's
 hardware is the robot plugin; run on its own (``ros2 run robot_bridge_node bridge``) it is
 ``RemoteRobot``, which reads ``joint_states`` from the separate sim and writes
-``joint_commands``, one tick per received state, on the states' clock (``StateClock``).
+``joint_commands``, one tick per received state, on the states' clock (``StateClock``). Which
+loop, controller and parameters a robot gets is its interface kind's (``interface_kinds``), looked
+up by the name its plugin gives: this module names no robot and no kind.
 """
 from __future__ import annotations
 
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -23,7 +25,6 @@ from qg_common.conversions import (at_rest_msg, ground_truth_from_msg, joint_sta
                                    twist_stamped, wrench_from_msg)
 from qg_common.node_parameters import declare_parameters, package_defaults
 from qg_common.node_runtime import LoopThread, favour_loop_thread, run_nodes
-from qg_common.params import POSITIVE, ParameterSection
 from qg_common.types import NO_GROUND_TRUTH, GroundTruth, JointState
 from qg_interfaces.msg import AtRest, GroundTruth as GroundTruthMsg
 from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
@@ -31,54 +32,28 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState as JointStateMsg
 from std_msgs.msg import Header
 
-from robot_bridge_node.core.hardware_interface import ROBOT_SECTION, RobotPlugin, robot_plugin
-from robot_bridge_node.core.impedance import HybridImpedanceController, ImpedanceConfig, ToolState
-from robot_bridge_node.core.position_control import PositionControlConfig
-from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
-from robot_bridge_node.core.robot_loop import LoopConfig, RobotLoop, StateClock, tool_model
-from robot_bridge_node.core.safety import (HARD_LIMITS, SafetyFilter, SafetyLimits,
-                                           SetpointRejected)
+from robot_bridge_node.core.hardware_interface import (ROBOT_SECTION, Robot, RobotPlugin,
+                                                       robot_plugin)
+from robot_bridge_node.core.impedance import ToolState
+from robot_bridge_node.core.interface_kinds import interface_kind
+from robot_bridge_node.core.robot_loop import RobotLoop, StateClock
+from robot_bridge_node.core.safety import SetpointRejected
 
-__all__ = ["BridgeNode", "CONTROLLER_SECTIONS", "LoopRunner", "LoopObserver", "RemoteRobot",
-           "LatestWrench", "MAX_STATE_GAP", "main"]
+__all__ = ["BridgeNode", "LoopRunner", "LoopObserver", "RemoteRobot", "LatestWrench",
+           "MAX_STATE_GAP", "main"]
 
 #: Called after every tick with the simulated time [ns] (e.g. an MCAP recorder).
 LoopObserver = Callable[[int, RobotLoop], None]
 
 
-_STEP_SECTIONS = (
-    ParameterSection("rest", RestConfig, ranges={
-        "linear_threshold": (0.0, 1.0), "angular_threshold": (0.0, 10.0),
-        "hold_time": (0.0, 10.0), "min_time": (0.0, 10.0), "max_time": (0.0, 10.0)}),
-    ParameterSection("loop", LoopConfig, ranges={"dt": (0.0, 0.01), "settle_time": (0.0, 10.0)}))
-
-#: The bridge's parameters by the robot's hardware interface: the controller and its limits,
-#: the rest detector that ends an RL step, the loop timing (``config/bridge.yaml``; a position
-#: robot's controller gains come with the robot's own files).
-CONTROLLER_SECTIONS: dict[str, tuple[ParameterSection, ...]] = {
-    "torque": (
-        ParameterSection("impedance", ImpedanceConfig, ranges={
-            "k_null": POSITIVE, "d_null": POSITIVE, "d_joint": POSITIVE}),
-        ParameterSection("safety", SafetyLimits, ranges={
-            **{name: (0.0, ceiling) for name, ceiling in HARD_LIMITS.items()},
-            "tilt_margin": (0.0, HARD_LIMITS["tilt_max"]), "tilt_stiffness": POSITIVE}),
-        *_STEP_SECTIONS),
-    "position": (
-        ParameterSection("position_control", PositionControlConfig, ranges={
-            "damping": (0.0, 1.0), "orientation_weight": POSITIVE, "max_iterations": (1, 10000),
-            "max_iteration_step": (0.0, 3.2), "position_tolerance": (0.0, 0.01),
-            "orientation_tolerance": (0.0, 0.1), "linear_speed_limit": (0.0, 1.0),
-            "angular_speed_limit": (0.0, 10.0), "joint_speed_limit": (0.0, 10.0),
-            "dt": (0.0, 0.01)}),
-        *_STEP_SECTIONS),
-}
-
-
 class BridgeNode(Node):
     """Takes wrench setpoints (``setpoint_handler``), reports the EEF state and rest.
 
-    Its parameters are the controller's of the robot's interface (``CONTROLLER_SECTIONS``); the
-    robot is the plugin named by its ``robot`` parameter unless ``plugin`` is given.
+    Its parameters are the controller's of the robot's interface kind
+    (``InterfaceKind.controller_sections``: the controller and its limits, the rest detector
+    that ends an RL step, the loop timing; defaults from ``config/bridge.yaml``, a position
+    robot's gains from the robot's own files); the robot is the plugin named by its ``robot``
+    parameter unless ``plugin`` is given.
     """
 
     def __init__(self, plugin: RobotPlugin | None = None) -> None:
@@ -86,7 +61,8 @@ class BridgeNode(Node):
         if plugin is None:
             plugin = robot_plugin(declare_parameters(self, [ROBOT_SECTION])["robot"])
         self.plugin = plugin
-        self.params = declare_parameters(self, CONTROLLER_SECTIONS[plugin.interface],
+        self.kind = interface_kind(plugin.interface)
+        self.params = declare_parameters(self, self.kind.controller_sections,
                                          (("robot_bridge_node", "bridge.yaml"),
                                           *plugin.config_files))
         self.ee_pose = self.create_publisher(PoseStamped, topics.EE_POSE, topics.SENSOR_QOS)
@@ -335,16 +311,19 @@ class RemoteRobot:
     """The loop's hardware and simulation over topics: the arm is the separate sim process.
 
     ``read`` is the latest ``joint_states`` and ``state_time`` its stamp; ``write`` publishes
-    ``joint_commands`` and waits (up to ``timeout``) for the next state, so the loop ticks once
-    per state it takes, and a tick covers the time since the previous state it took, however
-    many it missed. The first state and every ``sim/restarted`` call ``on_restart``; ``reset``
-    then waits for a state from after the restart, so the loop settles from the new pose.
+    ``joint_commands`` (the command in the interface kind's ``command_field``: torques in
+    ``effort``, targets in ``position``) and waits (up to ``timeout``) for the next state, so
+    the loop ticks once per state it takes, and a tick covers the time since the previous state
+    it took, however many it missed. The first state and every ``sim/restarted`` call
+    ``on_restart``; ``reset`` then waits for a state from after the restart, so the loop
+    settles from the new pose.
     """
 
-    def __init__(self, node: Node, n_joints: int, on_restart: Callable[[], None],
-                 timeout: float = 0.05) -> None:
+    def __init__(self, node: Node, n_joints: int, command_field: str,
+                 on_restart: Callable[[], None], timeout: float = 0.05) -> None:
         self.node = node
         self.n_joints = n_joints
+        self.command_field = command_field
         self.on_restart = on_restart
         self.timeout = timeout
         self._stamp = 0.0
@@ -394,7 +373,7 @@ class RemoteRobot:
                 self._fresh.wait(self.timeout)
             return self._state is not None
 
-    # --- torque interface ------------------------------------------------------------------
+    # --- torque or position interface ------------------------------------------------------
     def read(self) -> JointState:
         with self._fresh:
             assert self._state is not None, "no joint_states yet (wait_ready first)"
@@ -405,8 +384,8 @@ class RemoteRobot:
         """[s] the stamp of the state ``read`` returned last (the sim's clock)."""
         return self._read_stamp
 
-    def write(self, tau: np.ndarray) -> None:
-        msg = JointStateMsg(effort=np.asarray(tau, float).tolist())
+    def write(self, command: np.ndarray) -> None:
+        msg = JointStateMsg(**{self.command_field: np.asarray(command, float).tolist()})
         msg.header.stamp = self.node.get_clock().now().to_msg()
         self.commands.publish(msg)
         with self._fresh:
@@ -433,7 +412,8 @@ class RemoteRobot:
 
 
 class LatestWrench:
-    """The loop's estimator in separate-process mode: the last ``/wrench_estimate`` received."""
+    """The loop's wrench in separate-process mode: the last ``/wrench_estimate`` received (the
+    separate estimator's EKF, or the separate sim's wrist sensor)."""
 
     def __init__(self, node: Node) -> None:
         self._wrench = np.zeros(6)
@@ -462,20 +442,13 @@ def _start_separate_bridge(nodes: list[Node]) -> Callable[[], None]:
         if runner is not None:
             runner.request_reset(0)
 
-    if bridge.plugin.interface != "torque":
-        raise ValueError(f"the separate bridge drives torque robots over topics; run "
-                         f"{bridge.plugin.interface} robots in the composed `robot` process")
     # The robot's own parameters belong to the separate sim process: describe it by its defaults.
     description = bridge.plugin.describe(package_defaults("sim", bridge.plugin.config_files))
-    remote = RemoteRobot(bridge, len(description.joint_names), restart)
-    loop = RobotLoop(remote,
-                     HybridImpedanceController(ImpedanceConfig.from_dict(p.get("impedance", {})),
-                                               tool_model(description.tool)),
-                     SafetyFilter(SafetyLimits.from_dict(p.get("safety", {}))),
-                     RestDetector(RestConfig.from_dict(p.get("rest", {}))),
-                     LatestWrench(bridge),
-                     replace(LoopConfig.from_dict(p.get("loop", {})), realtime=True),
-                     simulation=remote, clock=StateClock(remote, MAX_STATE_GAP))
+    remote = RemoteRobot(bridge, len(description.joint_names), bridge.kind.command_field, restart)
+    params = {**p, "loop": {**p.get("loop", {}), "realtime": True}}
+    loop = bridge.kind.build_loop(Robot(remote, remote, description), params, {},
+                                  wrench=LatestWrench(bridge),
+                                  clock=StateClock(remote, MAX_STATE_GAP))
     runner = LoopRunner(loop, bridge, lockstep=False, pace=remote.wait_ready)
     bridge.setpoint_handler = runner.submit_setpoint
     favour_loop_thread()

@@ -8,7 +8,6 @@ runs the EKF on every ``joint_states`` message (position, velocity and the appli
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -17,34 +16,23 @@ from qg_common import topics
 from qg_common.conversions import joint_state_from_msg, time_ns, wrench_stamped
 from qg_common.node_parameters import declare_parameters, package_defaults
 from qg_common.node_runtime import run_nodes
-from qg_common.params import POSITIVE, ParameterSection
 from rclpy.node import Node
 from sensor_msgs.msg import JointState as JointStateMsg
 from std_msgs.msg import Header
 
 from robot_bridge_node.core.hardware_interface import ROBOT_SECTION, RobotPlugin, robot_plugin
-from robot_bridge_node.core.panda_model import PandaModel
-from robot_bridge_node.core.robot_loop import tool_model
-from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
+from robot_bridge_node.core.interface_kinds import interface_kind
 
-__all__ = ["WrenchEstimatorNode", "EKF_SECTION", "SeparateEstimator", "build_ekf", "main"]
-
-#: The EKF's noise model (``config/wrench_estimator.yaml``): a torque robot's wrench estimate.
-EKF_SECTION = ParameterSection("ekf", WrenchEKFConfig, ranges={
-    name: POSITIVE for name in WrenchEKFConfig.__dataclass_fields__})
-
-
-def build_ekf(params: dict[str, Any], model: PandaModel) -> WrenchEKF:
-    """The EKF from the node parameters (``ekf`` section of ``config/wrench_estimator.yaml``)."""
-    return WrenchEKF(WrenchEKFConfig.from_dict(params.get("ekf", {})), model)
+__all__ = ["WrenchEstimatorNode", "SeparateEstimator", "main"]
 
 
 class WrenchEstimatorNode(Node):
     """Publishes the contact wrench estimate (``wrench_estimate``, tool frame).
 
-    A torque robot's estimate is the EKF's (parameters ``ekf.*``); a position robot's is its
-    wrist sensor's, which has no parameters here. The robot is the plugin named by the
-    ``robot`` parameter unless ``plugin`` is given.
+    Its parameters are the robot's interface kind's (``estimator_sections``): a torque robot's
+    estimate is the EKF's (``ekf.*``); a position robot's is its wrist sensor's, which has no
+    parameters here. The robot is the plugin named by the ``robot`` parameter unless ``plugin``
+    is given.
     """
 
     def __init__(self, plugin: RobotPlugin | None = None) -> None:
@@ -52,8 +40,8 @@ class WrenchEstimatorNode(Node):
         if plugin is None:
             plugin = robot_plugin(declare_parameters(self, [ROBOT_SECTION])["robot"])
         self.plugin = plugin
-        sections = [EKF_SECTION] if plugin.interface == "torque" else []
-        self.params = declare_parameters(self, sections,
+        self.kind = interface_kind(plugin.interface)
+        self.params = declare_parameters(self, self.kind.estimator_sections,
                                          (("robot_bridge_node", "wrench_estimator.yaml"),))
         self.wrench = self.create_publisher(WrenchStamped, topics.WRENCH_ESTIMATE,
                                             topics.SENSOR_QOS)
@@ -63,22 +51,25 @@ class WrenchEstimatorNode(Node):
 
 
 class SeparateEstimator:
-    """The EKF fed by ``/joint_states`` of the separate sim process.
+    """The robot's estimator (the interface kind's ``separate_estimator``: a torque robot's EKF)
+    fed by ``/joint_states`` of the separate sim process.
 
     Each message is one simulator step (``dt`` = the scene's time step): wall-clock stamp
     differences would only add jitter the physics does not have. The filter restarts at the
     first state and at the first state after each ``/sim/restarted``.
+    :raises ValueError: for a robot whose kind estimates nothing (it measures its wrench).
     """
 
     def __init__(self, node: WrenchEstimatorNode) -> None:
         self.node = node
-        if node.plugin.interface != "torque":
-            raise ValueError("the separate estimator runs the EKF of torque robots only")
+        if node.kind.separate_estimator is None:
+            raise ValueError(f"{node.kind.name} robots measure their wrench (the separate sim "
+                             f"publishes it): there is nothing to estimate")
         # The robot's own parameters belong to the separate sim process: its defaults.
         robot = node.plugin.describe(package_defaults("sim", node.plugin.config_files))
         self.dt = robot.dt
         self.n_joints = len(robot.joint_names)
-        self.ekf = build_ekf(node.params, tool_model(robot.tool))
+        self.ekf = node.kind.separate_estimator(robot, node.params)
         self._restart_time: float | None = 0.0     # restart at the first state from then on
         node.create_subscription(JointStateMsg, topics.JOINT_STATES, self._on_state,
                                  topics.SENSOR_QOS)

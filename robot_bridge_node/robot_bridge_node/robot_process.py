@@ -24,9 +24,8 @@ from qg_common.node_runtime import LoopThread, RealtimePacer, favour_loop_thread
 from rclpy.node import Node
 
 from robot_bridge_node.bridge_node import BridgeNode, LoopRunner
-from robot_bridge_node.core.position_loop import build_position_loop
-from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
-from robot_bridge_node.estimator_node import WrenchEstimatorNode, build_ekf
+from robot_bridge_node.core.robot_loop import RobotLoop
+from robot_bridge_node.estimator_node import WrenchEstimatorNode
 from robot_bridge_node.recorder_node import RecorderNode
 from robot_bridge_node.simulation_node import SimulationNode, serve_reset
 
@@ -36,8 +35,9 @@ __all__ = ["RobotProcess", "main"]
 class RobotProcess:
     """One ``RobotLoop`` (robot plugin, controller, safety, rest detector, EKF) and its nodes.
 
-    A torque robot's loop runs the hybrid force/impedance controller and the EKF; a position
-    robot's (``position_loop.PositionLoop``) the task-space IK and reads the wrist sensor.
+    The loop is the robot's interface kind's (``InterfaceKind.build_loop``): a torque robot's
+    runs the hybrid force/impedance controller and the EKF; a position robot's
+    (``position_loop.PositionLoop``) the task-space IK and reads the wrist sensor.
 
     The loop is built from the nodes' parameters: the robot plugin the sim node loaded (its
     ``robot`` parameter) from the sim node's sections. ``runner.loop_observers`` is where a per-tick
@@ -54,10 +54,7 @@ class RobotProcess:
         robot = sim.plugin.create(sim.params)
         bridge_params = {**bridge.params,
                          "loop": {**bridge.params.get("loop", {}), "realtime": config.realtime}}
-        self.loop: RobotLoop = build_loop(
-            robot, bridge_params,
-            estimator=lambda robot, model: build_ekf(estimator.params, model)) \
-            if sim.plugin.interface == "torque" else build_position_loop(robot, bridge_params)
+        self.loop: RobotLoop = bridge.kind.build_loop(robot, bridge_params, estimator.params)
         #: Realtime: holds the wall-clock tick period (``missed`` counts dropped ticks).
         self.pacer = RealtimePacer(self.loop.config.dt) if config.realtime else None
         pacer = self.pacer

@@ -3,41 +3,45 @@
 Each adapter puts a pybullet scene behind the bridge's hardware interface (``read``/``write``)
 and its simulation interface (``reset``, ``ground_truth``, ``contact_wrench``); ``setup.py``
 registers them by name, and ``ros2 run robot_bridge_node robot --ros-args -p robot:=<name>``
-loads one. The bridge never imports this module.
+loads one. The bridge never imports this module. A torque arm in the shaft scene is
+``shaft_arm_plugin(arm, section, config file)``: ``sim_panda`` and ``sim_xarm7`` are two calls.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from qg_common.panda_description import JOINT_NAMES
+from qg_common.arm_description import ArmDescription
+from qg_common.panda_description import panda_arm
 from qg_common.params import POSITIVE, ParameterSection
 from qg_common.types import GroundTruth, JointState
+from qg_common.xarm_description import xarm7_arm
 from robot_bridge_node.core.hardware_interface import (Robot, RobotDescription, RobotPlugin,
                                                        ToolDescription)
 
+from sim_robot_node.core.arm_imperfections import ArmImperfections
 from sim_robot_node.core.nextage_scene import (NextagePegScene, NextageSceneConfig,
                                                PegHoleGeometry, nextage_urdf_path, sample_start)
-from sim_robot_node.core.arm_imperfections import ArmImperfections
-from sim_robot_node.core.panda_scene import PandaSceneConfig, PandaShaftScene
+from sim_robot_node.core.shaft_scene import ShaftScene, ShaftSceneConfig
 
-__all__ = ["SimPanda", "SIM_PANDA", "SimNextage", "SIM_NEXTAGE", "NEXTAGE_JOINT_NAMES"]
+__all__ = ["SimShaftArm", "shaft_arm_plugin", "shaft_scene_section", "SIM_PANDA", "SIM_XARM7",
+           "SimNextage", "SIM_NEXTAGE", "NEXTAGE_JOINT_NAMES"]
 
 #: The Nextage right arm's joints, as its URDF names them (the order of every joint vector).
 NEXTAGE_JOINT_NAMES = tuple(f"RARM_JOINT{i}" for i in range(6))
 
 
-class SimPanda:
-    """The Panda shaft-into-bearing scene as a torque-controlled arm with a simulation.
+class SimShaftArm:
+    """A torque-controlled arm in the shaft-into-bearing scene, with the scene's simulation.
 
     ``write`` applies the torques and steps the physics once: in lockstep the loop's tick is the
     simulation's clock.
     """
 
-    joint_names = JOINT_NAMES
-
-    def __init__(self, scene: PandaShaftScene) -> None:
+    def __init__(self, scene: ShaftScene) -> None:
         self.scene = scene
+        self.joint_names = scene.arm_description.joint_names
 
     # --- torque interface ------------------------------------------------------------------
     def read(self) -> JointState:
@@ -58,37 +62,54 @@ class SimPanda:
         return self.scene.contact_wrench()
 
 
-def _panda_config(params: dict[str, Any]) -> PandaSceneConfig:
-    return PandaSceneConfig.from_dict(params.get("panda_scene", {}))
+def shaft_scene_section(prefix: str) -> ParameterSection:
+    """A shaft scene's parameters under ``prefix``: every length, mass and friction positive,
+    every imperfection >= 0 (0: off)."""
+    return ParameterSection(prefix, ShaftSceneConfig, ranges={
+        **{name: POSITIVE for name, kind in ShaftSceneConfig.__annotations__.items()
+           if kind == "float"},
+        **{f"imperfections.{name}": POSITIVE
+           for name, kind in ArmImperfections.__annotations__.items() if kind == "float"},
+        "imperfections.seed": (0, 2 ** 31 - 1),
+        "time_step": (0.0, 0.01), "solver_iterations": (1, 10000), "bore_segments": (8, 10000)})
 
 
-def _describe_panda(params: dict[str, Any]) -> RobotDescription:
-    """The Panda holding the shaft at the grasp point, the shaft's weight a payload."""
-    config = _panda_config(params)
-    tool = ToolDescription(offset=config.tool_offset, payload_mass=config.shaft_mass,
-                           payload_com=config.tool_offset + config.shaft_com)
-    return RobotDescription(joint_names=JOINT_NAMES, tool=tool, dt=config.time_step)
+def shaft_arm_plugin(arm: Callable[[], ArmDescription], section: str,
+                     config_file: str) -> RobotPlugin:
+    """The plugin of a torque arm holding the shaft, its parameters the section ``section`` of
+    ``config/<config_file>`` (a ``ShaftSceneConfig``: what the file does not name keeps the
+    dataclass default, the task's numbers).
 
+    :param arm: the arm's description (called when the robot is described, not at import).
+    """
+    def config(params: dict[str, Any]) -> ShaftSceneConfig:
+        return ShaftSceneConfig.from_dict(params.get(section, {}))
 
-def _create_panda(params: dict[str, Any]) -> Robot:
-    sim = SimPanda(PandaShaftScene(_panda_config(params)))
-    return Robot(hardware=sim, simulation=sim, description=_describe_panda(params))
+    def describe(params: dict[str, Any]) -> RobotDescription:
+        """The arm holding the shaft at the grasp point, the shaft's weight a payload; the model
+        is the arm's URDF with its flange as the tool's frame."""
+        scene, description = config(params), arm()
+        tool = ToolDescription(offset=scene.tool_offset, payload_mass=scene.shaft_mass,
+                               payload_com=scene.tool_offset + scene.shaft_com)
+        return RobotDescription(joint_names=description.joint_names, tool=tool,
+                                dt=scene.time_step, urdf=description.urdf,
+                                tool_frame=description.flange,
+                                torque_limits=description.torque_limits,
+                                torque_rate_limits=description.torque_rate_limits)
 
+    def create(params: dict[str, Any]) -> Robot:
+        sim = SimShaftArm(ShaftScene(config(params), arm()))
+        return Robot(hardware=sim, simulation=sim, description=describe(params))
 
-#: The Panda scene's parameters: every length, mass and friction positive, every imperfection
-#: >= 0 (0: off).
-_PANDA_SCENE = ParameterSection("panda_scene", PandaSceneConfig, ranges={
-    **{name: POSITIVE for name, kind in PandaSceneConfig.__annotations__.items()
-       if kind == "float"},
-    **{f"imperfections.{name}": POSITIVE
-       for name, kind in ArmImperfections.__annotations__.items() if kind == "float"},
-    "imperfections.seed": (0, 2 ** 31 - 1),
-    "time_step": (0.0, 0.01), "solver_iterations": (1, 10000), "bore_segments": (8, 10000)})
+    return RobotPlugin(interface="torque", config_files=(("sim_robot_node", config_file),),
+                       parameters=(shaft_scene_section(section),), describe=describe,
+                       create=create)
+
 
 #: ``robot:=sim_panda``: the Panda pressing a shaft into a bearing (config/panda_scene.yaml).
-SIM_PANDA = RobotPlugin(interface="torque", config_files=(("sim_robot_node", "panda_scene.yaml"),),
-                        parameters=(_PANDA_SCENE,), describe=_describe_panda,
-                        create=_create_panda)
+SIM_PANDA = shaft_arm_plugin(panda_arm, "panda_scene", "panda_scene.yaml")
+#: ``robot:=sim_xarm7``: the UFACTORY xArm 7 in the same scene (config/xarm_scene.yaml).
+SIM_XARM7 = shaft_arm_plugin(xarm7_arm, "xarm_scene", "xarm_scene.yaml")
 
 
 class SimNextage:

@@ -1,10 +1,14 @@
-"""``ros2 run sim_robot_node sim``: the simulated Panda as a process of its own.
+"""``ros2 run sim_robot_node sim``: a simulated robot as a process of its own.
 
-The stack normally runs the simulation inside the ``robot`` process (the ``sim_panda`` plugin of
-``robot_bridge_node``). Run on its own, ``SeparateSim`` steps the scene at wall-clock 1 kHz like
-a torque-controlled arm: it applies the latest ``joint_commands`` efforts, and with no fresh
-command it holds gravity-compensating torques, as the Panda's own firmware would. The node is
-the bridge's ``SimulationNode`` (the same topics as in the composed process).
+The stack normally runs the simulation inside the ``robot`` process (the plugin named by its
+``robot`` parameter, in ``robot_bridge_node``). Run on its own, ``SeparateSim`` steps the same
+plugin's robot (``-p robot:=<name>``, ``sim_panda`` by default) at wall-clock 1 kHz: it applies
+the latest ``joint_commands`` (the field its interface kind names: torques in ``effort``, joint
+targets in ``position``), and with no fresh command what the kind's ``hold`` gives (a torque arm
+floats under gravity compensation, as its own firmware would; a position arm keeps its last
+target). A robot with a wrist force-torque sensor also publishes the sensor's reading on
+``wrench_estimate``, as its driver would. The node is the bridge's ``SimulationNode`` (the same
+topics as in the composed process).
 """
 from __future__ import annotations
 
@@ -16,18 +20,17 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
-import pybullet
+from geometry_msgs.msg import WrenchStamped
 from qg_common import topics
+from qg_common.conversions import wrench_stamped
 from qg_common.node_runtime import LoopThread, RealtimePacer, favour_loop_thread, run_nodes
-from qg_common.types import JointState
 from qg_interfaces.msg import AtRest
 from rclpy.node import Node
+from robot_bridge_node.core.hardware_interface import Robot
+from robot_bridge_node.core.interface_kinds import InterfaceKind, interface_kind
 from robot_bridge_node.simulation_node import SimulationNode, serve_reset
 from sensor_msgs.msg import JointState as JointStateMsg
 from std_msgs.msg import Header
-
-from sim_robot_node.core.panda_scene import PandaSceneConfig, PandaShaftScene
-from sim_robot_node.plugins import SIM_PANDA
 
 __all__ = ["SeparateSim", "main"]
 
@@ -43,51 +46,58 @@ class _ResetJob:
 
 
 class SeparateSim:
-    """The scene stepped at wall-clock 1 kHz under ``/joint_commands`` (separate processes).
+    """A robot plugin's robot stepped at wall-clock 1 kHz under ``/joint_commands`` (separate
+    processes).
 
     Every tick applies the latest command if it is fresh (younger than ``command_timeout`` and
-    sent after the last reset), else gravity compensation with joint damping; then it steps and
-    publishes the new state (``effort`` = the torque just applied) and the ground truth. A reset
-    teleports the arm and announces it on ``sim/restarted`` (stamped with the reset time), so
-    the bridge and the estimator restart from the new state; the bridge settles under its
-    controller and reports the settled state (``ee_at_rest`` with ``seq`` 0), and no earlier
-    than ``reset_wait`` after the reset the service answers with that observation.
+    sent after the last reset), else the interface kind's hold; then it steps (the hardware's
+    ``write``) and publishes the new state and the ground truth. A reset teleports the arm and
+    announces it on ``sim/restarted`` (stamped with the reset time), so the bridge and the
+    estimator restart from the new state; the bridge settles under its controller and reports
+    the settled state (``ee_at_rest`` with ``seq`` 0), and no earlier than ``reset_wait`` after
+    the reset the service answers with that observation.
+
+    :param robot: from the plugin; it needs a simulation (``reset``, ``ground_truth``).
+    :param kind: its interface kind (``robot_bridge_node.interfaces``).
     """
 
-    def __init__(self, node: SimulationNode, scene: PandaShaftScene) -> None:
+    def __init__(self, node: SimulationNode, robot: Robot, kind: InterfaceKind) -> None:
+        if robot.simulation is None:
+            raise ValueError("the separate sim needs a simulated robot (simulation is None)")
         self.node = node
-        self.scene = scene
+        self.robot = robot
+        self.simulation = robot.simulation
+        self.kind = kind
         self.config = node.config
-        self.pacer = RealtimePacer(scene.config.time_step)
-        self._command: tuple[float, np.ndarray] | None = None   # (arrival, tau)
+        self.n_joints = len(robot.description.joint_names)
+        self.hold = kind.hold(robot.description, self.config.hold_damping)
+        self.pacer = RealtimePacer(robot.description.dt)
+        self._command: tuple[float, np.ndarray] | None = None   # (arrival, command)
         self._settled: AtRest | None = None     # the bridge's observation after the last reset
         self._jobs: queue.Queue[_ResetJob] = queue.Queue()
         self._job: _ResetJob | None = None
         self._reset_time = -math.inf
         self.restarted = node.create_publisher(Header, topics.SIM_RESTARTED, topics.RESTARTED_QOS)
+        self.wrench = None if robot.wrist_sensor is None else node.create_publisher(
+            WrenchStamped, topics.WRENCH_ESTIMATE, topics.SENSOR_QOS)
         node.create_subscription(JointStateMsg, topics.JOINT_COMMANDS, self._on_command,
                                  topics.SENSOR_QOS)
         node.create_subscription(AtRest, topics.EE_AT_REST, self._on_at_rest, topics.COMMAND_QOS)
         serve_reset(node, self)
+        self.hold.reset(robot.hardware.read())
 
     def _on_command(self, msg: JointStateMsg) -> None:
-        tau = np.asarray(msg.effort, float)
-        if tau.shape != (7,) or not np.all(np.isfinite(tau)):
-            self.node.get_logger().error(f"ignoring joint_commands without 7 finite efforts: "
-                                         f"{tau.tolist()}", throttle_duration_sec=1.0)
+        command = np.asarray(getattr(msg, self.kind.command_field), float)
+        if command.shape != (self.n_joints,) or not np.all(np.isfinite(command)):
+            self.node.get_logger().error(
+                f"ignoring joint_commands without {self.n_joints} finite "
+                f"{self.kind.command_field} values: {command.tolist()}", throttle_duration_sec=1.0)
             return
-        self._command = (time.perf_counter(), tau)
+        self._command = (time.perf_counter(), command)
 
     def _on_at_rest(self, msg: AtRest) -> None:
         if msg.seq == 0:
             self._settled = msg
-
-    def hold_torques(self, state: JointState) -> np.ndarray:
-        """Gravity (with the shaft) compensated, motion damped: the arm floats in place."""
-        zeros = [0.0] * 7
-        gravity = np.asarray(pybullet.calculateInverseDynamics(
-            self.scene.robot, state.q.tolist(), zeros, zeros, physicsClientId=self.scene.cid))
-        return gravity - self.config.hold_damping * state.dq
 
     def reset(self, initial_pose: int, housing_yaw: float = 0.0, timeout: float = 5.0,
               session: str = "") -> AtRest:
@@ -109,25 +119,31 @@ class SeparateSim:
 
     def run(self, stop: threading.Event) -> None:
         """The 1 kHz loop (body of a ``LoopThread``)."""
-        every = self.config.publish_every(self.scene.config.time_step)
-        truth_every = self.config.ground_truth_every(self.scene.config.time_step)
+        dt = self.robot.description.dt
+        every = self.config.publish_every(dt)
+        truth_every = self.config.ground_truth_every(dt)
+        hardware = self.robot.hardware
         tick = 0
         while not stop.is_set():
             self.pacer.wait()
             now = time.perf_counter()
             self._take_reset(now)
-            state = self.scene.joint_state()
+            state = hardware.read()
             command = self._command
-            fresh = (command is not None and command[0] > self._reset_time
-                     and now - command[0] < self.config.command_timeout)
-            self.scene.apply_torques(command[1] if fresh else self.hold_torques(state))
-            self.scene.step()
+            since_reset = command if command is not None and command[0] > self._reset_time \
+                else None
+            fresh = since_reset is not None and now - since_reset[0] < self.config.command_timeout
+            hardware.write(since_reset[1] if fresh else self.hold.command(
+                state, None if since_reset is None else since_reset[1]))
             tick += 1
             if tick % every == 0:
                 stamp = self.node.get_clock().now().to_msg()
-                self.node.publish_state(stamp, self.scene.joint_state(),
-                                        self.scene.ground_truth() if tick % truth_every == 0
+                self.node.publish_state(stamp, hardware.read(),
+                                        self.simulation.ground_truth() if tick % truth_every == 0
                                         else None)
+                if self.wrench is not None:
+                    self.wrench.publish(wrench_stamped(self.robot.wrist_sensor.read_wrench(),
+                                                       stamp))
             if self._job is not None and now >= self._job.due and self._settled is not None:
                 self._job.observation = self._settled
                 self._job.done.set()
@@ -138,7 +154,8 @@ class SeparateSim:
             job = self._jobs.get_nowait()
         except queue.Empty:
             return
-        self.scene.reset(job.initial_pose, job.housing_yaw)
+        self.simulation.reset(job.initial_pose, job.housing_yaw)
+        self.hold.reset(self.robot.hardware.read())
         self._settled = None
         self._reset_time = now
         job.due = now + self.config.reset_wait
@@ -154,15 +171,16 @@ def _start_separate_sim(nodes: list[Node]) -> Callable[[], None]:
         # states would clock the bridge's loop (one tick per state) ten times too slowly.
         node.get_logger().info("separate sim process: running in realtime (wall-clock 1 kHz)")
         node.config = replace(node.config, clock_mode="realtime")
-    scene = PandaShaftScene(PandaSceneConfig.from_dict(node.params.get("panda_scene", {})))
-    scene.reset(node.config.initial_pose)
-    sim = SeparateSim(node, scene)
+    robot = node.plugin.create(node.params)
+    robot.simulation.reset(node.config.initial_pose)
+    sim = SeparateSim(node, robot, interface_kind(node.plugin.interface))
     favour_loop_thread()
     return LoopThread("sim", sim.run, node, node.config.realtime_priority).start().stop
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_nodes([lambda: SimulationNode(SIM_PANDA)], args, background=_start_separate_sim)
+    # The node loads the plugin its `robot` parameter names.
+    return run_nodes([SimulationNode], args, background=_start_separate_sim)
 
 
 if __name__ == "__main__":

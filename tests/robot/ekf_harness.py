@@ -16,8 +16,11 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as p
 
-from robot_bridge_node.core.panda_model import N_JOINTS, Q_READY, PandaModel, panda_urdf_path
+from qg_common.panda_description import Q_READY, panda_urdf_path
+from robot_bridge_node.core.arm_model import ArmModel
 from robot_bridge_node.core.wrench_ekf import WrenchEKF
+
+N_JOINTS = 7
 
 DT = 1e-3
 #: Computed-torque PD: ~3 Hz joint bandwidth, critically damped, whatever the inertia.
@@ -49,7 +52,7 @@ class PandaTorqueHarness:
     :param seed: seed of the measurement noise.
     """
 
-    def __init__(self, model: PandaModel, measurement_noise: tuple[float, float] = (0.0, 0.0),
+    def __init__(self, model: ArmModel, measurement_noise: tuple[float, float] = (0.0, 0.0),
                  seed: int = 0) -> None:
         self.model = model
         self.client = p.connect(p.DIRECT)
@@ -203,7 +206,7 @@ def sine_reference(q0: np.ndarray, amplitude: np.ndarray, period: float) -> Join
     return ref
 
 
-def descend_reference(model: PandaModel, q0: np.ndarray, depth: float, duration: float
+def descend_reference(model: ArmModel, q0: np.ndarray, depth: float, duration: float
                       ) -> JointReference:
     """Move the tool straight down by ``depth`` [m] at constant speed over ``duration`` [s].
 

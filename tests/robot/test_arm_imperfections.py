@@ -9,7 +9,8 @@ import math
 import numpy as np
 import pytest
 from qg_common.panda_description import panda_urdf_path
-from robot_bridge_node.core.panda_model import PandaModel
+from qg_common.panda_description import panda_arm
+from robot_bridge_node.core.arm_model import ArmModel
 from sim_robot_node.core.arm_imperfections import (GAZ_2019_COULOMB, ArmImperfections,
                                                    ImperfectArm)
 from sim_robot_node.core.panda_scene import PandaSceneConfig, PandaShaftScene
@@ -61,7 +62,7 @@ def test_a_payload_error_of_m_kg_at_tilt_theta_gives_its_gravity_torque():
     import pybullet as p
     mass, com = 0.3, np.array([0.02, 0.0, -0.03])
     scene = scene_with(only(payload_mass_error=mass, payload_com_error=tuple(com)))
-    model = PandaModel(tool_offset=scene.tool_offset, payload_mass=scene.config.shaft_mass,
+    model = ArmModel.of_arm(panda_arm(), tool_offset=scene.tool_offset, payload_mass=scene.config.shaft_mass,
                        payload_com=scene.tool_offset + scene.config.shaft_com)
     for pose in (0, 3):
         scene.reset(pose)
@@ -89,7 +90,7 @@ def test_joint_friction_is_what_the_links_lose_and_the_driver_does_not_see():
                             joint_friction_velocity=ArmImperfections().joint_friction_velocity,
                             joint_viscous_friction=(0.05,) * 7),
                        gravity=0.0, start_clearance=0.05)
-    model = PandaModel(tool_offset=scene.tool_offset, payload_mass=scene.config.shaft_mass,
+    model = ArmModel.of_arm(panda_arm(), tool_offset=scene.tool_offset, payload_mass=scene.config.shaft_mass,
                        payload_com=scene.tool_offset + scene.config.shaft_com)
     tau = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.3])
     scene.reset(0)
@@ -202,3 +203,20 @@ def test_imperfections_are_validated():
     with pytest.raises(ValueError, match="seed"):
         only(seed=-1)
     assert panda_urdf_path().is_file()
+
+
+def test_the_imperfections_fit_any_joint_count_and_refuse_another_arms():
+    """Six joints (a UR arm's) as well as seven: one figure a joint, drawn and applied per joint;
+    figures for another joint count are refused when the arm is built."""
+    six = dataclasses.replace(ArmImperfections.ideal(n_joints=6), torque_noise=0.02,
+                              torque_bias=0.15, joint_coulomb_friction=(0.1,) * 6,
+                              joint_friction_velocity=(0.2,) * 6, seed=4)
+    arm = ImperfectArm(six, 6)
+    assert arm.torque_bias.shape == (6,) and np.all(arm.torque_bias != 0.0)
+    reading = arm.measure(np.zeros(6), np.zeros(6), np.ones(6))
+    assert reading.tau.shape == (6,) and not np.array_equal(reading.tau, np.ones(6))
+    np.testing.assert_allclose(arm.friction(np.full(6, 10.0)), np.full(6, 0.1), rtol=1e-6)
+    with pytest.raises(ValueError, match="7 joints"):
+        ImperfectArm(six, 7)
+    with pytest.raises(ValueError, match="joint_friction_velocity needs 6"):
+        dataclasses.replace(six, joint_friction_velocity=(0.2,) * 7)

@@ -4,7 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from robot_bridge_node.core.impedance import HybridImpedanceController, ImpedanceConfig
-from robot_bridge_node.core.panda_model import Q_READY, PandaModel
+from qg_common.panda_description import Q_READY, panda_arm
+from robot_bridge_node.core.arm_model import ArmModel
 from robot_bridge_node.core.hardware_interface import load_robot
 from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from qg_common.types import WrenchSetpoint
@@ -22,7 +23,7 @@ def loop() -> RobotLoop:
 
 
 def test_at_the_reference_and_still_the_law_is_gravity_plus_jt_feedforward() -> None:
-    model = PandaModel()
+    model = ArmModel.of_arm(panda_arm())
     controller = HybridImpedanceController(ImpedanceConfig(), model)
     controller.reset(Q_READY)
     wrench = np.array([1.0, -2.0, -15.0, 0.5, -0.3, 0.1])
@@ -33,7 +34,7 @@ def test_at_the_reference_and_still_the_law_is_gravity_plus_jt_feedforward() -> 
 
 
 def test_velocity_is_damped_in_every_direction() -> None:
-    model = PandaModel()
+    model = ArmModel.of_arm(panda_arm())
     controller = HybridImpedanceController(ImpedanceConfig(), model)
     controller.reset(Q_READY)
     rng = np.random.default_rng(0)
@@ -50,7 +51,7 @@ def test_matches_the_law_written_out_in_numpy() -> None:
     the posture (spring, damping, feed-forward, null-space projection, C dq + g)."""
     import pinocchio as pin
 
-    model, config = PandaModel(), ImpedanceConfig()
+    model, config = ArmModel.of_arm(panda_arm()), ImpedanceConfig()
     controller = HybridImpedanceController(config, model)
     rng = np.random.default_rng(1)
     controller.reset(Q_READY + 0.05 * rng.standard_normal(7))       # the posture: elsewhere
@@ -110,3 +111,43 @@ def test_measured_lateral_stiffness_is_the_configured_one(loop: RobotLoop, axis:
     configured = loop.controller.config.k_trans[axis]
     assert stiffness == pytest.approx(configured, rel=0.10)
     assert abs(displacement[1 - axis]) < 0.1 * abs(displacement[axis])
+
+
+def test_the_panda_from_its_plugin_is_the_model_of_its_description_bit_for_bit():
+    """The generic model of the sim_panda plugin's description is the Panda with its shaft, as
+    the description in qg_common builds it: the same serialised model the kernels load."""
+    from qg_common.panda_description import FLANGE, JOINT_NAMES
+    from robot_bridge_node.core.hardware_interface import load_robot
+    description = load_robot("sim_panda", ideal()).description
+    assert description.joint_names == JOINT_NAMES and description.tool_frame == FLANGE
+    tool = description.tool
+    assert ArmModel.from_description(description).serialised() == ArmModel.of_arm(
+        panda_arm(), tool.offset, tool.payload_mass, tool.payload_com).serialised()
+    assert ArmModel.of_arm(panda_arm()).nv == 7        # the fingers are locked
+
+
+def test_holding_makes_every_axis_stiff_and_a_release_restores_the_task_gains():
+    """A pose error along z (force-controlled, 0 N/m in the task) pulls back while holding."""
+    model = ArmModel.of_arm(panda_arm())
+    controller = HybridImpedanceController(ImpedanceConfig(), model)
+    controller.reset(Q_READY)
+    kin = model.kinematics(Q_READY)
+    down = Q_READY + np.linalg.pinv(kin.jacobian) @ np.array([0, 0, -0.001, 0, 0, 0])
+    free = controller.step(down, np.zeros(7), WrenchSetpoint(np.zeros(6)), 0.001)
+    np.testing.assert_allclose(free, model.gravity(down) + ImpedanceConfig().k_null
+                               * _null_space_pull(model, down), atol=0.05)
+    controller.hold(Q_READY)
+    held = controller.step(down, np.zeros(7), WrenchSetpoint(np.zeros(6)), 0.001)
+    # 1 mm below the held pose: the hold pushes up with about 3000 N/m x 1 mm = 3 N.
+    force = np.linalg.lstsq(model.kinematics(down).jacobian.T, held - free, rcond=None)[0]
+    assert force[2] == pytest.approx(3.0, abs=0.3)
+    controller.release()
+    np.testing.assert_allclose(controller.step(down, np.zeros(7), WrenchSetpoint(np.zeros(6)),
+                                               0.001), free, atol=1e-9)
+
+
+def _null_space_pull(model: ArmModel, q: np.ndarray) -> np.ndarray:
+    """The posture spring's torque direction per unit stiffness at ``q`` (towards Q_READY)."""
+    J = model.kinematics(q).jacobian
+    projector = np.eye(7) - J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(6), J)
+    return projector @ (Q_READY - q)

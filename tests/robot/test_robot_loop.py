@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from robot_bridge_node.core.hardware_interface import load_robot
+from robot_bridge_node.core.hardware_interface import load_robot, robot_defaults, robot_plugin
 from robot_bridge_node.core.robot_loop import (MeasuredWrench, LoopConfig, RobotLoop,
                                                StateClock, TickClock, build_loop)
 from robot_bridge_node.core.safety import SetpointRejected
@@ -159,6 +159,38 @@ def test_realtime_watchdog_holds_the_pose_when_setpoints_stop(ideal_loop: RobotL
         realtime.tick()
     now, _ = realtime.simulation.scene.tool_pose()
     assert np.linalg.norm(now - held) < 0.0005
+
+
+@pytest.mark.parametrize("robot", ["sim_panda", "sim_xarm7"])
+def test_the_watchdog_hold_keeps_the_realistic_arm_within_half_a_millimetre(robot: str) -> None:
+    """The realistic arm's unknown 0.1 kg payload and joint friction push the tool while the
+    loop holds the pose on its own: stiff along every axis (z too, force-controlled in the task)
+    the tool stays within 0.5 mm of where the hold began for 0.6 s (measured 0.33-0.34 mm on
+    both arms; with the task's gains, z free, the Panda sank 4.2 mm, with z at the lateral
+    250 N/m 3.8 mm)."""
+    realistic = build_loop(load_robot(robot), robot_defaults(
+        robot_plugin(robot), (("robot_bridge_node", "bridge.yaml"),), "bridge"),
+        estimator=lambda robot, model: MeasuredWrench(robot.simulation.contact_wrench))
+    realtime = RobotLoop(realistic.hardware, realistic.controller, realistic.safety,
+                         realistic.rest, realistic.estimator, LoopConfig(realtime=True),
+                         realistic.simulation)
+    scene = realtime.simulation.scene
+    try:
+        for pose in (0, 3):
+            realtime.reset(pose)
+            realtime.command(WrenchSetpoint.residual(8.0, 0.0, 0.0))  # pulling up, then silence
+            while not realtime.holding:
+                realtime.tick()
+            held, _ = scene.tool_pose()
+            drift = []
+            for _ in range(600):
+                realtime.tick()
+                drift.append(np.linalg.norm(scene.tool_pose()[0] - held))
+            assert max(drift) < 0.0005, f"pose {pose}: {max(drift) * 1e3:.2f} mm"
+            realtime.command(WrenchSetpoint.residual(PUSH, 0.0, 0.0))   # a setpoint releases it
+            assert not realtime.holding and not realtime.controller.holding
+    finally:
+        scene.close()
 
 
 def test_ground_truth_estimator_reports_the_contact_wrench(ideal_loop: RobotLoop) -> None:

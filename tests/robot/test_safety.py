@@ -5,8 +5,11 @@ import math
 
 import numpy as np
 import pytest
-from robot_bridge_node.core.panda_model import DTAU_MAX, TAU_MAX
-from robot_bridge_node.core.safety import SafetyFilter, SafetyLimits, SetpointRejected
+from qg_common.panda_description import DTAU_MAX, panda_arm
+from qg_common.xarm_description import xarm7_arm
+from robot_bridge_node.core.arm_model import ArmModel
+from robot_bridge_node.core.safety import (VELOCITY_BRAKE_DAMPING, SafetyFilter, SafetyLimits,
+                                           SetpointRejected)
 from qg_common.types import PoseReference, WrenchSetpoint
 from qg_common.rotations import axis_angle_matrix, tilt_from_down
 
@@ -44,8 +47,13 @@ def test_limits_cannot_be_loosened_or_disabled(name: str, value: float) -> None:
         SafetyLimits(**{name: value})
 
 
+PANDA_LIMITS = ArmModel.of_arm(panda_arm()).limits
+
+
 def test_torques_respect_magnitude_and_rate_limits() -> None:
-    safety = SafetyFilter()
+    """The Panda's limits come from its URDF (87 / 12 Nm, the datasheet's) and its description
+    (1000 Nm/s)."""
+    safety = SafetyFilter(joints=PANDA_LIMITS)
     safety.reset(np.zeros(7))
     dt = 0.001
     tau = safety.limit_torques(np.full(7, 50.0), dt)
@@ -53,7 +61,36 @@ def test_torques_respect_magnitude_and_rate_limits() -> None:
     for _ in range(200):
         tau = safety.limit_torques(np.array([200.0, -200.0, 50, -50, 20, -20, 5]), dt)
     np.testing.assert_allclose(tau, [87.0, -87.0, 50, -50, 12, -12, 5])
-    assert np.all(np.abs(tau) <= TAU_MAX)
+
+
+def test_another_arm_gets_the_torque_and_velocity_limits_of_its_urdf() -> None:
+    """The xArm 7's URDF: 50, 50, 30, 30, 30, 20, 20 Nm and 3.14 rad/s on every joint."""
+    limits = ArmModel.of_arm(xarm7_arm()).limits
+    np.testing.assert_array_equal(limits.torque, [50, 50, 30, 30, 30, 20, 20])
+    np.testing.assert_array_equal(limits.velocity, np.full(7, 3.14))
+    safety = SafetyFilter(joints=limits)
+    tau = safety.limit_torques(np.array([200.0, -200.0, 50, -50, 25, -25, 5]), 0.001)
+    np.testing.assert_allclose(tau, [50.0, -50.0, 30, -30, 25, -20, 5])
+
+
+def test_a_joint_past_its_velocity_limit_is_braked_and_one_within_is_not() -> None:
+    safety = SafetyFilter(joints=PANDA_LIMITS)
+    tau = np.array([1.0, 2.0, 3.0, 4.0, 1.0, 1.0, 1.0])
+    within = PANDA_LIMITS.velocity * np.array([0.99, -0.99, 0.5, 0.0, 0.99, -0.5, 0.0])
+    np.testing.assert_array_equal(safety.limit_torques(tau, 0.001, within), tau)
+    fast = within.copy()
+    fast[1] = -PANDA_LIMITS.velocity[1] - 0.2           # 0.2 rad/s too fast, backwards
+    fast[4] = PANDA_LIMITS.velocity[4] + 0.1
+    braked = SafetyFilter(joints=PANDA_LIMITS).limit_torques(tau, 0.001, fast)
+    expected = tau.copy()
+    expected[1] += VELOCITY_BRAKE_DAMPING * 0.2
+    expected[4] -= VELOCITY_BRAKE_DAMPING * 0.1
+    np.testing.assert_allclose(braked, expected, atol=1e-12)
+
+
+def test_a_filter_without_joint_limits_refuses_to_limit_torques() -> None:
+    with pytest.raises(RuntimeError, match="joint limits"):
+        SafetyFilter().limit_torques(np.zeros(7), 0.001)
 
 
 def test_tilt_inside_the_cone_leaves_the_wrench_alone() -> None:

@@ -13,7 +13,8 @@ import pytest
 from ekf_harness import (PandaTorqueHarness, descend_reference, rmse, settling_time,
                          sine_reference, step_wrench)
 
-from robot_bridge_node.core.panda_model import Q_READY, PandaModel
+from qg_common.panda_description import Q_READY, panda_arm
+from robot_bridge_node.core.arm_model import ArmModel
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
 from qg_common.params import config_file, load_ros_params
 
@@ -23,19 +24,19 @@ Q_TILTED = Q_READY + np.array([0.4, 0.2, -0.3, 0.3, 0.5, -0.4, 0.6])
 
 
 @pytest.fixture(scope="module")
-def model() -> PandaModel:
-    return PandaModel()
+def model() -> ArmModel:
+    return ArmModel.of_arm(panda_arm())
 
 
 @pytest.fixture(scope="module")
-def exact(model: PandaModel) -> Iterator[PandaTorqueHarness]:
+def exact(model: ArmModel) -> Iterator[PandaTorqueHarness]:
     h = PandaTorqueHarness(model)
     yield h
     h.close()
 
 
 @pytest.fixture(scope="module")
-def noisy(model: PandaModel) -> Iterator[PandaTorqueHarness]:
+def noisy(model: ArmModel) -> Iterator[PandaTorqueHarness]:
     h = PandaTorqueHarness(model, measurement_noise=NOISE, seed=3)
     yield h
     h.close()
@@ -68,7 +69,7 @@ def test_bad_config_is_rejected(params: dict, match: str) -> None:
 # --- accuracy -----------------------------------------------------------------------------------
 @pytest.mark.parametrize("q0", [Q_READY, Q_TILTED], ids=["ready", "tilted"])
 def test_converges_to_applied_wrench_in_tool_frame(noisy: PandaTorqueHarness,
-                                                   model: PandaModel, q0: np.ndarray) -> None:
+                                                   model: ArmModel, q0: np.ndarray) -> None:
     noisy.reset(q0)
     ekf = WrenchEKF(WrenchEKFConfig(), model)
     trace = noisy.run(ekf, 0.8, step_wrench(W, 0.1))
@@ -84,7 +85,7 @@ def test_converges_to_applied_wrench_in_tool_frame(noisy: PandaTorqueHarness,
 
 
 def test_free_motion_estimate_is_near_zero(exact: PandaTorqueHarness, noisy: PandaTorqueHarness,
-                                           model: PandaModel) -> None:
+                                           model: ArmModel) -> None:
     motion = sine_reference(Q_READY, np.array([0.3, -0.2, 0.3, 0.3, 0.4, 0.3, 0.4]), 2.0)
     no_wrench = lambda t: np.zeros(6)  # noqa: E731
     exact.reset(Q_READY)
@@ -97,7 +98,7 @@ def test_free_motion_estimate_is_near_zero(exact: PandaTorqueHarness, noisy: Pan
 
 
 def test_settles_within_50_ms_of_contact_onset(exact: PandaTorqueHarness,
-                                               model: PandaModel) -> None:
+                                               model: ArmModel) -> None:
     """Measured: 28 ms to stay within 0.3 N / 0.03 Nm of a 16 N, 0.6 Nm step."""
     exact.reset(Q_READY)
     trace = exact.run(WrenchEKF(WrenchEKFConfig(), model), 0.3, step_wrench(W, 0.1))
@@ -105,7 +106,7 @@ def test_settles_within_50_ms_of_contact_onset(exact: PandaTorqueHarness,
     assert 0.01 < settle < 0.05, settle
 
 
-def test_recovers_from_an_impact(exact: PandaTorqueHarness, model: PandaModel) -> None:
+def test_recovers_from_an_impact(exact: PandaTorqueHarness, model: ArmModel) -> None:
     """A 60 N, 5 ms pulse is mostly missed (the filter averages over ~30 ms), then forgotten."""
     exact.reset(Q_READY)
     pulse = np.array([0.0, 0.0, 60.0, 0.0, 0.0, 0.0])
@@ -115,7 +116,7 @@ def test_recovers_from_an_impact(exact: PandaTorqueHarness, model: PandaModel) -
 
 
 def test_matches_a_real_table_contact_on_average(exact: PandaTorqueHarness,
-                                                 model: PandaModel) -> None:
+                                                 model: ArmModel) -> None:
     """Fingertips pressed onto a pybullet table: the truth is the contact-point wrench.
 
     The contact chatters at ~145 Hz (+-0.4 N), so the comparison is on the mean over 0.5 s.
@@ -133,7 +134,7 @@ def test_matches_a_real_table_contact_on_average(exact: PandaTorqueHarness,
     assert np.linalg.norm(bias[:3]) < 0.05 and np.linalg.norm(bias[3:]) < 0.005, bias
 
 
-def test_lowpass_delays_but_keeps_the_level(exact: PandaTorqueHarness, model: PandaModel) -> None:
+def test_lowpass_delays_but_keeps_the_level(exact: PandaTorqueHarness, model: ArmModel) -> None:
     runs = []
     for cutoff in (0.0, 5.0):
         exact.reset(Q_READY)
@@ -146,7 +147,7 @@ def test_lowpass_delays_but_keeps_the_level(exact: PandaTorqueHarness, model: Pa
 
 
 # --- state handling -----------------------------------------------------------------------------
-def test_reset_clears_the_estimate(exact: PandaTorqueHarness, model: PandaModel) -> None:
+def test_reset_clears_the_estimate(exact: PandaTorqueHarness, model: ArmModel) -> None:
     ekf = WrenchEKF(WrenchEKFConfig(), model)
     exact.reset(Q_READY)
     exact.run(ekf, 0.2, step_wrench(W, 0.0))
@@ -162,7 +163,7 @@ def test_reset_clears_the_estimate(exact: PandaTorqueHarness, model: PandaModel)
 
 @pytest.mark.parametrize("field", ["q", "dq", "tau_cmd"])
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
-def test_non_finite_input_is_rejected(model: PandaModel, field: str, bad: float) -> None:
+def test_non_finite_input_is_rejected(model: ArmModel, field: str, bad: float) -> None:
     ekf = WrenchEKF(WrenchEKFConfig(), model)
     ekf.reset(Q_READY)
     args = {"q": Q_READY.copy(), "dq": np.zeros(7), "tau_cmd": model.gravity(Q_READY)}
@@ -173,21 +174,21 @@ def test_non_finite_input_is_rejected(model: PandaModel, field: str, bad: float)
 
 
 @pytest.mark.parametrize("dt", [0.0, -1e-3, np.nan])
-def test_bad_time_step_is_rejected(model: PandaModel, dt: float) -> None:
+def test_bad_time_step_is_rejected(model: ArmModel, dt: float) -> None:
     ekf = WrenchEKF(WrenchEKFConfig(), model)
     ekf.reset(Q_READY)
     with pytest.raises(ValueError, match="dt"):
         ekf.update(Q_READY, np.zeros(7), model.gravity(Q_READY), dt)
 
 
-def test_wrong_shape_is_rejected(model: PandaModel) -> None:
+def test_wrong_shape_is_rejected(model: ArmModel) -> None:
     ekf = WrenchEKF(WrenchEKFConfig(), model)
     with pytest.raises(ValueError, match=r"shape \(7,\)"):
         ekf.reset(np.zeros(6))
 
 
 @pytest.mark.filterwarnings("ignore:overflow encountered")
-def test_large_finite_input_is_accepted(model: PandaModel) -> None:
+def test_large_finite_input_is_accepted(model: ArmModel) -> None:
     """The combined finiteness test (u.u) overflows here; the per-input checks must then pass."""
     ekf = WrenchEKF(WrenchEKFConfig(), model)
     ekf.reset(Q_READY)
@@ -196,7 +197,7 @@ def test_large_finite_input_is_accepted(model: PandaModel) -> None:
     ekf.update(Q_READY, np.zeros(7), tau, 1e-3)     # no ValueError
 
 
-def test_matches_step_by_step_reference(model: PandaModel) -> None:
+def test_matches_step_by_step_reference(model: ArmModel) -> None:
     """Same estimate as the textbook form of the filter: dense F P F^T and explicit Euler step."""
     import pinocchio as pin
     from scipy.linalg import lapack

@@ -53,11 +53,15 @@ def test_composed_realtime_is_paced_by_the_wall_clock_and_completes_steps(stack)
     assert stack.launcher.poll() == []
 
 
-def test_separate_sim_bridge_and_estimator_processes_complete_a_step(stack):
+@pytest.mark.parametrize("robot", ["sim_panda", "sim_xarm7"])
+def test_separate_sim_bridge_and_estimator_processes_complete_a_step(stack, robot):
+    """Every torque robot runs as three processes, each told only its ``robot`` name."""
     from geometry_msgs.msg import WrenchStamped
     from sensor_msgs.msg import JointState
-    stack.start(("sim", "sim_robot_node", "sim"), ("bridge", "robot_bridge_node", "bridge"),
-                ("wrench_estimator", "robot_bridge_node", "wrench_estimator"))
+    args = ("--ros-args", "-p", f"robot:={robot}")
+    stack.start(("sim", "sim_robot_node", "sim", args),
+                ("bridge", "robot_bridge_node", "bridge", args),
+                ("wrench_estimator", "robot_bridge_node", "wrench_estimator", args))
     with stack.client() as cli:
         estimates: list[WrenchStamped] = []
         cli.node.create_subscription(WrenchStamped, "/wrench_estimate", estimates.append, DEEP)
@@ -77,6 +81,9 @@ def test_separate_sim_bridge_and_estimator_processes_complete_a_step(stack):
         assert event.duration <= 0.25 + 0.02
         assert stack.logs().count("the sim restarted") == 1, stack.logs()
         assert np.all(np.isfinite(wrench(event.wrench_estimate)))
+        # The shaft is still in the counterbore: the sim's hold and the bridge kept it there
+        # (the xArm's wrist, damped as the Panda's, had swung it 9 mm off the axis).
+        assert event.ground_truth.lateral_offset < 0.005, stack.logs()
         # The sim runs realtime whatever sim.clock_mode says, its rates included: the bridge
         # ticks once per state, so lockstep's 100 Hz would make every step ten times as long.
         # A reader on a busy host misses many of 1000 states a second (45 seen in the CI
@@ -88,3 +95,27 @@ def test_separate_sim_bridge_and_estimator_processes_complete_a_step(stack):
         assert gaps[gaps > 0].min() < 2e6, f"closest states {gaps[gaps > 0].min() / 1e6} ms apart"
     codes = stack.stop(grace=5.0)
     assert codes == {"sim": 0, "bridge": 0, "wrench_estimator": 0}, stack.logs()
+
+
+def test_a_position_robot_runs_as_separate_sim_and_bridge_processes(stack):
+    """The Nextage (interface kind ``position``): the sim applies ``joint_commands.position``
+    and publishes its wrist sensor on ``wrench_estimate``; no estimator process is needed."""
+    from geometry_msgs.msg import WrenchStamped
+    args = ("--ros-args", "-p", "robot:=sim_nextage")
+    stack.start(("sim", "sim_robot_node", "sim", args),
+                ("bridge", "robot_bridge_node", "bridge", args))
+    with stack.client() as cli:
+        sensed: list[WrenchStamped] = []
+        cli.node.create_subscription(WrenchStamped, "/wrench_estimate", sensed.append, DEEP)
+        robot = RobotClient(cli)
+        reply = robot.reset(2, timeout=30.0)
+        assert reply.success, reply.message + stack.logs()
+        event = robot.step(1, (0.0,) * 6, timeout=20.0, resend=0.004)
+        assert event is not None, stack.logs()
+        assert event.duration <= 0.25 + 0.02
+        assert sensed and np.all(np.isfinite(wrench(sensed[-1].wrench)))
+        # The peg hangs where the reset put it: the bridge's targets hold it (< 1 mm).
+        start, end = reply.observation.ee_pose.position, event.ee_pose.position
+        assert np.linalg.norm([end.x - start.x, end.y - start.y, end.z - start.z]) < 0.001, \
+            stack.logs()
+    assert stack.stop(grace=5.0) == {"sim": 0, "bridge": 0}, stack.logs()

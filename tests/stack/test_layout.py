@@ -290,8 +290,52 @@ def test_robots_are_plugins_found_by_name():
     assert robot_plugin("sim_panda").interface == "torque"
     assert "sim_nextage" in robot_names()
     assert robot_plugin("sim_nextage").interface == "position"
+    assert robot_plugin("sim_xarm7").interface == "torque"
     with pytest.raises(ValueError, match="no robot plugin named 'franka_typo'"):
         robot_plugin("franka_typo")
+
+
+def test_interface_kinds_are_registered_and_every_robot_names_a_registered_one():
+    from robot_bridge_node.core.hardware_interface import robot_names, robot_plugin
+    from robot_bridge_node.core.interface_kinds import interface_kind, interface_kind_names
+    assert interface_kind_names() == ["position", "torque"]
+    for robot in robot_names():
+        kind = interface_kind(robot_plugin(robot).interface)
+        assert kind.name == robot_plugin(robot).interface
+    assert interface_kind("torque").command_field == "effort"
+    assert [s.prefix for s in interface_kind("torque").estimator_sections] == ["ekf"]
+    assert interface_kind("position").separate_estimator is None
+    with pytest.raises(ValueError, match=r"no hardware interface kind named 'velocty'.*'torque'"):
+        interface_kind("velocty")
+
+
+#: The modules that drive any robot: they look its interface kind up, never name one.
+ROBOT_AGNOSTIC = ["robot_bridge_node/robot_bridge_node/bridge_node.py",
+                  "robot_bridge_node/robot_bridge_node/robot_process.py",
+                  "robot_bridge_node/robot_bridge_node/estimator_node.py",
+                  "robot_bridge_node/robot_bridge_node/simulation_node.py",
+                  "sim_robot_node/sim_robot_node/sim_node.py"]
+
+
+def test_no_node_matches_an_interface_kind_or_a_robot_by_name():
+    """Interface kinds are found in the registry: no module that drives robots compares a kind's
+    name, imports a kind or names a robot's description."""
+    named = re.compile(r"""["'](torque|position)["']|torque_kind|position_kind|panda|xarm""",
+                       re.IGNORECASE)
+    offenders = {path: named.findall(_code_without_docs(ROOT / path)) for path in ROBOT_AGNOSTIC}
+    assert {path: found for path, found in offenders.items() if found} == {}
+    assert named.findall('if kind == "torque": ...') == ["torque"]     # the check can fail
+
+
+def _code_without_docs(path: Path) -> str:
+    """The module's code as Python reads it: no comments, no docstrings."""
+    tree = ast.parse(path.read_text())
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if isinstance(body, list) and body and isinstance(body[0], ast.Expr) \
+                and isinstance(body[0].value, ast.Constant) and isinstance(body[0].value.value, str):
+            body[0] = ast.Pass()
+    return ast.unparse(tree)
 
 
 #: The sources of the packages the stack installs (build scripts excepted).

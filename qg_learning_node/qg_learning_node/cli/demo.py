@@ -6,6 +6,7 @@ learning-curve PNG, TensorBoard scalars (``tensorboard/``, Stable-Baselines3's t
 ``episodes.json`` next to the MCAP episodes the stack recorded. The progress bar follows
 ``/transitions``, so it moves at every RL step.
 
+``--robot NAME`` runs another robot plugin (``sim_xarm7``) in the same stack.
 ``--robots N`` brings up N namespaced robots and one learner (``cli/fleet.py``) and deals the
 training episodes to them, which run them all at once (``cli/episode_schedule.py``): the same
 number of robot steps in less wall time. The tests then run on ``robot0``.
@@ -198,7 +199,8 @@ def load_random_bar(path: Path) -> dict | None:
         return None
 
 
-def _plot(outcomes: list[EpisodeOutcome], path: Path, bar: dict | None) -> None:
+def _plot(outcomes: list[EpisodeOutcome], path: Path, bar: dict | None,
+          robot: str = "the simulated Panda") -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -217,7 +219,7 @@ def _plot(outcomes: list[EpisodeOutcome], path: Path, bar: dict | None) -> None:
         ax.axhspan(bar["low"], bar["high"], color="grey", alpha=0.15, label="its 95 % interval")
     ax.set_xlabel("episode")
     ax.set_ylabel("steps to insert (cap = not inserted)")
-    ax.set_title("QG-DDPG on the simulated Panda, through the ROS stack")
+    ax.set_title(f"QG-DDPG on {robot}, through the ROS stack")
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()
@@ -225,16 +227,13 @@ def _plot(outcomes: list[EpisodeOutcome], path: Path, bar: dict | None) -> None:
     plt.close(fig)
 
 
-def _with_demo_settings(spec: ProcessSpec, settings: DemoSettings) -> ProcessSpec:
-    """The executor's and learner's specs with the demo's overrides; others unchanged."""
-    overrides = {("qg_learning_node", "executor"): {
-                     "task.train_max_steps": settings.train_max_steps},
-                 ("qg_learning_node", "learner"): {
-                     "learner.ddpg.critic_lr": settings.critic_lr,
-                     "learner.iterations_per_cycle": settings.iterations,
-                     "learner.schedule": settings.schedule,
-                     "learner.updates_per_step": float(settings.updates_per_step)}}
-    params = overrides.get((spec.package, spec.executable))
+#: The executables that load a robot plugin by their ``robot`` parameter.
+ROBOT_EXECUTABLES = {("robot_bridge_node", "robot"), ("robot_bridge_node", "bridge"),
+                     ("robot_bridge_node", "wrench_estimator"), ("sim_robot_node", "sim")}
+
+
+def _with_parameters(spec: ProcessSpec, params: dict[str, object]) -> ProcessSpec:
+    """``spec`` with ``-p key:=value`` ROS arguments added."""
     if not params:
         return spec
     ros_args = () if "--ros-args" in spec.args else ("--ros-args",)
@@ -242,18 +241,36 @@ def _with_demo_settings(spec: ProcessSpec, settings: DemoSettings) -> ProcessSpe
     return replace(spec, args=spec.args + ros_args + extra)
 
 
+def _with_demo_settings(spec: ProcessSpec, settings: DemoSettings,
+                        robot: str | None = None) -> ProcessSpec:
+    """The executor's and learner's specs with the demo's overrides, and with ``robot`` the
+    robot plugin every process that loads one runs; others unchanged."""
+    overrides = {("qg_learning_node", "executor"): {
+                     "task.train_max_steps": settings.train_max_steps},
+                 ("qg_learning_node", "learner"): {
+                     "learner.ddpg.critic_lr": settings.critic_lr,
+                     "learner.iterations_per_cycle": settings.iterations,
+                     "learner.schedule": settings.schedule,
+                     "learner.updates_per_step": float(settings.updates_per_step)}}
+    params = dict(overrides.get((spec.package, spec.executable), {}))
+    if robot is not None and (spec.package, spec.executable) in ROBOT_EXECUTABLES:
+        params["robot"] = robot
+    return _with_parameters(spec, params)
+
+
 def start_stack(run_dir: Path, settings: DemoSettings, config: Path,
-                domain_id: str | None = None,
-                robots: int = 1) -> tuple[Launcher, dict[str, str]]:
+                domain_id: str | None = None, robots: int = 1,
+                robot: str | None = None) -> tuple[Launcher, dict[str, str]]:
     """Start the processes of ``config`` with ``settings`` (``robots`` > 1: that many robots and
     one learner, ``cli/fleet.py``); episodes, checkpoints, logs and ROS logs go under
-    ``run_dir``. :returns: the launcher (stop it) and the stack's environment."""
+    ``run_dir``. :param robot: the robot plugin to run (``None``: the processes' default).
+    :returns: the launcher (stop it) and the stack's environment."""
     env = stack_env(log_dir=run_dir / "ros_log")
     env["QG_RUNS_DIR"] = str(run_dir)     # episodes/ (MCAP) and checkpoints/ go here
     if domain_id is not None:
         env["ROS_DOMAIN_ID"] = domain_id
     launcher = Launcher(env=env, out=None, log_dir=run_dir / "logs")
-    launcher.start(fleet_specs([_with_demo_settings(spec, settings)
+    launcher.start(fleet_specs([_with_demo_settings(spec, settings, robot)
                                 for spec in load_stack_config(config)], robots))
     return launcher, env
 
@@ -310,7 +327,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     robots = [robot_namespace(k) for k in range(args.robots)] if args.robots > 1 else [""]
     launcher, env = start_stack(run_dir, settings,
                                 Path(args.config) if args.config else config_file("stack.yaml"),
-                                robots=args.robots)
+                                robots=args.robots, robot=args.robot)
     train, tests = demo_schedule(args.train_episodes, args.test_poses, args.seed, robots)
     outcomes: list[EpisodeOutcome] = []
     log = TrainingLog(run_dir / "tensorboard")
@@ -346,7 +363,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         codes = launcher.stop()
         log.close()
     (run_dir / "episodes.json").write_text(json.dumps([asdict(o) for o in outcomes], indent=1))
-    _plot(outcomes, run_dir / "learning_curve.png", load_random_bar(args.random_bar or default_random_bar()))
+    _plot(outcomes, run_dir / "learning_curve.png",
+          load_random_bar(args.random_bar or default_random_bar()),
+          "the simulated Panda" if args.robot is None else args.robot)
     print(_summary(outcomes, run_dir, robots, train_wall, learner_transitions,
                    time.monotonic() - started, codes))
     return 0 if all(c == 0 for c in codes.values()) else 1
@@ -377,6 +396,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                       help="robots learning at once (namespaces /robot0, /robot1, ... and one "
                            "learner, as `qgl up --robots N`): the training episodes are dealt "
                            "to them and run concurrently; the tests run on robot0")
+    demo.add_argument("--robot", default=None,
+                      help="the robot plugin to learn on (-p robot:=NAME for every process that "
+                           "loads one, e.g. sim_xarm7; default: the processes' own, sim_panda)")
     demo.add_argument("--seed", type=int, default=1)
     demo.add_argument("--episode-timeout", type=float, default=900.0, help="[s]")
     demo.add_argument("--random-bar", type=Path, default=None,

@@ -9,24 +9,28 @@ as Gazebo's ``initSim`` does; a real arm has ``simulation=None``.
 Robots are plugins: a package registers a ``RobotPlugin`` under the entry-point group
 ``robot_bridge_node.robots`` (Python's entry points play pluginlib's role), and the robot process
 loads the one named by its ``robot`` parameter. This package never imports an implementation:
-``sim_robot_node`` registers ``sim_panda`` and ``sim_nextage``; a real Franka would be one more
-entry point in its own package.
+``sim_robot_node`` registers ``sim_panda``, ``sim_xarm7`` and ``sim_nextage``; a real Franka would
+be one more entry point in its own package. A plugin names its hardware interface kind
+(``interface_kinds``), found the same way; a torque robot's description names its URDF, from
+which the bridge builds its model (``arm_model``).
 """
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from importlib.metadata import entry_points
-from typing import Any, Literal, Protocol
+from typing import Any, Protocol
 
 import numpy as np
-from qg_common.params import ParameterSection
+from qg_common.params import (ParameterSection, load_ros_params, merge_params,
+                              package_config)
 from qg_common.types import GroundTruth, JointState
 
 __all__ = ["TorqueInterface", "PositionInterface", "StampedStates", "ForceTorqueSensor",
            "SimulationInterface", "ToolDescription",
            "RobotDescription", "Robot", "RobotPlugin", "RobotChoice", "ROBOT_SECTION",
-           "ROBOT_PLUGIN_GROUP", "robot_names", "robot_plugin", "load_robot"]
+           "ROBOT_PLUGIN_GROUP", "robot_names", "robot_plugin", "load_robot", "robot_defaults",
+           "registered_names", "load_registered"]
 
 #: The entry-point group robots register under (``name = module:RobotPlugin instance``).
 ROBOT_PLUGIN_GROUP = "robot_bridge_node.robots"
@@ -109,17 +113,28 @@ class ToolDescription:
 class RobotDescription:
     """What the bridge knows about a robot without talking to it.
 
+    A torque robot's model is built from this alone (``arm_model.ArmModel.from_description``):
+    the URDF gives the joint count, kinematics, inertias and the torque and velocity limits; the
+    description names the joints, the flange and the tool, and overrides a limit where the
+    robot's datasheet says otherwise than its URDF.
+
     :param joint_names: the arm's joints, in the order of every joint vector.
     :param tool: the held tool, for the controller's and the estimator's model.
     :param dt: [s] the control period the hardware runs at.
-    :param urdf: the arm's URDF, for a position robot's task-space controller ("" if unused).
-    :param tool_frame: the controlled frame of that URDF.
+    :param urdf: the arm's URDF ("" if the bridge needs none).
+    :param tool_frame: the frame of that URDF the bridge controls: a torque robot's flange, which
+        ``tool.offset`` is relative to; a position robot's IK frame.
+    :param torque_limits: (n,) [Nm] instead of the URDF's ``effort`` limits; ``None``: the URDF's.
+    :param torque_rate_limits: (n,) [Nm/s] how fast a torque command may change; ``None``:
+        unlimited (URDFs have no field for it).
     """
     joint_names: tuple[str, ...]
     tool: ToolDescription
     dt: float
     urdf: str = ""
     tool_frame: str = ""
+    torque_limits: tuple[float, ...] | None = None
+    torque_rate_limits: tuple[float, ...] | None = None
 
 
 @dataclass
@@ -141,8 +156,10 @@ class Robot:
 class RobotPlugin:
     """How a robot package makes its robot: registered as an entry point, loaded by name.
 
-    :param interface: which hardware interface it implements; it decides the bridge's
-        controller (``torque``: hybrid force/impedance, ``position``: task-space IK).
+    :param interface: the name of the hardware interface kind it implements, registered under
+        ``robot_bridge_node.interfaces`` (``interface_kinds``); the kind decides the bridge's
+        loop, controller and parameters (``torque``: hybrid force/impedance and the EKF,
+        ``position``: task-space IK and the wrist sensor).
     :param config_files: ``(package, file)`` in ``share/<package>/config`` with the defaults of
         the robot's own parameters and of its controller's gains for this robot.
     :param parameters: the robot's own parameters, declared by the ``sim`` node.
@@ -150,7 +167,7 @@ class RobotPlugin:
         robot (the separate bridge and estimator processes need only this).
     :param create: builds the robot from those parameters.
     """
-    interface: Literal["torque", "position"]
+    interface: str
     config_files: tuple[tuple[str, str], ...]
     parameters: tuple[ParameterSection, ...]
     describe: Callable[[dict[str, Any]], RobotDescription]
@@ -162,7 +179,7 @@ class RobotChoice:
     """Which robot a process runs.
 
     :param robot: the robot plugin to load, by its entry-point name in the group
-        ``robot_bridge_node.robots`` (``sim_panda``, ``sim_nextage``, ...).
+        ``robot_bridge_node.robots`` (``sim_panda``, ``sim_xarm7``, ``sim_nextage``, ...).
     """
     robot: str = "sim_panda"
 
@@ -171,9 +188,31 @@ class RobotChoice:
 ROBOT_SECTION = ParameterSection("", RobotChoice)
 
 
+def registered_names(group: str) -> list[str]:
+    """Names registered under the entry-point ``group``."""
+    return sorted(ep.name for ep in entry_points(group=group))
+
+
+def load_registered(group: str, name: str, expected: type, what: str) -> Any:
+    """The object registered as ``name`` under the entry-point ``group``.
+
+    :param what: what it is, for the messages (``robot plugin``).
+    :raises ValueError: if no installed package registers that name (lists those that do).
+    :raises TypeError: if the entry point is not an ``expected``.
+    """
+    found = [ep for ep in entry_points(group=group) if ep.name == name]
+    if not found:
+        raise ValueError(f"no {what} named {name!r}; installed: {registered_names(group)}")
+    loaded = found[0].load()
+    if not isinstance(loaded, expected):
+        raise TypeError(f"entry point {name!r} is {type(loaded).__name__}, "
+                        f"not a {expected.__name__}")
+    return loaded
+
+
 def robot_names() -> list[str]:
     """Names of the robots installed as plugins."""
-    return sorted(ep.name for ep in entry_points(group=ROBOT_PLUGIN_GROUP))
+    return registered_names(ROBOT_PLUGIN_GROUP)
 
 
 def robot_plugin(name: str) -> RobotPlugin:
@@ -181,15 +220,23 @@ def robot_plugin(name: str) -> RobotPlugin:
 
     :raises ValueError: if no installed package registers that name (lists those that do).
     """
-    found = [ep for ep in entry_points(group=ROBOT_PLUGIN_GROUP) if ep.name == name]
-    if not found:
-        raise ValueError(f"no robot plugin named {name!r}; installed: {robot_names()}")
-    plugin = found[0].load()
-    if not isinstance(plugin, RobotPlugin):
-        raise TypeError(f"entry point {name!r} is {type(plugin).__name__}, not a RobotPlugin")
-    return plugin
+    return load_registered(ROBOT_PLUGIN_GROUP, name, RobotPlugin, "robot plugin")
 
 
 def load_robot(name: str, params: dict[str, Any] | None = None) -> Robot:
     """Build the robot ``name`` from its parameters (its config sections; defaults if absent)."""
     return robot_plugin(name).create(params or {})
+
+
+def robot_defaults(plugin: RobotPlugin, base: Sequence[tuple[str, str]] = (),
+                   node: str | None = None) -> dict[str, Any]:
+    """The parameters a node gets by default for this robot: the ``base`` files
+    ``(package, file)``, then the plugin's own ``config_files`` over them, as the node declares
+    them (e.g. the bridge's: ``config/bridge.yaml``, then a robot's gains for itself).
+
+    :param node: the node whose section of each file counts over ``/**`` (``None``: ``/**``).
+    """
+    params: dict[str, Any] = {}
+    for package, name in (*base, *plugin.config_files):
+        params = merge_params(params, load_ros_params(package_config(package, name), node))
+    return params

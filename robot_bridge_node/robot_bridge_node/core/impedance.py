@@ -1,16 +1,24 @@
-"""Hybrid task-space force/impedance control of the Panda, in libfranka's callback shape.
+"""Hybrid task-space force/impedance control of a torque-controlled arm, in libfranka's callback
+shape.
 
 The residual policy commands a wrench, not a motion: along the shaft (EEF z) the stiffness is
 zero, so the feed-forward force pushes; across it a soft spring (250 N/m) and about every axis a
 rotational spring (4 Nm/rad) hold the pose the step started from, while the feed-forward torques
 turn the shaft against them. Damping makes every step settle so the rest detector can end it,
-and the redundant seventh degree of freedom is held by a damped null-space posture spring: left
-free, the elbow keeps drifting and the tool never comes to rest.
+and the redundant degrees of freedom (the Panda's and the xArm's seventh joint) are held by a
+damped null-space posture spring: left free, the elbow keeps drifting and the tool never comes
+to rest.
 
     tau = J^T (-F_ff + K (x_ref - x) - D v) + N (k_n (q_n - q) - d_n dq) - d_j dq + C dq + g
 
 with ``F_ff`` the feed-forward contact wrench (see ``types``) turned into the base frame,
 ``K``, ``D`` diagonal in the EEF frame, and ``N`` the null-space projector of ``J^T``.
+
+**Holding.** When the loop holds the pose on its own (the realtime watchdog: no setpoint for
+10 ms) nothing pushes along z any more, and a stiffness of 0 there would let an arm whose gravity
+model is off (an unknown payload) sink or rise while "holding". ``hold`` therefore makes every
+axis stiff and the translations about critically damped (``HOLD_STIFFNESS``, ``HOLD_DAMPING``)
+until the next setpoint ``release``s it.
 """
 from __future__ import annotations
 
@@ -21,12 +29,23 @@ from typing import Any
 import numpy as np
 from qg_common.params import config_from_dict
 
-from robot_bridge_node.core.native import ImpedanceKernel
-from robot_bridge_node.core.panda_model import PandaModel
 from qg_common.types import PoseReference, WrenchSetpoint
 
-__all__ = ["ImpedanceConfig", "HybridImpedanceController", "ToolState"]
+from robot_bridge_node.core.arm_model import ArmModel
+from robot_bridge_node.core.native import ImpedanceKernel
 
+__all__ = ["ImpedanceConfig", "HybridImpedanceController", "ToolState", "HOLD_STIFFNESS",
+           "HOLD_DAMPING"]
+
+#: [N/m x 3, Nm/rad x 3] The least stiffness of every axis while the loop holds the pose on its
+#: own (the safety behaviour, not a tuning: the bridge's parameters cannot lower it). An unknown
+#: 0.1 kg on the hand (the realistic arm's payload error) then sags 0.33 mm; at the task's
+#: 250 N/m it sank 3.8 mm in 0.6 s, at 0 N/m (z before) 4.2 mm (the realistic Panda).
+HOLD_STIFFNESS = (3000.0, 3000.0, 3000.0, 10.0, 10.0, 10.0)
+#: [Ns/m x 3, Nms/rad x 3] The least damping while holding: about critical for the 5-15 kg the
+#: arms have at the tool. The rotational damping stays the arm's own (``d_rot``): a light wrist
+#: (the xArm's, 1.5e-4 kg m^2 about the tool axis) is unstable at 1 kHz with more.
+HOLD_DAMPING = (300.0, 300.0, 300.0, 0.0, 0.0, 0.0)
 
 @dataclass(frozen=True)
 class ImpedanceConfig:
@@ -64,6 +83,18 @@ class ImpedanceConfig:
         """From the ``impedance`` section of ``config/bridge.yaml``."""
         return config_from_dict(cls, params)
 
+    def gains(self) -> tuple[np.ndarray, np.ndarray]:
+        """(6,) stiffness ``[k_trans, k_rot]`` and (6,) damping ``[d_trans, d_rot]``, EEF frame:
+        the task's gains."""
+        return (np.concatenate([self.k_trans, self.k_rot]).astype(float),
+                np.concatenate([self.d_trans, self.d_rot]).astype(float))
+
+    def hold_gains(self) -> tuple[np.ndarray, np.ndarray]:
+        """The gains while holding: the task's, raised to ``HOLD_STIFFNESS`` and
+        ``HOLD_DAMPING`` on every axis below them (z above all)."""
+        stiffness, damping = self.gains()
+        return np.maximum(stiffness, HOLD_STIFFNESS), np.maximum(damping, HOLD_DAMPING)
+
 
 @dataclass(frozen=True)
 class ToolState:
@@ -90,27 +121,40 @@ class HybridImpedanceController:
     when it changes.
 
     :param config: gains.
-    :param model: the Panda model with the task's tool frame and payload.
+    :param model: the arm's model with the task's tool frame and payload.
     """
 
-    def __init__(self, config: ImpedanceConfig, model: PandaModel) -> None:
+    def __init__(self, config: ImpedanceConfig, model: ArmModel) -> None:
         self.config = config
         self.model = model
-        self._kernel = ImpedanceKernel(
-            model.serialised(), model.tool_frame,
-            np.concatenate([config.k_trans, config.k_rot]).astype(float),     # EEF frame
-            np.concatenate([config.d_trans, config.d_rot]).astype(float),
-            config.k_null, config.d_null, config.d_joint)
+        self._kernel = ImpedanceKernel(model.serialised(), model.tool_frame,
+                                       *config.gains(),                      # EEF frame
+                                       config.k_null, config.d_null, config.d_joint)
+        self.holding = False
         self._kernel_reference: PoseReference | None = None
         self.reference: PoseReference | None = None
         self.q_null: np.ndarray | None = None
         self.tool: ToolState | None = None
 
     def reset(self, q: np.ndarray) -> None:
-        """Episode start: posture and pose reference from ``q``."""
+        """Episode start: posture and pose reference from ``q``, the task's gains."""
         self.q_null = np.asarray(q, float).copy()
         self._kernel.set_posture(self.q_null)
         self.set_reference_to_current(q)
+        self.release()
+
+    def hold(self, q: np.ndarray) -> PoseReference:
+        """Hold the pose at ``q`` stiffly along every axis (see the module doc) until
+        ``release``; the feed-forward wrench is the caller's (zero when holding)."""
+        self._kernel.set_gains(*self.config.hold_gains())
+        self.holding = True
+        return self.set_reference_to_current(q)
+
+    def release(self) -> None:
+        """Back to the task's gains after ``hold`` (nothing to do otherwise)."""
+        if self.holding:
+            self._kernel.set_gains(*self.config.gains())
+            self.holding = False
 
     def set_reference_to_current(self, q: np.ndarray) -> PoseReference:
         """Hold the pose at ``q`` (what the residual policy does at each RL step)."""

@@ -18,7 +18,8 @@ from robot_bridge_node.core.hardware_interface import (PositionInterface, Robot,
 from robot_bridge_node.core.position_control import (PositionControlConfig,
                                                      TaskSpacePositionController, pose_matrix)
 from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
-from robot_bridge_node.core.robot_loop import LoopConfig, MeasuredWrench, RobotLoop
+from robot_bridge_node.core.robot_loop import (LoopClock, LoopConfig, MeasuredWrench, RobotLoop,
+                                               WrenchEstimator)
 from robot_bridge_node.core.safety import SetpointRejected
 
 __all__ = ["PositionLoop", "build_position_loop"]
@@ -33,12 +34,13 @@ class PositionLoop(RobotLoop):
     """
 
     def __init__(self, hardware: PositionInterface, controller: TaskSpacePositionController,
-                 rest_detector: RestDetector, estimator: MeasuredWrench | None = None,
+                 rest_detector: RestDetector, estimator: WrenchEstimator | None = None,
                  config: LoopConfig | None = None,
-                 simulation: SimulationInterface | None = None) -> None:
+                 simulation: SimulationInterface | None = None,
+                 clock: LoopClock | None = None) -> None:
         # No torque safety filter: the controller clamps and rate-limits its own targets.
         super().__init__(hardware, controller, None, rest_detector, estimator,  # type: ignore
-                         config, simulation)
+                         config, simulation, clock)
         self.reference = np.eye(4)
 
     def reset(self, initial_pose: int, housing_yaw: float = 0.0) -> None:
@@ -84,19 +86,23 @@ class PositionLoop(RobotLoop):
         return self.rest.update(tool.linear_speed, tool.angular_speed, dt)
 
 
-def build_position_loop(robot: Robot, bridge_params: dict[str, Any] | None = None) -> PositionLoop:
+def build_position_loop(robot: Robot, bridge_params: dict[str, Any] | None = None,
+                        wrench: WrenchEstimator | None = None,
+                        clock: LoopClock | None = None) -> PositionLoop:
     """The loop of a position-controlled robot from a plugin (``interface="position"``).
 
     :param bridge_params: the bridge node's parameters (sections ``position_control``, ``rest``,
         ``loop``); missing sections keep the defaults.
+    :param wrench: the wrench source; ``None``: the robot's wrist sensor (none without one).
+    :param clock: the loop's time; ``None``: one ``loop.dt`` per tick.
     """
     params = bridge_params or {}
     description = robot.description
     controller = TaskSpacePositionController(
         description.urdf, description.tool_frame,
         PositionControlConfig.from_dict(params.get("position_control", {})))
-    sensor = (None if robot.wrist_sensor is None
-              else MeasuredWrench(robot.wrist_sensor.read_wrench))
+    if wrench is None and robot.wrist_sensor is not None:
+        wrench = MeasuredWrench(robot.wrist_sensor.read_wrench)
     return PositionLoop(robot.hardware, controller,
-                        RestDetector(RestConfig.from_dict(params.get("rest", {}))), sensor,
-                        LoopConfig.from_dict(params.get("loop", {})), robot.simulation)
+                        RestDetector(RestConfig.from_dict(params.get("rest", {}))), wrench,
+                        LoopConfig.from_dict(params.get("loop", {})), robot.simulation, clock)

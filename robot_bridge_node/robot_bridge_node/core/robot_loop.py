@@ -16,16 +16,15 @@ import numpy as np
 from qg_common.params import config_from_dict
 from qg_common.types import NO_GROUND_TRUTH, GroundTruth, JointState, StepResult, WrenchSetpoint
 
+from robot_bridge_node.core.arm_model import ArmModel
 from robot_bridge_node.core.hardware_interface import (Robot, SimulationInterface,
-                                                       StampedStates, ToolDescription,
-                                                       TorqueInterface)
+                                                       StampedStates, TorqueInterface)
 from robot_bridge_node.core.impedance import HybridImpedanceController, ImpedanceConfig
-from robot_bridge_node.core.panda_model import PandaModel
 from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
 from robot_bridge_node.core.safety import SafetyFilter, SafetyLimits
 
 __all__ = ["WrenchEstimator", "MeasuredWrench", "LoopConfig", "LoopClock", "TickClock",
-           "StateClock", "RobotLoop", "tool_model", "build_loop"]
+           "StateClock", "RobotLoop", "build_loop"]
 
 
 class WrenchEstimator(Protocol):
@@ -231,7 +230,9 @@ class RobotLoop:
         if checked.reference is None:
             self.controller.set_reference_to_current(self.hardware.read().q)
         self.setpoint = checked
-        self.holding = False
+        if self.holding:
+            self.controller.release()
+            self.holding = False
         self.safety.feed_watchdog(self.time)
         self.rest.reset()
 
@@ -247,7 +248,9 @@ class RobotLoop:
             self.wrench_estimate = self.estimator.update(state.q, state.dq, state.tau, dt)
         if (self.config.realtime and not self.holding
                 and self.safety.watchdog_expired(self.time)):
-            self.controller.set_reference_to_current(state.q)
+            # The commander fell silent: hold the pose, stiff along every axis (the task's
+            # force-controlled z included; see HybridImpedanceController.hold).
+            self.controller.hold(state.q)
             self.setpoint = _HOLD
             self.holding = True
         setpoint = self.setpoint
@@ -255,7 +258,8 @@ class RobotLoop:
         if tool is not None:
             setpoint = WrenchSetpoint(self.safety.limit_tilt(setpoint.wrench, tool.rotation),
                                       setpoint.reference)
-        tau = self.safety.limit_torques(self.controller.step(state.q, state.dq, setpoint, dt), dt)
+        tau = self.safety.limit_torques(self.controller.step(state.q, state.dq, setpoint, dt), dt,
+                                        state.dq)
         self.hardware.write(tau)
         self.ticks += 1
         self.clock.advance(dt)
@@ -284,29 +288,26 @@ class RobotLoop:
                           else self.wrench_estimate.copy())
 
 
-def tool_model(tool: ToolDescription) -> PandaModel:
-    """The Panda model with the robot's tool: tool frame at its origin, the held part as payload."""
-    return PandaModel(tool_offset=tool.offset, payload_mass=tool.payload_mass,
-                      payload_com=tool.payload_com)
-
-
 def build_loop(robot: Robot, bridge_params: dict[str, Any] | None = None,
-               estimator: Callable[[Robot, PandaModel], WrenchEstimator] | None = None
-               ) -> RobotLoop:
+               estimator: Callable[[Robot, ArmModel], WrenchEstimator] | None = None,
+               clock: LoopClock | None = None) -> RobotLoop:
     """The loop of a torque-controlled robot with controller, safety and rest detector.
 
+    The controller's, the safety filter's and the estimator's model is the robot's own
+    (``ArmModel.from_description``: its URDF, joints, flange, tool and limits).
     :param robot: from a plugin (``hardware_interface.load_robot``).
     :param bridge_params: the ``ros__parameters`` of ``config/bridge.yaml`` (sections
         ``impedance``, ``safety``, ``rest``, ``loop``); missing sections keep the defaults.
     :param estimator: builds the wrench estimator from the robot and the controller's model,
         e.g. ``lambda robot, model: MeasuredWrench(robot.simulation.contact_wrench)``; ``None``: none.
+    :param clock: the loop's time; ``None``: one ``loop.dt`` per tick (``TickClock``).
     """
     params = bridge_params or {}
-    model = tool_model(robot.description.tool)
+    model = ArmModel.from_description(robot.description)
     controller = HybridImpedanceController(ImpedanceConfig.from_dict(params.get("impedance", {})),
                                            model)
-    safety = SafetyFilter(SafetyLimits.from_dict(params.get("safety", {})))
+    safety = SafetyFilter(SafetyLimits.from_dict(params.get("safety", {})), model.limits)
     return RobotLoop(robot.hardware, controller, safety,
                      RestDetector(RestConfig.from_dict(params.get("rest", {}))),
                      None if estimator is None else estimator(robot, model),
-                     LoopConfig.from_dict(params.get("loop", {})), robot.simulation)
+                     LoopConfig.from_dict(params.get("loop", {})), robot.simulation, clock)

@@ -2,9 +2,11 @@
 
 A learning agent explores, so nothing it sends may reach the joints unchecked: setpoints with
 NaN/inf are rejected (the caller logs the reason), forces and residual torques are clamped, the
-tool is kept inside a tilt cone around the vertical, joint torques respect the Panda's magnitude
-and rate limits, and in realtime mode a silent commander makes the robot hold its pose. The limits
-can be tightened by configuration but never loosened past the hard ceilings below.
+tool is kept inside a tilt cone around the vertical, joint torques respect the arm's magnitude
+and rate limits (its URDF's and datasheet's, ``arm_model.JointLimits``), a joint faster than its
+velocity limit is braked, and in realtime mode a silent commander makes the robot hold its pose.
+The task-space limits can be tightened by configuration but never loosened past the hard
+ceilings below.
 """
 from __future__ import annotations
 
@@ -16,14 +18,20 @@ import numpy as np
 from qg_common.params import config_from_dict
 from qg_common.rotations import tilt_from_down
 
-from robot_bridge_node.core.panda_model import DTAU_MAX, TAU_MAX
 from qg_common.types import WrenchSetpoint
 
-__all__ = ["SafetyLimits", "SafetyFilter", "SetpointRejected", "HARD_LIMITS"]
+from robot_bridge_node.core.arm_model import JointLimits
+
+__all__ = ["SafetyLimits", "SafetyFilter", "SetpointRejected", "HARD_LIMITS",
+           "VELOCITY_BRAKE_DAMPING"]
 
 #: Ceilings no configuration may exceed (SPEC section 1 and the Franka datasheet).
 HARD_LIMITS = {"tilt_max": math.pi / 4, "force_max": 20.0, "torque_max": 3.0,
                "watchdog_timeout": 0.01}
+#: [Nms/rad] Braking torque per rad/s by which a joint exceeds its velocity limit (then clipped
+#: to the torque limits like any command). The task moves the joints at a few tenths of their
+#: limits, so the brake never acts in it; it stops a runaway within ~0.1 s of a Panda link.
+VELOCITY_BRAKE_DAMPING = 10.0
 
 
 class SetpointRejected(ValueError):
@@ -61,10 +69,16 @@ class SafetyFilter:
 
     State: the last torque command (for the rate limit) and the time of the last setpoint (for
     the watchdog); ``reset(tau)`` at every episode start.
+
+    :param limits: the task-space limits.
+    :param joints: the arm's joint limits; without them ``limit_torques`` refuses to run (a
+        position robot's loop, which sends no torques, needs none).
     """
 
-    def __init__(self, limits: SafetyLimits | None = None) -> None:
+    def __init__(self, limits: SafetyLimits | None = None,
+                 joints: JointLimits | None = None) -> None:
         self.limits = limits or SafetyLimits()
+        self.joints = joints
         self._last_tau: np.ndarray | None = None
         self._last_setpoint_time: float | None = None
 
@@ -114,11 +128,23 @@ class SafetyFilter:
         return np.concatenate([wrench[:3], -(rotation.T @ applied)])
 
     # --- joint torques ------------------------------------------------------------------
-    def limit_torques(self, tau: np.ndarray, dt: float) -> np.ndarray:
-        """``tau`` clipped to the joint torque limits and to the rate limit since the last call."""
-        tau = np.minimum(np.maximum(np.asarray(tau, float), -TAU_MAX), TAU_MAX)
+    def limit_torques(self, tau: np.ndarray, dt: float,
+                      dq: np.ndarray | None = None) -> np.ndarray:
+        """``tau`` with a brake on every joint faster than its velocity limit (given ``dq``),
+        clipped to the joint torque limits and to the rate limit since the last call.
+
+        :raises RuntimeError: if the filter was built without joint limits.
+        """
+        if self.joints is None:
+            raise RuntimeError("this safety filter has no joint limits (SafetyFilter(joints=...))")
+        tau = np.asarray(tau, float)
+        if dq is not None:
+            excess = dq - np.clip(dq, -self.joints.velocity, self.joints.velocity)
+            if np.any(excess):
+                tau = tau - VELOCITY_BRAKE_DAMPING * excess
+        tau = np.minimum(np.maximum(tau, -self.joints.torque), self.joints.torque)
         if self._last_tau is not None:
-            step = DTAU_MAX * dt
+            step = self.joints.torque_rate * dt
             tau = np.minimum(np.maximum(tau, self._last_tau - step), self._last_tau + step)
         self._last_tau = tau.copy()
         return tau

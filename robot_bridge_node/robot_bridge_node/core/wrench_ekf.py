@@ -6,20 +6,21 @@ model ``M ddq = tau_cmd - C dq - g`` cannot explain is an external torque, and a
 produces the external torque ``J^T F``. The filter follows the disturbance-observer form of
 Giftthaler et al. (2018), the observer used on the real robot in the thesis (ch. 3.2.2).
 
-**State.** ``x = [q (7), dq (7), F (6)]``: the joint state augmented with the tool wrench ``F``
+**State.** ``x = [q (n), dq (n), F (6)]`` for an arm of ``n`` joints (the model's ``nv``: 7 for
+the Panda and the xArm): the joint state augmented with the tool wrench ``F``
 (about the tool origin, base-frame axes), a random walk. We estimate the wrench itself rather
-than 7 external joint torques mapped through ``pinv(J^T)`` because
+than n external joint torques mapped through ``pinv(J^T)`` because
 
 - the random walk then has separate force and torque intensities. A joint-torque state has one
   joint-space intensity that fixes the force/torque bandwidth ratio badly: at about the same
   settling time (21 vs 28 ms) and 1e-3 rad/s velocity noise it gave 0.62 N / 0.12 Nm RMSE in
   our pybullet harness, the wrench state 0.23 N / 0.022 Nm;
-- the filter weighs the 7 joint equations by its own covariance (a weighted least squares)
+- the filter weighs the n joint equations by its own covariance (a weighted least squares)
   instead of the unweighted pseudo-inverse, and needs no pseudo-inverse damping;
 - a contact with a fixed environment is constant in base axes even while the arm moves, which is
   exactly the random-walk prior, whereas its joint torques change with ``J``.
 
-7 joints and 6 wrench components: the wrench is observable wherever ``J`` has full rank; at a
+n >= 6 joints and 6 wrench components: the wrench is observable wherever ``J`` has full rank; at a
 singularity the unobservable direction keeps its prior (its covariance grows, its mean stays).
 
 **Step.** Predict with semi-implicit Euler (the integrator of the simulator and of the control
@@ -38,8 +39,8 @@ from typing import Any
 import numpy as np
 from qg_common.params import config_from_dict
 
+from .arm_model import ArmModel
 from .native import WrenchEkfKernel
-from .panda_model import N_JOINTS, PandaModel
 
 __all__ = ["WrenchEKFConfig", "WrenchEKF"]
 
@@ -111,13 +112,14 @@ class WrenchEKF:
     NumPy); this class owns the noise model, the output low-pass and the checks' messages.
 
     :param config: noise model.
-    :param model: the Panda model; the wrench is expressed at its tool frame, and its payload is
-        part of the dynamics (not of the estimate). The EKF works on its own copy of the model.
+    :param model: the arm's model, which sizes the filter (``2 nv + 6`` states); the wrench is
+        expressed at its tool frame, and its payload is part of the dynamics (not of the
+        estimate). The EKF works on its own copy of the model.
     """
 
-    def __init__(self, config: WrenchEKFConfig, model: PandaModel) -> None:
+    def __init__(self, config: WrenchEKFConfig, model: ArmModel) -> None:
         self.config = config
-        c, n = config, N_JOINTS
+        c, n = config, model.nv
         self._kernel = WrenchEkfKernel(
             model.serialised(), model.tool_frame,
             _diagonal((n, c.measurement_noise_q ** 2), (n, c.measurement_noise_dq ** 2)),
@@ -165,5 +167,5 @@ class WrenchEKF:
 
     @property
     def covariance(self) -> np.ndarray:
-        """State covariance (20 x 20) over [q, dq, base-frame wrench]."""
+        """State covariance ((2n + 6) x (2n + 6)) over [q, dq, base-frame wrench]."""
         return self._kernel.covariance

@@ -1,4 +1,5 @@
-"""What separates a real Panda from the model the bridge controls it with.
+"""What separates a real arm from the model the bridge controls it with (the Panda's figures as
+defaults; any arm: the per-joint ones have one entry a joint of the arm).
 
 The simulated arm is otherwise ideal: the bridge's Pinocchio model is the very URDF pybullet
 loads, the joint state is exact and the measured torque is the command. At rest the EKF then
@@ -36,6 +37,7 @@ from qg_common.params import config_from_dict
 __all__ = ["GAZ_2019_COULOMB", "GAZ_2019_VELOCITY", "RESIDUAL_FRICTION_SHARE", "RESIDUAL_COULOMB",
            "ArmImperfections", "ImperfectArm"]
 
+#: The Panda's joint count: the length of the per-joint defaults.
 N_ARM_JOINTS = 7
 
 #: [Nm] Coulomb level of each joint's friction, Gaz et al. (2019), "Dynamic Identification of the
@@ -66,11 +68,11 @@ class ArmImperfections:
         centre of mass; libfranka ``setLoad``).
     :param payload_com_error: (3,) [m] that mass's centre in the tool frame (z along the shaft).
         Default 2 cm beside the flange and 3 cm towards it.
-    :param joint_coulomb_friction: (7,) [Nm] Coulomb level per joint that reaches the links:
-        20 % of Gaz et al.'s identified friction (:data:`RESIDUAL_COULOMB`).
-    :param joint_friction_velocity: (7,) [rad/s] velocity at which the Coulomb part reaches 76 %
+    :param joint_coulomb_friction: (n,) [Nm] Coulomb level per joint that reaches the links:
+        20 % of Gaz et al.'s identified friction (:data:`RESIDUAL_COULOMB`) on the Panda.
+    :param joint_friction_velocity: (n,) [rad/s] velocity at which the Coulomb part reaches 76 %
         of its level (``tanh(1)``); Gaz et al.'s sigmoid slope. Must be > 0 where friction is on.
-    :param joint_viscous_friction: (7,) [Nms/rad] viscous friction per joint that reaches the
+    :param joint_viscous_friction: (n,) [Nms/rad] viscous friction per joint that reaches the
         links. Gaz et al. fitted none beyond the sigmoid, whose slope at rest (0.7-2.0 Nms/rad)
         acts viscous at the task's speeds; default 0.02 Nms/rad, a residual of the same order.
     :param torque_noise: [Nm] std of the joint-torque sensor's noise per sample. Default 0.02 Nm,
@@ -125,18 +127,24 @@ class ArmImperfections:
                                  f"got {value!r}")
         if len(self.payload_com_error) != 3:
             raise ValueError(f"payload_com_error needs 3 entries, got {self.payload_com_error}")
-        for name in ("joint_coulomb_friction", "joint_friction_velocity",
-                     "joint_viscous_friction"):
-            if len(getattr(self, name)) != N_ARM_JOINTS:
-                raise ValueError(f"{name} needs {N_ARM_JOINTS} entries, got {getattr(self, name)}")
+        n = self.n_joints
+        for name in ("joint_friction_velocity", "joint_viscous_friction"):
+            if len(getattr(self, name)) != n:
+                raise ValueError(f"{name} needs {n} entries (one a joint, as "
+                                 f"joint_coulomb_friction), got {getattr(self, name)}")
         if any(c > 0.0 and v <= 0.0 for c, v in zip(self.joint_coulomb_friction,
                                                     self.joint_friction_velocity)):
             raise ValueError("joint_friction_velocity must be > 0 on every joint with friction")
 
+    @property
+    def n_joints(self) -> int:
+        """The joint count the per-joint figures are for."""
+        return len(self.joint_coulomb_friction)
+
     @classmethod
-    def ideal(cls, seed: int = 0) -> ArmImperfections:
-        """The arm exactly as the bridge models it (every imperfection 0)."""
-        zeros = (0.0,) * N_ARM_JOINTS
+    def ideal(cls, seed: int = 0, n_joints: int = N_ARM_JOINTS) -> ArmImperfections:
+        """The arm of ``n_joints`` joints exactly as the bridge models it (every imperfection 0)."""
+        zeros = (0.0,) * n_joints
         return cls(payload_mass_error=0.0, payload_com_error=(0.0, 0.0, 0.0),
                    joint_coulomb_friction=zeros, joint_friction_velocity=zeros,
                    joint_viscous_friction=zeros, torque_noise=0.0, torque_bias=0.0,
@@ -174,13 +182,22 @@ class ImperfectArm:
     the true joint state and the command into what the driver reads, once per physics step;
     ``start_jitter`` perturbs each start; ``housing_rotation_error`` and
     ``housing_position_error`` are the fixture's constant misplacement (housing frame).
+
+    :param n_joints: the arm's joint count (its model's), which the per-joint figures must
+        match; ``None``: theirs.
+    :raises ValueError: if they do not.
     """
 
-    def __init__(self, config: ArmImperfections) -> None:
+    def __init__(self, config: ArmImperfections, n_joints: int | None = None) -> None:
+        n_joints = config.n_joints if n_joints is None else n_joints
+        if config.n_joints != n_joints:
+            raise ValueError(f"the imperfections' per-joint figures have {config.n_joints} "
+                             f"entries, the arm has {n_joints} joints")
         self.config = config
+        self.n_joints = n = n_joints
         constants = np.random.default_rng([config.seed, 0])
-        self.torque_bias = constants.normal(0.0, 1.0, N_ARM_JOINTS) * config.torque_bias
-        self.encoder_bias = constants.normal(0.0, 1.0, N_ARM_JOINTS) * config.encoder_bias
+        self.torque_bias = constants.normal(0.0, 1.0, n) * config.torque_bias
+        self.encoder_bias = constants.normal(0.0, 1.0, n) * config.encoder_bias
         tilt = constants.normal(0.0, 1.0, 2) * config.housing_tilt_error
         offset = constants.normal(0.0, 1.0, 2) * config.housing_position_error
         #: (3,) rotation vector of the true bore axis against the configured one (housing frame)
@@ -193,18 +210,18 @@ class ImperfectArm:
                                   np.array(config.joint_friction_velocity, float), 1.0)
         self._viscous = np.array(config.joint_viscous_friction, float)
         self._sensor_noise = np.repeat([config.encoder_noise, config.velocity_noise,
-                                        config.torque_noise], N_ARM_JOINTS)
+                                        config.torque_noise], n)
 
     def friction(self, dq: np.ndarray) -> np.ndarray:
-        """(7,) [Nm] the joints' friction torque at true velocities ``dq`` (opposes motion)."""
+        """(n,) [Nm] the joints' friction torque at true velocities ``dq`` (opposes motion)."""
         return self._coulomb * np.tanh(dq / self._velocity) + self._viscous * dq
 
     def measure(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray) -> Measurement:
         """The driver's reading of the true ``q``, ``dq`` and the realised torque ``tau``."""
-        noise = self._noise.normal(0.0, 1.0, 3 * N_ARM_JOINTS) * self._sensor_noise
-        return Measurement(q=q + self.encoder_bias + noise[:N_ARM_JOINTS],
-                           dq=dq + noise[N_ARM_JOINTS:2 * N_ARM_JOINTS],
-                           tau=tau + self.torque_bias + noise[2 * N_ARM_JOINTS:])
+        n = self.n_joints
+        noise = self._noise.normal(0.0, 1.0, 3 * n) * self._sensor_noise
+        return Measurement(q=q + self.encoder_bias + noise[:n], dq=dq + noise[n:2 * n],
+                           tau=tau + self.torque_bias + noise[2 * n:])
 
     def start_jitter(self) -> tuple[np.ndarray, np.ndarray]:
         """One reset's ``(tilt vector change [rad] (2,), tip offset [m] (2,))``, housing frame."""

@@ -222,6 +222,16 @@ class ImpedanceKernel {
 
   void set_posture(const VecIn& q_null) { q_null_ = q_null; }
 
+  // The EEF-frame stiffness and damping (x, y, z, rx, ry, rz): the task's, or the hold's.
+  void set_gains(const VecIn& stiffness, const VecIn& damping) {
+    check_input("stiffness", stiffness, 6);
+    check_input("damping", damping, 6);
+    if ((stiffness.array() < 0.0).any() || (damping.array() < 0.0).any())
+      throw std::invalid_argument("stiffness and damping entries must be >= 0");
+    stiffness_ = stiffness;
+    damping_ = damping;
+  }
+
   // Joint torques for this tick, and the tool's position, rotation and twist it was computed at.
   py::tuple step(const VecIn& q, const VecIn& dq, const Eigen::Ref<const Vec6>& wrench_ff) {
     update_kinematics(q);
@@ -292,5 +302,6 @@ PYBIND11_MODULE(_torque_kernels, m) {
       .def("kinematics", &ImpedanceKernel::kinematics)
       .def("set_reference", &ImpedanceKernel::set_reference)
       .def("set_posture", &ImpedanceKernel::set_posture)
+      .def("set_gains", &ImpedanceKernel::set_gains)
       .def("step", &ImpedanceKernel::step);
 }

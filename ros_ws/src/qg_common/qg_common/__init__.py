@@ -2,7 +2,8 @@
 
 ``params`` (config files and dataclasses), ``types`` (the data crossing the hardware seam and the
 setpoint interface), ``conversions`` (messages <-> those types), ``topics`` (names and QoS),
-``node_runtime`` (``main()`` of every node executable), ``rotations`` and ``panda_description``.
+``node_runtime`` (``main()`` of every node executable), ``rotations``, and the torque arms' descriptions
+(``arm_description``, ``panda_description``, ``xarm_description``).
 No pybullet, no torch: the bridge, the simulator and the learner all import this package, and
 nothing here imports them.
 """

@@ -1,22 +1,26 @@
-"""Facts about the Franka Panda that both the simulator and the bridge's model need.
+"""The Franka Panda as an ``ArmDescription``: its URDF and what the URDF does not say.
 
-The URDF file (``example-robot-data``'s Panda, with real inertias), joint names, limits, and the
-configuration the arm starts from: the robot description, which in ROS 2 both the hardware and
-the controllers read, so it lives in the common package and neither side imports the other.
+The URDF is ``example-robot-data``'s Panda (real inertias; its ``effort`` limits, 87 Nm for
+joints 1-4 and 12 Nm for 5-7, and velocity limits are the Franka datasheet's). The fingers are
+locked; tools are fixed to ``panda_hand_tcp``.
 """
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError, distribution
+from functools import cache
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["panda_urdf_path", "N_JOINTS", "JOINT_NAMES", "TAU_MAX", "DTAU_MAX", "Q_READY"]
+from qg_common.arm_description import (ArmDescription, example_robot_data_arm,
+                                       example_robot_data_urdf)
 
-N_JOINTS = 7
+__all__ = ["panda_arm", "panda_urdf_path", "JOINT_NAMES", "FLANGE", "DTAU_MAX", "Q_READY"]
+
+#: The URDF in example-robot-data's ``robots`` folder.
+PANDA_URDF = "panda_description/urdf/panda.urdf"
 JOINT_NAMES = tuple(f"panda_joint{i}" for i in range(1, 8))
-#: Joint torque limits [Nm] (Franka datasheet: 87 Nm for joints 1-4, 12 Nm for 5-7).
-TAU_MAX = np.array([87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0])
+#: The frame tools are fixed to: the hand's tool centre point.
+FLANGE = "panda_hand_tcp"
 #: Joint torque rate limits [Nm/s] (Franka datasheet: 1000 Nm/s on every joint).
 DTAU_MAX = np.full(7, 1000.0)
 #: A comfortable configuration with the hand pointing down.
@@ -26,16 +30,14 @@ Q_READY = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 1.9, 0.785])
 def panda_urdf_path() -> Path:
     """Path of the example-robot-data Panda URDF (with real inertias).
 
-    The ``example-robot-data`` wheel (cmeel) ships only data, no Python module, so the file is
-    found through the installed distribution.
     :raises FileNotFoundError: if the package or the file is missing.
     """
-    try:
-        dist = distribution("example-robot-data")
-    except PackageNotFoundError as exc:
-        raise FileNotFoundError("example-robot-data is not installed") from exc
-    path = Path(str(dist.locate_file("cmeel.prefix/share/example-robot-data/robots/"
-                                     "panda_description/urdf/panda.urdf")))
-    if not path.is_file():
-        raise FileNotFoundError(f"Panda URDF not found at {path}")
-    return path
+    return example_robot_data_urdf(PANDA_URDF)
+
+
+@cache
+def panda_arm() -> ArmDescription:
+    """The Panda's description (the URDF is looked up once, when first asked for)."""
+    return example_robot_data_arm("Franka Panda", PANDA_URDF, joint_names=JOINT_NAMES,
+                                  flange=FLANGE, ready=tuple(Q_READY.tolist()),
+                                  torque_rate_limits=tuple(DTAU_MAX.tolist()))

@@ -1,0 +1,178 @@
+"""Rigid-body model of a torque-controlled arm from its URDF (Pinocchio), shared by the controller,
+the safety filter and the EKF.
+
+The robot plugin's ``RobotDescription`` names the URDF, the driven joints, the flange frame, the
+tool held there and, where the datasheet overrides the URDF, the limits; everything else (joint
+count, kinematics, inertias, torque and velocity limits) is what Pinocchio reads from the URDF.
+The simulated arms load the same file, so model and "hardware" agree except where a scene chooses
+otherwise (``sim_robot_node/core/arm_imperfections.py``). All quantities are in the base frame
+unless a name says otherwise; Jacobians are 6xn with the linear part first (LOCAL_WORLD_ALIGNED).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+from qg_common.arm_description import ArmDescription
+
+from robot_bridge_node.core.hardware_interface import RobotDescription
+
+__all__ = ["ArmModel", "JointLimits", "Kinematics"]
+
+
+@dataclass(frozen=True)
+class Kinematics:
+    """Tool pose and Jacobian at one configuration."""
+    position: np.ndarray      # (3,) tool position, base frame [m]
+    rotation: np.ndarray      # (3, 3) tool orientation, base frame
+    jacobian: np.ndarray      # (6, n) [linear; angular], LOCAL_WORLD_ALIGNED
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """What the safety filter holds every joint to: (n,) each."""
+    torque: np.ndarray        # [Nm] magnitude
+    torque_rate: np.ndarray   # [Nm/s] change of the command (inf: unlimited)
+    velocity: np.ndarray      # [rad/s] magnitude
+
+    def __post_init__(self) -> None:
+        n = len(self.torque)
+        for name in ("torque", "torque_rate", "velocity"):
+            value = np.asarray(getattr(self, name), float)
+            finite = np.all(np.isfinite(value)) or name == "torque_rate"
+            if value.shape != (n,) or not finite or not np.all(value > 0.0):
+                raise ValueError(f"{name} limits must be {n} values > 0"
+                                 f"{'' if name == 'torque_rate' else ', finite'}, got {value}")
+
+
+class ArmModel:
+    """The driven joints of an arm (every other joint locked at neutral), a tool frame at an
+    offset from the flange, and the held part as a payload.
+
+    :param urdf: path of the URDF.
+    :param joint_names: the driven joints, in the order of every joint vector; must be the
+        URDF's order of those joints.
+    :param flange: the URDF frame the tool is fixed to.
+    :param tool_offset: translation of the tool frame from the flange, in the flange frame [m].
+    :param payload_mass: mass rigidly held at the flange [kg] (e.g. the shaft).
+    :param payload_com: its centre of mass in the flange frame [m]; default the tool origin.
+    :param torque_limits: (n,) [Nm] overriding the URDF's ``effort`` limits; ``None`` keeps them.
+    :param torque_rate_limits: (n,) [Nm/s]; ``None`` leaves the rate unlimited.
+    :raises ValueError: if a joint or the flange is missing, the joints are out of the URDF's
+        order, a joint is not a single degree of freedom, or a URDF limit is missing.
+    """
+
+    def __init__(self, urdf: str, joint_names: tuple[str, ...], flange: str,
+                 tool_offset: np.ndarray | None = None, payload_mass: float = 0.0,
+                 payload_com: np.ndarray | None = None,
+                 torque_limits: tuple[float, ...] | None = None,
+                 torque_rate_limits: tuple[float, ...] | None = None) -> None:
+        full = pin.buildModelFromUrdf(str(urdf))
+        missing = [n for n in joint_names if not full.existJointName(n)]
+        if missing:
+            raise ValueError(f"{urdf}: no joints {missing}")
+        lock = [j for j in range(1, full.njoints) if full.names[j] not in joint_names]
+        self.model = pin.buildReducedModel(full, lock, pin.neutral(full)) if lock else full
+        names = tuple(self.model.names[j] for j in range(1, self.model.njoints))
+        if names != tuple(joint_names):
+            raise ValueError(f"{urdf}: joint_names must be the URDF's order {names}, "
+                             f"got {tuple(joint_names)}")
+        if not self.model.nq == self.model.nv == len(joint_names):
+            raise ValueError(f"{urdf}: every driven joint must have one degree of freedom "
+                             f"(nq {self.model.nq}, nv {self.model.nv})")
+        if not self.model.existFrame(flange):
+            raise ValueError(f"{urdf}: no frame {flange!r}")
+        self.joint_names = tuple(joint_names)
+        flange_id = self.model.getFrameId(flange)
+        parent = self.model.frames[flange_id].parentJoint
+        placement = self.model.frames[flange_id].placement
+        offset = np.zeros(3) if tool_offset is None else np.asarray(tool_offset, float)
+        tool_placement = placement * pin.SE3(np.eye(3), offset)
+        self.tool_frame = self.model.addFrame(
+            pin.Frame("tool", parent, flange_id, tool_placement, pin.FrameType.OP_FRAME))
+        if payload_mass > 0.0:
+            com = tool_placement.translation if payload_com is None else \
+                (placement * pin.SE3(np.eye(3), np.asarray(payload_com, float))).translation
+            self.model.inertias[parent] += pin.Inertia(
+                payload_mass, com, np.diag([1e-5, 1e-5, 1e-5]))
+        self.data = self.model.createData()
+        self.q_lower = self.model.lowerPositionLimit.copy()
+        self.q_upper = self.model.upperPositionLimit.copy()
+        self.limits = JointLimits(
+            torque=_urdf_limit(self.model.effortLimit, "effort", urdf) if torque_limits is None
+            else np.asarray(torque_limits, float),
+            torque_rate=np.full(self.nv, np.inf) if torque_rate_limits is None
+            else np.asarray(torque_rate_limits, float),
+            velocity=_urdf_limit(self.model.velocityLimit, "velocity", urdf))
+
+    @classmethod
+    def of_arm(cls, arm: ArmDescription, tool_offset: np.ndarray | None = None,
+               payload_mass: float = 0.0, payload_com: np.ndarray | None = None) -> ArmModel:
+        """The model of an arm from its description (``qg_common``), e.g. the Panda's
+        (``panda_description.panda_arm()``), with an optional tool and payload."""
+        return cls(arm.urdf, arm.joint_names, arm.flange, tool_offset, payload_mass, payload_com,
+                   torque_limits=arm.torque_limits, torque_rate_limits=arm.torque_rate_limits)
+
+    @classmethod
+    def from_description(cls, description: RobotDescription) -> ArmModel:
+        """The model of a torque robot as its plugin describes it (URDF, joints, flange, tool)."""
+        if not description.urdf or not description.tool_frame:
+            raise ValueError("a torque robot's description must name its urdf and tool_frame "
+                             "(the flange the tool is fixed to)")
+        tool = description.tool
+        return cls(description.urdf, description.joint_names, description.tool_frame,
+                   tool_offset=tool.offset, payload_mass=tool.payload_mass,
+                   payload_com=tool.payload_com, torque_limits=description.torque_limits,
+                   torque_rate_limits=description.torque_rate_limits)
+
+    @property
+    def nv(self) -> int:
+        """Number of driven joints."""
+        return self.model.nv
+
+    def serialised(self) -> str:
+        """The model in Pinocchio's text serialisation: how the compiled kernels
+        (``core/native``) get exactly this model, tool frame and payload included."""
+        return self.model.saveToString()
+
+    # --- kinematics -----------------------------------------------------------------------
+    def kinematics(self, q: np.ndarray) -> Kinematics:
+        """Forward kinematics and the tool Jacobian."""
+        pin.computeJointJacobians(self.model, self.data, q)
+        pin.updateFramePlacements(self.model, self.data)
+        oMf = self.data.oMf[self.tool_frame]
+        J = pin.getFrameJacobian(self.model, self.data, self.tool_frame, pin.LOCAL_WORLD_ALIGNED)
+        return Kinematics(oMf.translation.copy(), oMf.rotation.copy(), J.copy())
+
+    def tool_twist(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """Tool twist (v, w) in the base frame."""
+        return self.kinematics(q).jacobian @ dq
+
+    # --- dynamics -------------------------------------------------------------------------
+    def gravity(self, q: np.ndarray) -> np.ndarray:
+        """Generalised gravity torques g(q)."""
+        return pin.computeGeneralizedGravity(self.model, self.data, q).copy()
+
+    def mass_matrix(self, q: np.ndarray) -> np.ndarray:
+        """Joint-space inertia M(q) (symmetric)."""
+        M = pin.crba(self.model, self.data, q)
+        return np.triu(M) + np.triu(M, 1).T
+
+    def nonlinear_effects(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """C(q, dq) dq + g(q)."""
+        return pin.nonLinearEffects(self.model, self.data, q, dq).copy()
+
+    def forward_dynamics(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """Joint accelerations ddq = M^-1 (tau - C dq - g)."""
+        return pin.aba(self.model, self.data, q, dq, tau).copy()
+
+
+def _urdf_limit(values: np.ndarray, name: str, urdf: str) -> np.ndarray:
+    """A limit the URDF gives every driven joint (``<limit effort=... velocity=...>``).
+
+    :raises ValueError: if a joint has none (Pinocchio reads a missing one as 0 or inf).
+    """
+    if not (np.all(values > 0.0) and np.all(np.isfinite(values))):
+        raise ValueError(f"{urdf}: every driven joint needs a {name} limit, got {values}")
+    return values.copy()
