@@ -23,7 +23,6 @@ from qg_common.conversions import (at_rest_msg, ground_truth_from_msg, joint_sta
                                    twist_stamped, wrench_from_msg)
 from qg_common.node_parameters import declare_parameters, package_defaults
 from qg_common.node_runtime import LoopThread, favour_loop_thread, run_nodes
-from qg_common.params import POSITIVE, ParameterSection
 from qg_common.types import NO_GROUND_TRUTH, GroundTruth, JointState
 from qg_interfaces.msg import AtRest, GroundTruth as GroundTruthMsg
 from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
@@ -32,12 +31,11 @@ from sensor_msgs.msg import JointState as JointStateMsg
 from std_msgs.msg import Header
 
 from robot_bridge_node.core.hardware_interface import ROBOT_SECTION, RobotPlugin, robot_plugin
+from robot_bridge_node.core.parameter_sections import CONTROLLER_SECTIONS
 from robot_bridge_node.core.impedance import HybridImpedanceController, ImpedanceConfig, ToolState
-from robot_bridge_node.core.position_control import PositionControlConfig
 from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
 from robot_bridge_node.core.robot_loop import LoopConfig, RobotLoop, StateClock, tool_model
-from robot_bridge_node.core.safety import (HARD_LIMITS, SafetyFilter, SafetyLimits,
-                                           SetpointRejected)
+from robot_bridge_node.core.safety import SafetyFilter, SafetyLimits, SetpointRejected
 
 __all__ = ["BridgeNode", "CONTROLLER_SECTIONS", "LoopRunner", "LoopObserver", "RemoteRobot",
            "LatestWrench", "MAX_STATE_GAP", "main"]
@@ -46,32 +44,6 @@ __all__ = ["BridgeNode", "CONTROLLER_SECTIONS", "LoopRunner", "LoopObserver", "R
 LoopObserver = Callable[[int, RobotLoop], None]
 
 
-_STEP_SECTIONS = (
-    ParameterSection("rest", RestConfig, ranges={
-        "linear_threshold": (0.0, 1.0), "angular_threshold": (0.0, 10.0),
-        "hold_time": (0.0, 10.0), "min_time": (0.0, 10.0), "max_time": (0.0, 10.0)}),
-    ParameterSection("loop", LoopConfig, ranges={"dt": (0.0, 0.01), "settle_time": (0.0, 10.0)}))
-
-#: The bridge's parameters by the robot's hardware interface: the controller and its limits,
-#: the rest detector that ends an RL step, the loop timing (``config/bridge.yaml``; a position
-#: robot's controller gains come with the robot's own files).
-CONTROLLER_SECTIONS: dict[str, tuple[ParameterSection, ...]] = {
-    "torque": (
-        ParameterSection("impedance", ImpedanceConfig, ranges={
-            "k_null": POSITIVE, "d_null": POSITIVE, "d_joint": POSITIVE}),
-        ParameterSection("safety", SafetyLimits, ranges={
-            **{name: (0.0, ceiling) for name, ceiling in HARD_LIMITS.items()},
-            "tilt_margin": (0.0, HARD_LIMITS["tilt_max"]), "tilt_stiffness": POSITIVE}),
-        *_STEP_SECTIONS),
-    "position": (
-        ParameterSection("position_control", PositionControlConfig, ranges={
-            "damping": (0.0, 1.0), "orientation_weight": POSITIVE, "max_iterations": (1, 10000),
-            "max_iteration_step": (0.0, 3.2), "position_tolerance": (0.0, 0.01),
-            "orientation_tolerance": (0.0, 0.1), "linear_speed_limit": (0.0, 1.0),
-            "angular_speed_limit": (0.0, 10.0), "joint_speed_limit": (0.0, 10.0),
-            "dt": (0.0, 0.01)}),
-        *_STEP_SECTIONS),
-}
 
 
 class BridgeNode(Node):

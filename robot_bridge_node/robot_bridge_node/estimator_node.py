@@ -17,7 +17,6 @@ from qg_common import topics
 from qg_common.conversions import joint_state_from_msg, time_ns, wrench_stamped
 from qg_common.node_parameters import declare_parameters, package_defaults
 from qg_common.node_runtime import run_nodes
-from qg_common.params import POSITIVE, ParameterSection
 from rclpy.node import Node
 from sensor_msgs.msg import JointState as JointStateMsg
 from std_msgs.msg import Header
@@ -25,13 +24,11 @@ from std_msgs.msg import Header
 from robot_bridge_node.core.hardware_interface import ROBOT_SECTION, RobotPlugin, robot_plugin
 from robot_bridge_node.core.panda_model import PandaModel
 from robot_bridge_node.core.robot_loop import tool_model
+from robot_bridge_node.core.parameter_sections import EKF_SECTION
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
 
 __all__ = ["WrenchEstimatorNode", "EKF_SECTION", "SeparateEstimator", "build_ekf", "main"]
 
-#: The EKF's noise model (``config/wrench_estimator.yaml``): a torque robot's wrench estimate.
-EKF_SECTION = ParameterSection("ekf", WrenchEKFConfig, ranges={
-    name: POSITIVE for name in WrenchEKFConfig.__dataclass_fields__})
 
 
 def build_ekf(params: dict[str, Any], model: PandaModel) -> WrenchEKF:
