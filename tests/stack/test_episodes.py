@@ -131,7 +131,7 @@ def test_train_episode_is_recorded_and_replays_into_the_same_graph(stack, tmp_pa
             counts[channel.topic] = counts.get(channel.topic, 0) + 1
             if channel.topic == "/transitions":
                 steps.append(msg.step)
-                assert len(msg.state) == 6 and np.all(np.abs(msg.state) <= 1.0)   # tilt state
+                assert len(msg.state) == 2 and np.all(np.abs(msg.state) <= 1.0)   # tilt_only
     assert counts["/transitions"] == final.step, counts
     assert sorted(steps) == list(range(final.step))
     for topic in ("/joint_states", "/wrench_estimate", "/ee_pose", "/ee_twist",
