@@ -58,7 +58,6 @@ def node_settings() -> list[NodeSettings]:
     from robot_bridge_node.core.parameter_sections import CONTROLLER_SECTIONS, EKF_SECTION
     from robot_bridge_node.recorder_node import RECORDER_SECTION
     from robot_bridge_node.simulation_node import SIM_SECTION
-    from sim_robot_node.core.peg_env import PegEnvConfig
 
     from qg_learning_node.executor.parameters import (EXECUTOR_SECTIONS, TASK_CHOICE_SECTION,
                                                       TASK_SECTIONS)
@@ -81,8 +80,6 @@ def node_settings() -> list[NodeSettings]:
                      ((nextage_stack, (("qg_learning_node", "executor_nextage.yaml"),)),)),
         NodeSettings("learner", LEARNER_SECTIONS, (("qg_learning_node", "learner.yaml"),),
                      ((nextage_stack, (("qg_learning_node", "learner_nextage.yaml"),)),)),
-        NodeSettings("experiments (free peg)", (ParameterSection("", PegEnvConfig),),
-                     (("sim_robot_node", "peg_env.yaml"),)),
     ]
 
 
@@ -96,8 +93,11 @@ def extra_rows() -> list[Setting]:
         Setting("peg discount (experiments 5, 6)", ("experiments",),
                 "code: `PegBudget.gamma` (a profile of config/experiments.yaml may set it)",
                 PegBudget.gamma, "-"),
-        Setting("experiment budgets, the grid's state (`profiles.*`)", ("experiments",),
-                "config/experiments.yaml", "-", "-"),
+        Setting("experiment budgets and variants (`profiles.*`: seeds, cells, a variant's "
+                "state or gamma)", ("experiments",), "config/experiments.yaml", "-", "-"),
+        Setting("the free peg environment (experiment 5; every key)", ("experiments",),
+                "config/peg_env.yaml (the `peg` environment plugin of sim_robot_node)", "-",
+                "-"),
     ]
 
 
