@@ -25,9 +25,20 @@ _NO_STACK_ENV: str | None = None
 #: The test being set up: a Stack started for a test without the ``ros`` mark is refused.
 _current_test: pytest.Item | None = None
 
-# Domains 150..229 are ours; each test that starts processes takes the next one, so a straggler
-# of one test can never answer another test's service calls.
-_DOMAINS = itertools.cycle(range(150 + os.getpid() % 40, 230))
+
+
+def _domains() -> Iterator[int]:
+    """Domains 150..229 are ours, split evenly between the pytest-xdist workers; each test that
+    starts processes takes its worker's next one, so a straggler of one test can never answer
+    another test's service calls, on this worker or another. (The pid picks where a worker
+    starts in its share, so two pytest runs at once rarely meet either.)"""
+    worker = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:])
+    share = 80 // int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    first, offset = 150 + worker * share, os.getpid() % share
+    return itertools.cycle([first + (offset + i) % share for i in range(share)])
+
+
+_DOMAINS = _domains()
 
 
 def _run_as_the_pytest_command() -> bool:
