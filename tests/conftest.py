@@ -119,6 +119,29 @@ class Stack:
         return self.launcher.stop(grace)
 
 
+@pytest.fixture(autouse=True)
+def _cpu_to_itself(request: pytest.FixtureRequest,
+                   tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """Under pytest-xdist, a test marked ``alone`` (it times itself by the wall clock: a
+    realtime loop's pace, a heartbeat's gaps) runs while no other worker runs a test, and the
+    others run side by side. A readers-writer lock on a file all workers share: a test takes it
+    shared, an ``alone`` test exclusive; the turnstile, taken briefly by every test and held by
+    an ``alone`` test while it waits, keeps the other worker from taking the lock shared again
+    and again ahead of it."""
+    if "PYTEST_XDIST_WORKER" not in os.environ:
+        yield
+        return
+    import fcntl
+    shared = tmp_path_factory.getbasetemp().parent
+    alone = request.node.get_closest_marker("alone") is not None
+    with open(shared / "alone.turnstile", "a") as turnstile, \
+            open(shared / "alone.lock", "a") as lock:
+        fcntl.flock(turnstile, fcntl.LOCK_EX)
+        fcntl.flock(lock, fcntl.LOCK_EX if alone else fcntl.LOCK_SH)
+        fcntl.flock(turnstile, fcntl.LOCK_UN)
+        yield
+
+
 @pytest.fixture
 def stack(tmp_path: Path) -> Iterator[Stack]:
     s = Stack(tmp_path)

@@ -44,11 +44,6 @@ from qg_learning_node.learner.ddpg import ActorMLP
 
 
 
-#: [s] how long StartEpisode waits for /sim/reset to be discovered before refusing.
-ROBOT_DISCOVERY_GRACE = 3.0
-#: [s] an episode's first step waits this long for a learner never heard from (it may just
-#: not be discovered yet) before running degraded with the zero residual.
-LEARNER_DISCOVERY_GRACE = 3.0
 #: [s] how long shutdown waits for the episode thread to abort the episode.
 SHUTDOWN_GRACE = 2.0
 #: [s] a reset unanswered this long is asked for again (same request id: no second reset).
@@ -222,7 +217,7 @@ class ExecutorNode(Node):
                                "is still running: stop it first (/executor/stop_episode)"
             return response
         # A robot process that has just come up may not be discovered yet: give it a moment.
-        if not self.reset_client.wait_for_service(timeout_sec=ROBOT_DISCOVERY_GRACE):
+        if not self.reset_client.wait_for_service(timeout_sec=self.config.robot_grace):
             response.success = False
             response.message = "the robot side is not up (/sim/reset unavailable): start " \
                                "`robot_bridge_node robot`"
@@ -287,8 +282,8 @@ class ExecutorNode(Node):
         try:
             observation = observation_from_msg(self._reset(episode))
             episode.begin(observation)
-            self._await_first_learner_contact(LEARNER_DISCOVERY_GRACE)
-            self._await_learner_reading_transitions(LEARNER_DISCOVERY_GRACE)
+            self._await_first_learner_contact(self.config.learner_grace)
+            self._await_learner_reading_transitions(self.config.learner_grace)
             self._set_state("running")
             while not episode.done:
                 if self.stop_requested.is_set():

@@ -17,10 +17,12 @@ pytestmark = pytest.mark.ros
 ROBOT = ("robot", "robot_bridge_node", "robot", ("--ros-args", "-p", "sim.clock_mode:=lockstep"))
 
 
-def executor_spec(max_steps: int) -> tuple:
+def executor_spec(max_steps: int, alone: bool = False) -> tuple:
+    """The executor; ``alone``: in a stack with no learner, so an episode need not wait its
+    ``learner_grace`` for one to be discovered."""
     return ("executor", "qg_learning_node", "executor",
             ("--ros-args", "-p", f"task.train_max_steps:={max_steps}",
-             "-p", "learner_timeout:=1.5"))
+             "-p", "learner_timeout:=1.5", *(("-p", "learner_grace:=0.0") if alone else ())))
 
 
 def learner_spec(checkpoint_dir: Path, name: str = "learner") -> tuple:
@@ -313,7 +315,7 @@ def test_learner_killed_mid_episode_degrades_then_resumes(stack, tmp_path):
 
 
 def test_bad_requests_are_refused_and_the_stack_stays_up(stack):
-    stack.start(ROBOT, executor_spec(max_steps=400))
+    stack.start(ROBOT, executor_spec(max_steps=400, alone=True))
     with stack.client() as cli:
         episodes = Episodes(cli)
         for fields, word in [({"mode": "play"}, "mode"), ({"mode": "train", "initial_pose": 8}, "initial_pose"),
@@ -339,7 +341,8 @@ def test_bad_requests_are_refused_and_the_stack_stays_up(stack):
 
 
 def test_executor_without_robot_refuses_with_a_clear_message(stack):
-    stack.start(executor_spec(max_steps=10))
+    executor = executor_spec(max_steps=10, alone=True)
+    stack.start((*executor[:3], (*executor[3], "-p", "robot_grace:=0.5")))
     with stack.client() as cli:
         response = Episodes(cli).start(mode="train")
         assert not response.success and "robot side is not up" in response.message

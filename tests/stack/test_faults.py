@@ -28,7 +28,7 @@ def test_executor_stopped_mid_episode_aborts_it_and_exits_zero(stack):
                                      COMMAND_QOS)
         episodes.wait_for_robot()
         for name, sig in (("executor_int", signal.SIGINT), ("executor_term", signal.SIGTERM)):
-            spec = executor_spec(max_steps=400)
+            spec = executor_spec(max_steps=400, alone=True)
             stack.start((name, *spec[1:]))
             response = episodes.start(mode="train", initial_pose=1)
             assert response.success, response.message + stack.logs()
@@ -56,7 +56,7 @@ def test_stopping_the_stack_mid_episode_records_the_abort(stack):
     from rosbags.highlevel import AnyReader
 
     from qg_recording.player import message_class
-    stack.start(ROBOT, executor_spec(max_steps=400))
+    stack.start(ROBOT, executor_spec(max_steps=400, alone=True))
     with stack.client() as cli:
         episodes = Episodes(cli)
         episodes.wait_for_robot()
@@ -73,6 +73,7 @@ def test_stopping_the_stack_mid_episode_records_the_abort(stack):
     assert (statuses[-1].state, statuses[-1].message) == ("aborted", "shutdown"), stack.logs()
 
 
+@pytest.mark.alone
 def test_learner_heartbeat_goes_on_while_it_trains(stack, tmp_path):
     """A training cycle of several seconds must not silence the heartbeat, or the executor
     would run degraded (zero residual) while the learner is merely busy.

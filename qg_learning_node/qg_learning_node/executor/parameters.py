@@ -29,18 +29,25 @@ class ExecutorConfig:
     :param keepalive_period: [s] re-send the running setpoint this often; 0 = never (a lockstep
         robot). A realtime robot needs 0.005: its watchdog holds the pose after 10 ms.
     :param learner_timeout: [s] no word from the learner this long -> degraded (zero residual).
+    :param robot_grace: [s] an episode start waits this long for a robot (``sim/reset``) not
+        discovered yet before it refuses.
+    :param learner_grace: [s] an episode's first step waits this long for a learner never heard
+        from (it may not be discovered yet) before it runs degraded with the zero residual.
     """
     step_timeout: float = 10.0
     reset_timeout: float = 30.0
     keepalive_period: float = 0.0
     learner_timeout: float = 2.0
+    robot_grace: float = 3.0
+    learner_grace: float = 3.0
 
     def __post_init__(self) -> None:
         for name in ("step_timeout", "reset_timeout", "learner_timeout"):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be > 0 s, got {getattr(self, name)}")
-        if not self.keepalive_period >= 0.0:
-            raise ValueError(f"keepalive_period must be >= 0 s, got {self.keepalive_period}")
+        for name in ("keepalive_period", "robot_grace", "learner_grace"):
+            if not getattr(self, name) >= 0.0:
+                raise ValueError(f"{name} must be >= 0 s, got {getattr(self, name)}")
 
     @classmethod
     def from_dict(cls, params: dict[str, Any]) -> ExecutorConfig:
@@ -69,7 +76,8 @@ TASK_CHOICE_SECTION = ParameterSection("task", TaskChoice, fixed=_TASK_FIXED)
 #: Timeouts: every one settable while the executor runs (from the next wait on).
 TIMING_SECTION = ParameterSection("", ExecutorConfig, ranges={
     "step_timeout": (0.0, 3600.0), "reset_timeout": (0.0, 3600.0),
-    "keepalive_period": (0.0, 1.0), "learner_timeout": (0.0, 3600.0)},
+    "keepalive_period": (0.0, 1.0), "learner_timeout": (0.0, 3600.0),
+    "robot_grace": (0.0, 60.0), "learner_grace": (0.0, 60.0)},
     runtime=frozenset(f.name for f in fields(ExecutorConfig)), applies="from the next step")
 
 #: Exploration noise: settable while the executor runs; an episode keeps the noise it began with.
