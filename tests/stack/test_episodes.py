@@ -256,6 +256,7 @@ def test_async_learner_trains_while_the_robot_moves(stack, tmp_path):
     assert episodes.learner_heartbeats[-1].actor_version == final.step
 
 
+@pytest.mark.slow                 # three episodes and two learners: 20-30 s on loaded cores
 def test_learner_killed_mid_episode_degrades_then_resumes(stack, tmp_path):
     """The executor runs degraded without the learner and is back to normal as soon as a
     restarted learner speaks; the restarted learner resumes from the checkpoint and does not
