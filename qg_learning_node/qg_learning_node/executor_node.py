@@ -1,6 +1,8 @@
 """The ``executor`` node: runs episodes of the residual force policy on request.
 
-State machine idle -> resetting -> running -> done (or aborted), published on
+At start it publishes its task on the latched ``executor/task_spec`` (kind, observation, state
+and action sizes): the executor owns the state definition, and the learner builds its networks
+for it. State machine idle -> resetting -> running -> done (or aborted), published on
 ``/episode_status``. One RL step: choose the action (local actor from the latest
 ``/actor_parameters``, plus exploration noise in training), send the wrench setpoint, wait for
 the robot's at-rest event, turn it into (s', r, terminal), publish the transition (reliable QoS).
