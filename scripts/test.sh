@@ -9,4 +9,6 @@ export QG_ROS_INSTALL="$ROOT/ros_ws/install"    # the workspace the Python side 
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_LOG_DIR="${ROS_LOG_DIR:-$ROOT/runs/ros_log}"
 eval "$(.venv/bin/python -m qg_learning_node.cli.ros_env)"
-exec .venv/bin/python -m pytest "$@"
+# Two workers (pytest-xdist), each taking whole files, so a file's shared stack is started once;
+# QG_TEST_WORKERS=0 runs in this one process (for -s output or a debugger).
+exec .venv/bin/python -m pytest -n "${QG_TEST_WORKERS:-2}" --dist loadfile "$@"

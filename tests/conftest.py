@@ -12,8 +12,10 @@ from __future__ import annotations
 import itertools
 import os
 import sys
+import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+from typing import IO
 
 import pytest
 
@@ -25,9 +27,41 @@ _NO_STACK_ENV: str | None = None
 #: The test being set up: a Stack started for a test without the ``ros`` mark is refused.
 _current_test: pytest.Item | None = None
 
-# Domains 150..229 are ours; each test that starts processes takes the next one, so a straggler
-# of one test can never answer another test's service calls.
-_DOMAINS = itertools.cycle(range(150 + os.getpid() % 40, 230))
+
+
+def _domains() -> Iterator[int]:
+    """Domains 150..229 are ours, split evenly between the pytest-xdist workers; each test that
+    starts processes takes its worker's next free one (``_take_domain``), so a straggler of one
+    test can never answer another test's service calls, on this worker or another."""
+    worker = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:])
+    share = 80 // int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    first, offset = 150 + worker * share, os.getpid() % share
+    return itertools.cycle([first + (offset + i) % share for i in range(share)])
+
+
+_DOMAINS = _domains()
+#: One lock file per domain, machine-wide: another pytest run on this host (another checkout's
+#: suite, a loop of --count runs) holds the domains it uses, and this run skips them. (Two runs
+#: once met on one domain: a learner got the other run's executor's task.)
+_DOMAIN_LOCKS = Path(tempfile.gettempdir()) / "qg-ros-domains"
+
+
+def _take_domain() -> tuple[int, IO[str]]:
+    """The next domain of this worker's share that no test on this host holds, and its held
+    lock (released when the file is closed: when the ``Stack`` holding it goes)."""
+    import fcntl
+    _DOMAIN_LOCKS.mkdir(exist_ok=True)
+    for _ in range(80):
+        domain = next(_DOMAINS)
+        lock = open(_DOMAIN_LOCKS / f"{domain}.lock", "a")
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            lock.close()
+            continue
+        return domain, lock
+    raise RuntimeError(f"every ROS domain of this worker is held by other test runs "
+                       f"({_DOMAIN_LOCKS})")
 
 
 def _run_as_the_pytest_command() -> bool:
@@ -70,6 +104,18 @@ def pytest_report_header(config: pytest.Config) -> str:
     return "stack environment: set up (QG_STACK_ENV=1)"
 
 
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Files holding an ``alone`` test first, then those holding a ``slow`` one, the order
+    otherwise kept. Two workers that take whole files finish together only if the longest
+    files start early; and an ``alone`` test waits for the other worker's test in progress,
+    which at the start is a short one, not a minute-long ``slow`` one."""
+    def files(marker: str) -> set:
+        return {item.path for item in items if item.get_closest_marker(marker)}
+
+    alone, slow = files("alone"), files("slow")
+    items.sort(key=lambda item: 0 if item.path in alone else 1 if item.path in slow else 2)
+
+
 @pytest.hookimpl(tryfirst=True)
 def pytest_runtest_setup(item: pytest.Item) -> None:
     global _current_test
@@ -87,7 +133,7 @@ class Stack:
                         "tier, -m 'not ros', must not start any)", pytrace=False)
         from qg_learning_node.cli.launcher import Launcher
         from qg_learning_node.cli.ros_env import stack_env
-        self.domain_id = next(_DOMAINS)
+        self.domain_id, self._domain_lock = _take_domain()
         self.log_dir = tmp_path / "logs"
         self.env = stack_env(domain_id=str(self.domain_id), log_dir=tmp_path / "ros_log")
         self.env["QG_RUNS_DIR"] = str(tmp_path / "runs")
@@ -106,6 +152,29 @@ class Stack:
 
     def stop(self, grace: float = 5.0) -> dict[str, int]:
         return self.launcher.stop(grace)
+
+
+@pytest.fixture(autouse=True)
+def _cpu_to_itself(request: pytest.FixtureRequest,
+                   tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """Under pytest-xdist, a test marked ``alone`` (it times itself by the wall clock: a
+    realtime loop's pace, a heartbeat's gaps) runs while no other worker runs a test, and the
+    others run side by side. A readers-writer lock on a file all workers share: a test takes it
+    shared, an ``alone`` test exclusive; the turnstile, taken briefly by every test and held by
+    an ``alone`` test while it waits, keeps the other worker from taking the lock shared again
+    and again ahead of it."""
+    if "PYTEST_XDIST_WORKER" not in os.environ:
+        yield
+        return
+    import fcntl
+    shared = tmp_path_factory.getbasetemp().parent
+    alone = request.node.get_closest_marker("alone") is not None
+    with open(shared / "alone.turnstile", "a") as turnstile, \
+            open(shared / "alone.lock", "a") as lock:
+        fcntl.flock(turnstile, fcntl.LOCK_EX)
+        fcntl.flock(lock, fcntl.LOCK_EX if alone else fcntl.LOCK_SH)
+        fcntl.flock(turnstile, fcntl.LOCK_UN)
+        yield
 
 
 @pytest.fixture

@@ -24,7 +24,8 @@ import torch
 from qg_common.params import config_file, load_ros_params
 
 from qg_learning_node.learner.learner_params import learner_config_from_params
-from qg_learning_node.executor.noise import ActionNoise, NoiseConfig
+from qg_learning_node.executor.noise import ActionNoise
+from qg_learning_node.executor.parameters import load_noise
 from qg_experiments.environments import make_environment
 from qg_experiments.nextage_peg import NextagePeg
 from qg_experiments.profile import PegBudget
@@ -53,7 +54,8 @@ class PegRunSpec:
     :param lr: learning rate of actor and critic.
     :param train_iterations: minibatch updates after each episode.
     :param robot: ``free`` (the free peg) or ``sim_nextage`` (the arm through the stack's cores).
-    :param gamma: discount (``PegBudget.gamma``), not ``learner.yaml``'s, which is the Panda's.
+    :param gamma: discount, not ``learner.yaml``'s, which is the Panda's; its one home is
+        ``PegBudget.gamma`` (a profile may set it), this default is that one.
     """
     algorithm: str
     lr: float
@@ -63,7 +65,7 @@ class PegRunSpec:
     episode_steps: int = 200
     config_dir: str | None = None
     robot: str = "free"
-    gamma: float = 0.99
+    gamma: float = PegBudget.gamma
 
     def __post_init__(self) -> None:
         if self.algorithm not in ALGORITHMS:
@@ -105,7 +107,7 @@ def run_peg(spec: PegRunSpec) -> dict[str, Any]:
 
     env = (make_environment("peg", params("peg_env.yaml"), episode_steps=spec.episode_steps)
            if spec.robot == "free" else NextagePeg(spec.config_dir, spec.episode_steps))
-    base = learner_config_from_params(params("learner.yaml")["learner"])
+    base = learner_config_from_params(params("learner.yaml")["learner"], "learner.yaml")
     config = algorithm_config(base, spec.algorithm, env.action_dim)
     config = dataclasses.replace(
         config, seed=spec.seed, iterations_per_cycle=spec.train_iterations,
@@ -113,7 +115,7 @@ def run_peg(spec: PegRunSpec) -> dict[str, Any]:
         ddpg=dataclasses.replace(config.ddpg, actor_hidden=(200, 200, 200),
                                  critic_hidden=(200, 200, 200), critic_lr=spec.lr,
                                  actor_lr=spec.lr, seed=spec.seed, gamma=spec.gamma))
-    noise_config = NoiseConfig.from_dict(params("executor.yaml").get("noise", {}))
+    noise_config = load_noise(params("executor.yaml"), "executor.yaml")
     learner = LearnerCore(config, env.state_dim, env.action_dim)
     episodes = []
     try:

@@ -24,16 +24,19 @@ from typing import Any
 
 import numpy as np
 import torch
-from qg_common.params import config_file, load_ros_params, merge_params
+from qg_common.params import (check_section, config_file, load_ros_params, merge_params,
+                              section_values)
 from qg_common.rotations import housing_rotation
 from qg_common.types import N_START_POSES, WrenchSetpoint
-from robot_bridge_node.core.hardware_interface import load_robot
+from robot_bridge_node.core.hardware_interface import load_robot, robot_plugin
+from robot_bridge_node.core.torque_kind import EKF_SECTION, TORQUE
 from robot_bridge_node.core.robot_loop import MeasuredWrench, RobotLoop, build_loop
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
 
 from qg_learning_node.executor.episode import Actor, Episode, TransitionRecord
 from qg_learning_node.learner.learner_params import learner_config_from_params
 from qg_learning_node.executor.noise import ActionNoise, NoiseConfig
+from qg_learning_node.executor.parameters import load_noise, load_task
 from qg_learning_node.executor.observation import observation_from_step
 from qg_learning_node.executor.residual_task import (ACTION_DIM, Observation,
                                                      ResidualTask, TaskConfig)
@@ -118,13 +121,21 @@ class StackSettings:
         if arm == "ideal":
             robot = merge_params(robot, load_ros_params(config_file("panda_ideal.yaml", directory)))
         executor = load_ros_params(config_file("executor.yaml", directory))
-        return cls(robot=robot,
-                   bridge=load_ros_params(config_file("bridge.yaml", directory)),
-                   ekf=load_ros_params(config_file("wrench_estimator.yaml", directory))["ekf"],
-                   task=TaskConfig.from_dict(executor["task"]),
-                   noise=NoiseConfig.from_dict(executor.get("noise", {})),
+        bridge = load_ros_params(config_file("bridge.yaml", directory))
+        estimator = load_ros_params(config_file("wrench_estimator.yaml", directory))
+        # Each file through the sections its node declares: what a node would refuse (a value
+        # out of range, a misspelt key), the experiments refuse too.
+        for section in robot_plugin("sim_panda").parameters:
+            check_section(section, section_values(section, robot), "panda_scene.yaml")
+        for section in TORQUE.controller_sections:
+            check_section(section, section_values(section, bridge), "bridge.yaml")
+        return cls(robot=robot, bridge=bridge,
+                   ekf=check_section(EKF_SECTION, estimator["ekf"], "wrench_estimator.yaml"),
+                   task=load_task(executor, "executor.yaml"),
+                   noise=load_noise(executor, "executor.yaml"),
                    learner=learner_config_from_params(
-                       load_ros_params(config_file("learner.yaml", directory))["learner"]))
+                       load_ros_params(config_file("learner.yaml", directory))["learner"],
+                       "learner.yaml"))
 
     def with_arm_seed(self, seed: int) -> StackSettings:
         """The same settings on robot ``seed``: the arm's biases, housing error and noise

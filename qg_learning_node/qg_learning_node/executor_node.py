@@ -1,6 +1,8 @@
 """The ``executor`` node: runs episodes of the residual force policy on request.
 
-State machine idle -> resetting -> running -> done (or aborted), published on
+At start it publishes its task on the latched ``executor/task_spec`` (kind, observation, state
+and action sizes): the executor owns the state definition, and the learner builds its networks
+for it. State machine idle -> resetting -> running -> done (or aborted), published on
 ``/episode_status``. One RL step: choose the action (local actor from the latest
 ``/actor_parameters``, plus exploration noise in training), send the wrench setpoint, wait for
 the robot's at-rest event, turn it into (s', r, terminal), publish the transition (reliable QoS).
@@ -12,19 +14,19 @@ from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass, fields
+import uuid
 from collections.abc import Callable
 from typing import Any
 
 from qg_common import topics
 from qg_common.node_parameters import declare_parameters, on_parameter_change
 from qg_common.node_runtime import run_nodes
-from qg_common.params import POSITIVE, ParameterSection, config_from_dict
+from qg_common.params import ParameterSection
 from qg_common.conversions import setpoint_msg
 from qg_common.topics import LATCHED, RELIABLE_DEEP
 from qg_common.types import WrenchSetpoint as Setpoint
 from qg_interfaces.msg import (ActorParameters, AtRest, EpisodeStatus, LearnerDiagnostics,
-                               Transition, WrenchSetpoint)
+                               TaskSpec, Transition, WrenchSetpoint)
 from qg_interfaces.srv import ResetSim, StartEpisode, StopEpisode
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.duration import Duration
@@ -36,91 +38,33 @@ from qg_learning_node.executor.episode import Episode
 from qg_learning_node.executor.episode_id import episode_id as make_episode_id
 from qg_learning_node.executor.episode_request import N_POSES, EpisodeRequest
 from qg_learning_node.executor.noise import ActionNoise, NoiseConfig
+from qg_learning_node.executor.parameters import (EXECUTOR_SECTIONS, TASK_CHOICE_SECTION,
+                                                  TASK_SECTIONS, ExecutorConfig)
 from qg_learning_node.executor.peg_task import PegTask, PegTaskConfig
 from qg_learning_node.executor.residual_task import ResidualTask, TaskConfig
 from qg_learning_node.learner.ddpg import ActorMLP
 
 
 
-#: [s] how long StartEpisode waits for /sim/reset to be discovered before refusing.
-ROBOT_DISCOVERY_GRACE = 3.0
-#: [s] an episode's first step waits this long for a learner never heard from (it may just
-#: not be discovered yet) before running degraded with the zero residual.
-LEARNER_DISCOVERY_GRACE = 3.0
 #: [s] how long shutdown waits for the episode thread to abort the episode.
 SHUTDOWN_GRACE = 2.0
+#: [s] a reset unanswered this long is asked for again (same request id: no second reset).
+RESET_RETRY = 5.0
 
 
 class EpisodeAborted(Exception):
     """The episode cannot go on (stop request, robot gone, reset refused)."""
 
 
-@dataclass(frozen=True)
-class ExecutorConfig:
-    """How long the executor waits for the other nodes (``config/executor.yaml``, top level).
-
-    :param step_timeout: [s] wall time to wait for the at-rest event of one step.
-    :param reset_timeout: [s] wall time to wait for ``sim/reset``.
-    :param keepalive_period: [s] re-send the running setpoint this often; 0 = never (a lockstep
-        robot). A realtime robot needs 0.005: its watchdog holds the pose after 10 ms.
-    :param learner_timeout: [s] no word from the learner this long -> degraded (zero residual).
-    """
-    step_timeout: float = 10.0
-    reset_timeout: float = 30.0
-    keepalive_period: float = 0.0
-    learner_timeout: float = 2.0
-
-    def __post_init__(self) -> None:
-        for name in ("step_timeout", "reset_timeout", "learner_timeout"):
-            if not getattr(self, name) > 0.0:
-                raise ValueError(f"{name} must be > 0 s, got {getattr(self, name)}")
-        if not self.keepalive_period >= 0.0:
-            raise ValueError(f"keepalive_period must be >= 0 s, got {self.keepalive_period}")
-
-    @classmethod
-    def from_dict(cls, params: dict[str, Any]) -> ExecutorConfig:
-        """From the executor's parameters (its top-level ones; the sections are skipped)."""
-        own = {f.name for f in fields(cls)}
-        return config_from_dict(cls, {k: v for k, v in params.items() if k in own})
-
-
-@dataclass(frozen=True)
-class TaskChoice:
-    """Which task the executor runs.
-
-    :param kind: ``residual`` (the Panda's residual force policy, section ``task``) or ``peg``
-        (the Nextage's peg-in-hole by position offsets, section ``peg``).
-    """
-    kind: str = "residual"
-
-
-#: The executor's parameters. Changeable while it runs (``ros2 param set``): the timeouts, the
-#: exploration noise and the default reward; they apply from the next step or episode.
-EXECUTOR_SECTIONS = (
-    ParameterSection("", ExecutorConfig, ranges={
-        "step_timeout": (0.0, 3600.0), "reset_timeout": (0.0, 3600.0),
-        "keepalive_period": (0.0, 1.0), "learner_timeout": (0.0, 3600.0)},
-        runtime=frozenset(f.name for f in fields(ExecutorConfig))),
-    ParameterSection("noise", NoiseConfig, ranges={
-        "sigma": (0.0, 10.0), "theta": (0.0, 100.0), "dt": POSITIVE},
-        runtime=frozenset(f.name for f in fields(NoiseConfig))),
-)
-
-#: Each task kind's section and how its task is built from the section's values.
-TASKS = {
-    "residual": (ParameterSection("task", TaskConfig, ranges={
-        "max_residual_torque": (0.0, 3.0), "force_range": POSITIVE, "torque_range": POSITIVE,
-        "sigma_position": POSITIVE, "sigma_orientation": POSITIVE,
-        "max_lateral_offset": POSITIVE, "train_max_steps": (1, 1000000),
-        "test_max_steps": (1, 1000000), "tilt_range": POSITIVE},
-        runtime=frozenset({"reward"})),
-        lambda values: ResidualTask(TaskConfig.from_dict(values))),
-    "peg": (ParameterSection("peg", PegTaskConfig, ranges={
-        "action_scale": (0.0, 0.1), "reward_length": POSITIVE, "workspace_side": POSITIVE,
-        "tool_to_tip": POSITIVE, "train_max_steps": (1, 1000000),
-        "test_max_steps": (1, 1000000)},
-        runtime=frozenset({"reward"})),
-        lambda values: PegTask(PegTaskConfig.from_dict(values))),
+#: Each task kind's parameter section (``executor/parameters.py``), how its task is built from
+#: the section's values, and the ``observation`` it tells the learner (``TaskSpec``).
+TASKS: dict[str, tuple[ParameterSection, Callable[[dict[str, Any]], Any],
+                       Callable[[Any], str]]] = {
+    "residual": (TASK_SECTIONS["residual"],
+                 lambda values: ResidualTask(TaskConfig.from_dict(values)),
+                 lambda task: task.config.observation),
+    "peg": (TASK_SECTIONS["peg"], lambda values: PegTask(PegTaskConfig.from_dict(values)),
+            lambda task: "peg"),
 }
 
 
@@ -129,15 +73,21 @@ class ExecutorNode(Node):
 
     def __init__(self) -> None:
         super().__init__("executor")
-        self.task_kind = declare_parameters(self, [ParameterSection("task", TaskChoice)])[
-            "task"]["kind"]
+        self.task_kind = declare_parameters(self, [TASK_CHOICE_SECTION])["task"]["kind"]
         if self.task_kind not in TASKS:
             raise ValueError(f"task.kind must be one of {sorted(TASKS)}, got {self.task_kind!r}")
-        self.task_section, self.make_task = TASKS[self.task_kind]
+        self.task_section, self.make_task, observation = TASKS[self.task_kind]
         self._configure(declare_parameters(self, [*EXECUTOR_SECTIONS, self.task_section],
                                            (("qg_learning_node", "executor.yaml"),)))
-        on_parameter_change(self, self._configure)
+        on_parameter_change(self, self._configure, "from the next episode (timeouts: next step)")
 
+        # The learner builds its networks from this: the state is set here, and only here.
+        spec = TaskSpec(kind=self.task_kind, observation=observation(self.task),
+                        state_dim=self.task.state_dim, action_dim=self.task.action_dim)
+        self.task_spec_pub = self.create_publisher(TaskSpec, topics.TASK_SPEC, LATCHED)
+        self.task_spec_pub.publish(spec)
+        self.get_logger().info(f"task {spec.kind}, observation {spec.observation}: "
+                               f"{spec.state_dim}-D states, {spec.action_dim}-D actions")
         self.status_pub = self.create_publisher(EpisodeStatus, topics.EPISODE_STATUS, LATCHED)
         self.transition_pub = self.create_publisher(Transition, topics.TRANSITIONS, RELIABLE_DEEP)
         self.setpoint_pub = self.create_publisher(WrenchSetpoint, topics.WRENCH_SETPOINT,
@@ -193,8 +143,8 @@ class ExecutorNode(Node):
         if actor.input_dim != self.task.state_dim:
             self.get_logger().error(
                 f"ignoring actor v{msg.version}: it takes {actor.input_dim}-D states, the "
-                f"{self.task_kind} task's are {self.task.state_dim}-D (set the learner's "
-                "`observation` to the executor's `task.observation`, or `peg`)")
+                f"{self.task_kind} task's are {self.task.state_dim}-D (a learner of another "
+                f"task, or one resumed from another task's checkpoint)")
             return
         with self.lock:
             self.actor, self.actor_version = actor, int(msg.version)
@@ -269,7 +219,7 @@ class ExecutorNode(Node):
                                "is still running: stop it first (/executor/stop_episode)"
             return response
         # A robot process that has just come up may not be discovered yet: give it a moment.
-        if not self.reset_client.wait_for_service(timeout_sec=ROBOT_DISCOVERY_GRACE):
+        if not self.reset_client.wait_for_service(timeout_sec=self.config.robot_grace):
             response.success = False
             response.message = "the robot side is not up (/sim/reset unavailable): start " \
                                "`robot_bridge_node robot`"
@@ -334,8 +284,8 @@ class ExecutorNode(Node):
         try:
             observation = observation_from_msg(self._reset(episode))
             episode.begin(observation)
-            self._await_first_learner_contact(LEARNER_DISCOVERY_GRACE)
-            self._await_learner_reading_transitions(LEARNER_DISCOVERY_GRACE)
+            self._await_first_learner_contact(self.config.learner_grace)
+            self._await_learner_reading_transitions(self.config.learner_grace)
             self._set_state("running")
             while not episode.done:
                 if self.stop_requested.is_set():
@@ -362,15 +312,26 @@ class ExecutorNode(Node):
             self._set_state("aborted", f"error: {exc}")
 
     def _reset(self, episode: Episode) -> AtRest:
+        """Reset the robot to the episode's start; a reply lost on the way is asked for again
+        every ``RESET_RETRY`` seconds with the same request id, which the robot answers
+        without a second reset (``serve_reset``)."""
         # The episode id is the session: from now on the bridge executes only its setpoints.
         request = ResetSim.Request(initial_pose=episode.initial_pose, housing_yaw=0.0,
-                                   session=episode.episode_id)
-        future = self.reset_client.call_async(request)
-        if not self._wait_until(future.done, self.config.reset_timeout, poll=0.002):
+                                   session=episode.episode_id, request_id=uuid.uuid4().hex)
+        deadline = time.monotonic() + self.config.reset_timeout
+        while True:
+            future = self.reset_client.call_async(request)
+            wait = max(min(RESET_RETRY, deadline - time.monotonic()), 0.0)
+            if self._wait_until(future.done, wait, poll=0.002):
+                break
+            self.reset_client.remove_pending_request(future)
             if self.stop_requested.is_set():
                 raise EpisodeAborted(f"{self.stop_reason} during reset")
-            raise EpisodeAborted(
-                f"/sim/reset did not answer within {self.config.reset_timeout} s")
+            if time.monotonic() >= deadline:
+                raise EpisodeAborted(
+                    f"/sim/reset did not answer within {self.config.reset_timeout} s")
+            self.get_logger().warning(f"/sim/reset unanswered for {RESET_RETRY:.0f} s: asking "
+                                      f"again (request {request.request_id})")
         result = future.result()
         if result is None or not result.success:
             raise EpisodeAborted(f"reset refused: {getattr(result, 'message', 'no answer')}")

@@ -1,5 +1,11 @@
 """The ``learner`` node: QG-DDPG on the transitions the executor publishes.
 
+It builds its networks for the executor's task: the executor owns the state definition and
+publishes the sizes on its latched ``executor/task_spec``, so a learner started before or after
+it learns them from the one place they are set (a resumed learner checks its checkpoint's
+against them; a robot whose task does not fit is logged and its transitions are not used). Until
+then it has no networks and sends no heartbeat, so the executor does not count on it yet.
+
 With ``learner.schedule: cycle`` (the thesis) it trains ``iterations_per_cycle`` times every
 ``cycle_steps`` transitions, in the transition callback; with ``async`` a training thread keeps
 training while the robot moves (``updates_per_step`` per transition, see ``learner_core``).
@@ -9,75 +15,38 @@ every episode it checkpoints networks, optimizers, Q-Graph and replay memory; wi
 ``resume: true`` a restarted learner continues from the last checkpoint. Only episodes it saw
 running are checkpointed: the latched final status of an episode that ended before it started
 is not news. Its heartbeat has a callback group of its own, so a long training cycle never
-silences it (the executor would run degraded).
+silences it (the executor would run degraded). ``ros2 param set`` changes the training settings
+of ``learner_core.RUNTIME_FIELDS`` from the next cycle on.
 """
 from __future__ import annotations
 
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
+from typing import Any
 
 from qg_common import topics
-from qg_common.node_parameters import declare_parameters
+from qg_common.node_parameters import declare_parameters, on_parameter_change
 from qg_common.node_runtime import run_nodes
-from qg_common.params import POSITIVE, ParameterSection, runs_dir
+from qg_common.params import runs_dir
 from qg_common.topics import LATCHED, RELIABLE_DEEP
-from qg_interfaces.msg import ActorParameters, EpisodeStatus, LearnerDiagnostics, Transition
+from qg_interfaces.msg import (ActorParameters, EpisodeStatus, LearnerDiagnostics, TaskSpec,
+                               Transition)
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 
 from qg_learning_node.conversions import actor_to_msg
 from qg_learning_node.executor.episode import TransitionRecord
-from qg_learning_node.learner.learner_params import learner_config_from_params
-from qg_learning_node.executor.peg_task import PEG_ACTION_DIM, PEG_STATE_DIM
-from qg_learning_node.executor.residual_task import ACTION_DIM, state_dim
-from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore
+from qg_learning_node.learner.learner_core import LearnerCore, with_runtime_settings
+from qg_learning_node.learner.learner_params import LEARNER_SECTIONS, learner_config_from_params
 
 CHECKPOINT_NAME = "learner.pt"
 #: [s] how long to wait for the last transitions of an ended episode before checkpointing.
 CHECKPOINT_GRACE = 3.0
-
-
-def task_dims(observation: str) -> tuple[int, int]:
-    """(state, action) sizes of the executor's task, from the learner's ``observation``."""
-    if observation == "peg":
-        return PEG_STATE_DIM, PEG_ACTION_DIM
-    return state_dim(observation), ACTION_DIM
-
-
-@dataclass(frozen=True)
-class LearnerNodeConfig:
-    """The learner node's own parameters (``config/learner.yaml``, top level).
-
-    :param observation: the executor's ``task.observation`` (``thesis``, ``tilt``), or ``peg``
-        for the peg task; sets the networks' input and output sizes.
-    :param checkpoint_dir: folder of ``learner.pt``; "" = ``<runs>/checkpoints``.
-    :param resume: restore networks, optimizers, graph and replay at start.
-    :param robot_namespaces: the robots whose ``<ns>/transitions`` and ``<ns>/episode_status``
-        this learner learns from; "" is the learner's own namespace (one robot, the default).
-        ``qgl up --robots 2`` gives ``[robot0, robot1]`` (see ``cli/fleet.py``).
-    """
-    observation: str = "thesis"
-    checkpoint_dir: str = ""
-    resume: bool = False
-    robot_namespaces: tuple[str, ...] = ("",)
-
-
-#: The learner's parameters, all read-only: a running learner keeps its networks' settings.
-#: (ROS parameters cannot be null: 0 / [] stand for "none", see ``learner/learner_params.py``.)
-LEARNER_SECTIONS = (
-    ParameterSection("", LearnerNodeConfig),
-    ParameterSection("learner", LearnerConfig, ranges={
-        "replay_capacity": (0, 1_000_000_000), "iterations_per_cycle": (1, 1_000_000),
-        "cycle_steps": (1, 1_000_000), "batch_size": (1, 1_000_000),
-        "census_every": (1, 1_000_000), "graph_resolution": (0.0, 2.0),
-        "updates_per_step": POSITIVE, "publish_every": (1, 1_000_000),
-        "ddpg.gamma": (0.0, 1.0), "ddpg.critic_lr": (0.0, 1.0), "ddpg.actor_lr": (0.0, 1.0),
-        "ddpg.tau": (0.0, 1.0), "ddpg.he_horizon": (1, 100_000), "ddpg.he_lambda": POSITIVE}),
-)
+#: [s] at most one warning this often about transitions the learner cannot use.
+WARN_PERIOD = 5.0
 
 
 class LearnerNode(Node):
@@ -86,15 +55,17 @@ class LearnerNode(Node):
     def __init__(self) -> None:
         super().__init__(topics.LEARNER_NODE)
         p = declare_parameters(self, LEARNER_SECTIONS, (("qg_learning_node", "learner.yaml"),))
-        config = learner_config_from_params(p["learner"])
+        self.config = learner_config_from_params(p["learner"])
         self.checkpoint = Path(p["checkpoint_dir"] or runs_dir() / "checkpoints") / CHECKPOINT_NAME
+        self.core: LearnerCore | None = None      # built for the executor's task_spec
         if p["resume"] and self.checkpoint.is_file():
             self.core = LearnerCore.load(self.checkpoint)
             self.get_logger().info(f"resumed from {self.checkpoint}: {self.core.steps} "
                                    f"transitions, actor v{self.core.actor_version}")
-        else:
-            self.core = LearnerCore(config, *task_dims(p["observation"]))
         self.lock = threading.Lock()
+        self.tasks: dict[str, TaskSpec] = {}      # robot -> its executor's task, if it fits
+        self.refused: dict[str, str] = {}         # robot -> why its transitions are not used
+        self.last_warning = -float("inf")
         self.received: dict[str, int] = {}        # transitions per episode id
         self.seen_running: set[str] = set()       # episodes with a status before their end
         self.pending_checkpoint: dict[str, tuple[int, float]] = {}  # id -> (final steps, ended at)
@@ -109,6 +80,9 @@ class LearnerNode(Node):
         if len(set(robots)) != len(robots):     # each transition would count twice
             raise ValueError(f"robot_namespaces names a robot twice: {p['robot_namespaces']}")
         for robot in robots:
+            self.create_subscription(TaskSpec, topics.robot_topic(robot, topics.TASK_SPEC),
+                                     partial(self._on_task, robot=robot), LATCHED,
+                                     callback_group=group)
             self.create_subscription(Transition, topics.robot_topic(robot, topics.TRANSITIONS),
                                      partial(self._on_transition, robot=robot), RELIABLE_DEEP,
                                      callback_group=group)
@@ -119,11 +93,66 @@ class LearnerNode(Node):
         # A heartbeat, so the executor knows the learner is alive while it trains.
         self.create_timer(0.5, self._publish_diagnostics,
                           callback_group=MutuallyExclusiveCallbackGroup())
-        self._publish_actor()
+        on_parameter_change(self, self._reconfigure, "from the next training cycle")
+        if self.core is not None:
+            self._publish_actor()
+
+    def _on_task(self, msg: TaskSpec, robot: str = "") -> None:
+        """The executor of ``robot`` says what its states and actions are: build the networks
+        for them (the first robot to say so), or check that they fit the networks built."""
+        who = f"robot {robot!r}" if robot else "the executor"
+        dims = (int(msg.state_dim), int(msg.action_dim))
+        with self.lock:
+            built = self.core is None
+            if built:
+                self.core = LearnerCore(self.config, *dims)
+            have = (self.core.state_dim, self.core.action_dim)
+            if have != dims:
+                self.refused[robot] = (f"{who} runs the {msg.kind} task ({msg.observation}) with "
+                                       f"{dims[0]}-D states and {dims[1]}-D actions; this "
+                                       f"learner's networks take {have[0]}-D and {have[1]}-D")
+                self.tasks.pop(robot, None)
+            else:
+                self.refused.pop(robot, None)
+                self.tasks[robot] = msg
+        if robot in self.refused:
+            self.get_logger().error(f"{self.refused[robot]}: its transitions are not used")
+            return
+        self.get_logger().info(f"task of {who}: {msg.kind}, observation {msg.observation}, "
+                               f"{dims[0]}-D states, {dims[1]}-D actions"
+                               + ("; networks built for it" if built else ""))
+        if built:
+            self._publish_actor()
+            self._publish_diagnostics()
+
+    def _usable(self, t: TransitionRecord, robot: str) -> bool:
+        """Whether the transition fits the networks; a (throttled) error says why not."""
+        reason = self.refused.get(robot)
+        if reason is None and robot not in self.tasks:
+            reason = "no executor/task_spec heard from its executor yet"
+        if reason is None and (len(t.state), len(t.action)) != (self.core.state_dim,
+                                                                self.core.action_dim):
+            reason = (f"a {len(t.state)}-D state and {len(t.action)}-D action; the networks "
+                      f"take {self.core.state_dim}-D and {self.core.action_dim}-D")
+        if reason is not None and time.monotonic() - self.last_warning > WARN_PERIOD:
+            self.last_warning = time.monotonic()
+            self.get_logger().error(f"transition of {t.episode_id} not used: {reason}")
+        return reason is None
+
+    def _reconfigure(self, params: dict[str, Any]) -> None:
+        """``ros2 param set`` of a training setting: taken between two cycles (the lock is
+        held while one trains). rclpy has refused read-only ones already."""
+        config = learner_config_from_params(params["learner"])
+        with self.lock:
+            if self.core is not None:
+                self.core.reconfigure(with_runtime_settings(self.core.config, config))
+            self.config = config
 
     def _on_transition(self, msg: Transition, robot: str = "") -> None:
         t = TransitionRecord.from_message(msg)
         with self.lock:
+            if not self._usable(t, robot):
+                return
             cycle_due = self.core.add_transition(t.state, t.action, t.reward, t.next_state,
                                                  t.terminal, robot)
             self.received[t.episode_id] = self.received.get(t.episode_id, 0) + 1
@@ -139,7 +168,7 @@ class LearnerNode(Node):
         """The ``async`` schedule's training thread: train whenever updates are due."""
         while not stop.is_set():
             with self.lock:
-                due = self.core.training_due()
+                due = self.core is not None and self.core.training_due()
                 if due:
                     self.last_diagnostics = self.core.train_cycle()
             if due:
@@ -170,7 +199,7 @@ class LearnerNode(Node):
         ``CHECKPOINT_GRACE`` seconds the checkpoint is written without them.
         """
         pending = self.pending_checkpoint.get(episode_id)
-        if pending is None:
+        if pending is None or self.core is None:
             return
         final, ended_at = pending
         got = self.received.get(episode_id, 0)
@@ -194,6 +223,8 @@ class LearnerNode(Node):
         self.actor_pub.publish(msg)
 
     def _publish_diagnostics(self) -> None:
+        if self.core is None:             # no networks yet: nothing to count on
+            return
         d = self.last_diagnostics
         msg = LearnerDiagnostics(actor_version=self.core.actor_version,
                                  updates=self.core.updates,
@@ -212,7 +243,7 @@ def _start_training_thread(nodes: list[Node]) -> Callable[[], None]:
     """The ``async`` schedule trains in its own thread; ``cycle`` needs none."""
     node = nodes[0]
     assert isinstance(node, LearnerNode)
-    if node.core.config.schedule != "async":
+    if node.config.schedule != "async":
         return lambda: None
     stop = threading.Event()
     thread = threading.Thread(target=node.train_while_running, args=(stop,),

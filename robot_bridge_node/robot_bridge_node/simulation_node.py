@@ -156,9 +156,24 @@ def serve_reset(node: Node, resetter: Resetter) -> None:
     """Serve ``sim/reset`` on ``node``: validate the request, then ``resetter.reset``.
 
     The call blocks until the robot has settled, so the service has a callback group of its own
-    and the node's other callbacks keep running meanwhile.
+    and the node's other callbacks keep running meanwhile. A reply can be lost (a client the
+    server has not matched yet, ``cli/ros_client.py``), so a client retries with the same
+    ``request_id``; that retry is answered with the first reply, and the robot, which may have
+    moved on since, is not reset twice.
     """
+    answered: dict[str, ResetSim.Response] = {}      # the last request_id and its reply
+
     def on_reset(request: ResetSim.Request, response: ResetSim.Response) -> ResetSim.Response:
+        if request.request_id and request.request_id in answered:
+            node.get_logger().info(f"reset {request.request_id} asked again: its reply again")
+            return answered[request.request_id]
+        answer(request, response)
+        if request.request_id:
+            answered.clear()
+            answered[request.request_id] = response
+        return response
+
+    def answer(request: ResetSim.Request, response: ResetSim.Response) -> ResetSim.Response:
         response.success = False
         if not 0 <= request.initial_pose < N_START_POSES:
             response.message = (f"initial_pose must be 0..{N_START_POSES - 1}, "

@@ -70,6 +70,7 @@ def test_zero_residual_jams_from_most_starts(loop: RobotLoop, ideal_loop: RobotL
 
 
 @pytest.mark.ros     # full tier only: 8 episodes of up to 1000 steps, 15 s on a loaded 2-core box
+@pytest.mark.slow                 # 8 episodes of up to 1000 steps: 50-140 s on loaded cores
 def test_uniform_random_residuals_insert_from_at_least_six_of_eight_starts(
         loop: RobotLoop) -> None:
     """The issue's bar: uniform random residuals insert within 1000 steps from >= 6 of the 8

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import time
+import uuid
 
 import numpy as np
 import rclpy.qos
@@ -30,9 +31,15 @@ class RobotClient:
                                                    10)
 
     def reset(self, pose: int, timeout: float = 60.0, session: str = "") -> ResetSim.Response:
-        """Reset to ``pose``; the bridge then serves only ``session``'s setpoints ("" = any)."""
-        return call_service(self.cli, ResetSim, f"{self.namespace}/sim/reset",
-                            ResetSim.Request(initial_pose=pose, session=session), timeout)
+        """Reset to ``pose``; the bridge then serves only ``session``'s setpoints ("" = any).
+
+        Asked again after 5 s without a reply (a reply to a client the server has not matched
+        yet is lost), with the same request id: the robot answers that without resetting twice.
+        """
+        request = ResetSim.Request(initial_pose=pose, session=session,
+                                   request_id=uuid.uuid4().hex)
+        return call_service(self.cli, ResetSim, f"{self.namespace}/sim/reset", request, timeout,
+                            resend_after=5.0)
 
     def send(self, seq: int, wrench: tuple[float, ...], session: str = "") -> None:
         assert self.cli.spin_until(lambda: self.setpoints.get_subscription_count() > 0, 30.0), \

@@ -7,44 +7,9 @@ from __future__ import annotations
 import time
 
 import pytest
-from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
-from rcl_interfaces.srv import (DescribeParameters, GetParameters, ListParameters,
-                                SetParameters)
+from param_client import describe, get, listed, set_double, set_value, string
 
 pytestmark = pytest.mark.ros
-
-
-def listed(cli, node: str) -> set[str]:
-    from qg_learning_node.cli.ros_client import call_service
-    return set(call_service(cli, ListParameters, f"{node}/list_parameters",
-                            ListParameters.Request(), timeout=30.0, resend_after=5.0).result.names)
-
-
-def get(cli, node: str, *names: str) -> list:
-    from qg_learning_node.cli.ros_client import call_service
-    from rclpy.parameter import parameter_value_to_python
-    values = call_service(cli, GetParameters, f"{node}/get_parameters",
-                          GetParameters.Request(names=list(names)), resend_after=5.0).values
-    return [parameter_value_to_python(v) for v in values]
-
-
-def describe(cli, node: str, name: str):
-    from qg_learning_node.cli.ros_client import call_service
-    return call_service(cli, DescribeParameters, f"{node}/describe_parameters",
-                        DescribeParameters.Request(names=[name]),
-                        resend_after=5.0).descriptors[0]
-
-
-def set_double(cli, node: str, name: str, value: float):
-    return set_value(cli, node, name, ParameterValue(type=ParameterType.PARAMETER_DOUBLE,
-                                                     double_value=value))
-
-
-def set_value(cli, node: str, name: str, value: ParameterValue):
-    from qg_learning_node.cli.ros_client import call_service
-    request = SetParameters.Request(parameters=[Parameter(name=name, value=value)])
-    return call_service(cli, SetParameters, f"{node}/set_parameters", request,
-                        resend_after=5.0).results[0]
 
 
 def test_each_robot_node_declares_only_its_own_parameters_read_only(stack):
@@ -85,7 +50,7 @@ def test_one_params_file_overrides_only_what_it_names_and_run_time_changes_apply
         assert not any(n.startswith(("learner.", "impedance.")) for n in names)
         # The file's one value, and the package YAML's (not the dataclass's) for the rest.
         assert get(cli, "/executor", "noise.sigma", "task.base_force", "task.observation",
-                   "noise.kind") == [0.5, -15.0, "tilt", "gaussian"]
+                   "noise.kind") == [0.5, -15.0, "tilt_only", "gaussian"]
         sigma = describe(cli, "/executor", "noise.sigma")
         assert not sigma.read_only and sigma.description
         assert sigma.floating_point_range[0].to_value == 10.0
@@ -94,13 +59,9 @@ def test_one_params_file_overrides_only_what_it_names_and_run_time_changes_apply
         assert get(cli, "/executor", "noise.sigma") == [0.7]
         too_big = set_double(cli, "/executor", "noise.sigma", 50.0)
         assert not too_big.successful and "out of range" in too_big.reason
-        bad_kind = set_value(cli, "/executor", "noise.kind",
-                             ParameterValue(type=ParameterType.PARAMETER_STRING,
-                                            string_value="brownian"))
+        bad_kind = set_value(cli, "/executor", "noise.kind", string("brownian"))
         assert not bad_kind.successful and "noise kind" in bad_kind.reason
-        assert set_value(cli, "/executor", "task.reward",
-                         ParameterValue(type=ParameterType.PARAMETER_STRING,
-                                        string_value="sparse")).successful
+        assert set_value(cli, "/executor", "task.reward", string("sparse")).successful
         frozen = set_double(cli, "/executor", "task.base_force", -10.0)
         assert not frozen.successful and "read-only" in frozen.reason
         assert get(cli, "/executor", "noise.sigma", "noise.kind", "task.reward",

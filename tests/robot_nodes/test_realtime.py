@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from robot_client import DEEP, RobotClient, wrench
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.alone]   # paced by the wall clock
 
 
 def stamps_for(cli, topic: str, msg_type, seconds: float) -> list[int]:

@@ -12,7 +12,7 @@ import pytest
 from live_capture import LiveCapture, stamp_ns
 from robot_client import RobotClient
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.alone]   # a realtime robot process
 
 EPISODE = "rt_0001"
 

@@ -102,3 +102,35 @@ def test_only_the_served_session_steers_the_arm(stack):
         assert robot.reset(2).success
         event = robot.step(5, (0.0, 0.0, -10.0, 0.0, 0.0, 0.0), session="anyone")
         assert event is not None and event.foreign_setpoints == 0
+
+
+def test_a_reset_asked_again_with_its_request_id_is_answered_not_redone(stack):
+    """A client whose reply got lost asks again with the same id: it gets the first reply, and
+    the arm, which has moved on, is not reset again (no settling: the lockstep clock stands)."""
+    from qg_interfaces.srv import ResetSim
+    from rosgraph_msgs.msg import Clock
+
+    from qg_learning_node.cli.ros_client import call_service
+    stack.start(ROBOT)
+    with stack.client() as cli:
+        clock: list[int] = []
+        cli.node.create_subscription(
+            Clock, "/clock", lambda m: clock.append(m.clock.sec * 10**9 + m.clock.nanosec), DEEP)
+        robot = RobotClient(cli)
+        request = ResetSim.Request(initial_pose=2, request_id="reset-once")
+        first = call_service(cli, ResetSim, "/sim/reset", request, 60.0)
+        assert first.success, first.message + stack.logs()
+        moved = robot.step(1, (0.0, 0.0, -10.0, 1.0, 0.0, 0.0))
+        assert moved is not None, stack.logs()
+        cli.spin_for(0.3)
+        before = clock[-1]
+        again = call_service(cli, ResetSim, "/sim/reset", request, 60.0)
+        cli.spin_for(0.3)
+        assert (again.success, again.message, again.observation) == \
+            (first.success, first.message, first.observation)
+        assert clock[-1] == before                      # nothing stepped: no second reset
+        assert "reset reset-once asked again: its reply again" in stack.logs()
+        fresh = call_service(cli, ResetSim, "/sim/reset",
+                             ResetSim.Request(initial_pose=2, request_id="reset-twice"), 60.0)
+        cli.spin_for(0.3)
+        assert fresh.success and clock[-1] >= before + 0.1e9 - 1   # a new id: settled again

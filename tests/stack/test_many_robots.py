@@ -89,6 +89,9 @@ def test_two_robots_run_concurrent_episodes_into_one_learner(two_robots: TwoRobo
     total = sum(f.step for f in finals.values())
     assert cli.spin_until(lambda: learner.learner_heartbeats[-1].transitions == total, 30.0), \
         (learner.learner_heartbeats[-1], total)
+    # A heartbeat can go out while the last cycle trains (every transition in, its actor not
+    # yet): give that cycle its time.
+    cli.spin_until(lambda: learner.learner_heartbeats[-1].actor_version == total // 10, 10.0)
     version = learner.learner_heartbeats[-1].actor_version
     assert version == total // 10      # cycle_steps 10: one new actor per 10 transitions
     # Both executors hold the learner's latest actor (their status heartbeat says which).

@@ -6,8 +6,10 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 
 import pytest
+from conftest import Stack
 
 pytestmark = pytest.mark.ros
 
@@ -25,33 +27,31 @@ def discovered_nodes(cli) -> set[str]:
     return {f"{ns.rstrip('/')}/{n}" for n, ns in cli.node.get_node_names_and_namespaces()}
 
 
-def test_every_executable_starts_is_discovered_and_exits_zero_on_sigint(stack):
-    stack.start(*[(name, pkg, exe) for name, pkg, exe, _ in EXECUTABLES])
+@pytest.fixture(scope="module")
+def every_executable(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
+    """Every executable, started once for the tests below that only ask it questions and then
+    stop it (the last one, SIGINT to all; one before it, SIGTERM to the learner)."""
+    stack = Stack(tmp_path_factory.mktemp("every_executable"))
+    try:
+        stack.start(*[(name, pkg, exe) for name, pkg, exe, _ in EXECUTABLES])
+        yield stack
+    finally:
+        stack.stop(grace=3.0)
+
+
+def test_every_executable_starts_and_is_discovered(every_executable):
+    stack = every_executable
     expected = set().union(*(nodes for *_, nodes in EXECUTABLES))
     with stack.client() as cli:
         found = cli.spin_until(lambda: expected <= discovered_nodes(cli), timeout=30.0)
         assert found, f"missing {expected - discovered_nodes(cli)}\n{stack.logs()}"
-    t0 = time.monotonic()
-    codes = stack.stop(grace=5.0)
-    elapsed = time.monotonic() - t0
-    assert codes == {name: 0 for name, *_ in EXECUTABLES}, stack.logs()
-    assert elapsed < 5.0
 
 
-def test_sigterm_also_exits_zero(stack):
-    stack.start(("learner", "qg_learning_node", "learner"))
-    with stack.client() as cli:
-        assert cli.spin_until(lambda: "/learner" in discovered_nodes(cli), timeout=30.0)
-    proc = stack.launcher.running[0].popen
-    proc.send_signal(signal.SIGTERM)
-    assert proc.wait(timeout=5.0) == 0, stack.logs()
-
-
-def test_start_episode_crosses_processes_and_rejects_bad_fields(stack):
+def test_start_episode_crosses_processes_and_rejects_bad_fields(every_executable):
     from qg_interfaces.srv import StartEpisode
 
     from qg_learning_node.cli.ros_client import call_service
-    stack.start(("executor", "qg_learning_node", "executor"))
+    stack = every_executable
     with stack.client() as cli:
         bad = call_service(cli, StartEpisode, "/executor/start_episode",
                            StartEpisode.Request(mode="fly", initial_pose=8, reward="lots"), 30.0,
@@ -61,6 +61,26 @@ def test_start_episode_crosses_processes_and_rejects_bad_fields(stack):
             assert word in bad.message
         assert bad.episode_id == ""
     assert stack.launcher.poll() == [], "the executor must survive bad requests"
+
+
+def test_sigterm_also_exits_zero(every_executable):
+    stack = every_executable
+    with stack.client() as cli:
+        assert cli.spin_until(lambda: "/learner" in discovered_nodes(cli), timeout=30.0)
+    proc = next(r for r in stack.launcher.running if r.spec.name == "learner").popen
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=5.0) == 0, stack.logs()
+
+
+def test_every_executable_exits_zero_on_sigint(every_executable):
+    stack = every_executable
+    with stack.client() as cli:     # up (when this test runs alone)
+        assert cli.spin_until(lambda: "/executor" in discovered_nodes(cli), timeout=30.0)
+    t0 = time.monotonic()
+    codes = stack.stop(grace=5.0)
+    elapsed = time.monotonic() - t0
+    assert codes == {name: 0 for name, *_ in EXECUTABLES}, stack.logs()
+    assert elapsed < 5.0
 
 
 def qgl(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:

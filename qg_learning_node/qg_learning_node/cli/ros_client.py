@@ -70,7 +70,8 @@ def call_service(cli: CliNode, srv_type: Any, name: str, request: Any,
     """Call ``name`` and return the response.
 
     :param resend_after: [s] send the request again when it is unanswered this long; only for
-        requests that are safe to repeat (queries, refused requests, parameter sets).
+        requests that are safe to repeat (queries, refused requests, parameter sets, a
+        ``sim/reset`` with a ``request_id``).
     :raises TimeoutError: naming the service, when it is not available or does not answer.
     """
     client = cli.client(srv_type, name)

@@ -26,7 +26,7 @@ import numpy as np
 from qg_common.types import WrenchSetpoint
 
 __all__ = ["TaskConfig", "Observation", "ResidualTask", "OBSERVATIONS", "OBSERVATION_COMPONENTS",
-           "STATE_DIM", "ACTION_DIM", "state_dim", "tilt_from_push_axis"]
+           "ACTION_DIM", "state_dim", "tilt_from_push_axis"]
 
 #: The components of each state definition (see the module docstring), in order: wrench
 #: components (tool frame) and the tilt (ex, ey) away from the push axis.
@@ -39,7 +39,6 @@ OBSERVATION_COMPONENTS = {
 #: State definitions and their lengths.
 OBSERVATIONS = {name: len(parts) for name, parts in OBSERVATION_COMPONENTS.items()}
 _WRENCH_INDEX = {"fx": 0, "fy": 1, "tx": 3, "ty": 4}
-STATE_DIM = OBSERVATIONS["thesis"]
 ACTION_DIM = 2
 
 
@@ -75,7 +74,8 @@ class TaskConfig:
     :param max_lateral_offset: the episode ends (not terminal) past this tip offset [m].
     :param train_max_steps: step cap of training episodes; :param test_max_steps: of test ones.
     :param reward: default reward type, sparse | dense.
-    :param observation: the state, one of :data:`OBSERVATIONS` (``thesis``: 4-D wrench).
+    :param observation: the state, one of :data:`OBSERVATIONS` (``thesis``: 4-D wrench;
+        ``tilt_only``: the tilt alone). The executor owns it and tells the learner.
     :param tilt_range: tilt [rad] that maps to state 1.0 (``tilt`` observation).
     :param push_axis: base-frame direction the shaft should point along (the bore axis, tip
         first); the ``tilt`` observation measures the tool's tilt away from it.
@@ -90,7 +90,7 @@ class TaskConfig:
     train_max_steps: int = 1000
     test_max_steps: int = 200
     reward: str = "dense"
-    observation: str = "thesis"
+    observation: str = "tilt_only"
     tilt_range: float = 0.5
     push_axis: tuple[float, float, float] = (0.0, 0.0, -1.0)
 

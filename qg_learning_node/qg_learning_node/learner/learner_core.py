@@ -36,21 +36,28 @@ from qg_learning_node.learner.ddpg import DDPG, DIAGNOSTIC_KEYS, DDPGConfig
 from qg_learning_node.learner.qgraph import TRANSITION_KINDS, QGraph
 from qg_learning_node.learner.replay import ReplayMemory
 
-__all__ = ['LearnerConfig', 'LearnerCore', 'SCHEDULES']
+__all__ = ['LearnerConfig', 'LearnerCore', 'RUNTIME_FIELDS', 'SCHEDULES',
+           'with_runtime_settings']
 
 _GRAPH_BOUNDS = ('qgraph', 'qgraph+apriori')
 SCHEDULES = ('cycle', 'async')
+#: Settings a running learner can take between two training cycles (``LearnerCore.reconfigure``):
+#: how much and how fast it trains, not what its networks, graph or replay memory are.
+RUNTIME_FIELDS = frozenset({'iterations_per_cycle', 'cycle_steps', 'batch_size', 'census_every',
+                            'ddpg.critic_lr', 'ddpg.actor_lr'})
 
 
 @dataclass(frozen=True)
 class LearnerConfig:
-    """Learner settings.
+    """Learner settings; the defaults are ``config/learner.yaml``'s where it sets them (a test
+    keeps the two equal).
 
     :param ddpg: network and bound settings.
     :param replay_capacity: replay slots, ``None`` = unbounded (SPEC: also 300 in one study).
     :param use_qgraph: maintain the Q-Graph (required by the ``qgraph*`` bound modes; without them
         it only feeds the census diagnostics).
-    :param zero_action: action that leaves the state unchanged, or ``None``.
+    :param zero_action: action that leaves the state unchanged, or ``None`` (the default is the
+        Panda residual's: zero torques about x and y).
     :param iterations_per_cycle: train steps after every cycle (SPEC: 10 or 50).
     :param cycle_steps: RL steps per training cycle.
     :param batch_size: minibatch size.
@@ -67,11 +74,11 @@ class LearnerConfig:
     ddpg: DDPGConfig = field(default_factory=DDPGConfig)
     replay_capacity: int | None = None
     use_qgraph: bool = True
-    zero_action: tuple[float, ...] | None = None
+    zero_action: tuple[float, ...] | None = (0.0, 0.0)
     iterations_per_cycle: int = 10
     cycle_steps: int = 20
     batch_size: int = 64
-    census_every: int = 1
+    census_every: int = 5
     seed: int = 0
     graph_resolution: float = 0.0
     schedule: str = 'cycle'
@@ -129,6 +136,9 @@ class LearnerCore:
         self.updates = 0
         self.actor_version = 0
         self._census: dict = {}
+        # Train steps owed beyond (steps // cycle_steps) * iterations_per_cycle: nonzero once a
+        # run-time change of either (``reconfigure``) starts counting anew from where it stood.
+        self._owed_offset = 0
 
     def add_transition(self, s: np.ndarray, a: np.ndarray, r: float, s_next: np.ndarray,
                        terminal: bool, robot: str = '') -> bool:
@@ -150,8 +160,29 @@ class LearnerCore:
         if self.config.schedule == 'async':
             return self.updates + self.config.publish_every <= (self.config.updates_per_step
                                                                 * self.steps)
-        owed = (self.steps // self.config.cycle_steps) * self.config.iterations_per_cycle
+        owed = (self._owed_offset
+                + (self.steps // self.config.cycle_steps) * self.config.iterations_per_cycle)
         return self.steps % self.config.cycle_steps == 0 and self.updates < owed
+
+    def reconfigure(self, config: LearnerConfig) -> dict[str, tuple]:
+        """Take ``config`` between two cycles: it may differ from the current one only in
+        ``RUNTIME_FIELDS``. The training owed so far stays owed, and from here on each
+        ``cycle_steps`` steps owe ``iterations_per_cycle`` updates (no burst to catch up).
+
+        :returns: dotted name -> (old, new) of what changed.
+        :raises ValueError: if a setting outside ``RUNTIME_FIELDS`` differs.
+        """
+        changed = {name: pair for name, pair in _differences(self.config, config)}
+        fixed = sorted(set(changed) - RUNTIME_FIELDS)
+        if fixed:
+            raise ValueError(f'{fixed} cannot change while the learner runs (its networks, '
+                             'graph and replay memory are built with them)')
+        owed = (self._owed_offset
+                + (self.steps // self.config.cycle_steps) * self.config.iterations_per_cycle)
+        self._owed_offset = owed - (self.steps // config.cycle_steps) * config.iterations_per_cycle
+        self.agent.set_learning_rates(config.ddpg.critic_lr, config.ddpg.effective_actor_lr)
+        self.config = config
+        return changed
 
     def train_cycle(self) -> dict:
         """The due train steps (``iterations_per_cycle``, or ``publish_every`` when ``async``);
@@ -196,6 +227,7 @@ class LearnerCore:
             'updates': self.updates,
             'actor_version': self.actor_version,
             'census': self._census,
+            'owed_offset': self._owed_offset,
         }, pathlib.Path(path))
 
     @classmethod
@@ -210,4 +242,25 @@ class LearnerCore:
         core.steps, core.actor_version = state['steps'], state['actor_version']
         core.updates = state.get('updates', core.actor_version * core.config.iterations_per_cycle)
         core._census = state['census']
+        core._owed_offset = state.get('owed_offset', 0)
         return core
+
+
+def with_runtime_settings(base: LearnerConfig, source: LearnerConfig) -> LearnerConfig:
+    """``base`` with the ``RUNTIME_FIELDS`` of ``source`` (a learner resumed from a checkpoint
+    keeps the checkpoint's other settings when its parameters change)."""
+    ddpg = dataclasses.replace(base.ddpg, critic_lr=source.ddpg.critic_lr,
+                               actor_lr=source.ddpg.actor_lr)
+    top = {name: getattr(source, name) for name in RUNTIME_FIELDS if '.' not in name}
+    return dataclasses.replace(base, ddpg=ddpg, **top)
+
+
+def _differences(old, new, prefix: str = ''):
+    """(dotted name, (old, new)) of every field in which two configs differ, nested configs
+    (``ddpg``) field by field."""
+    for f in dataclasses.fields(old):
+        a, b = getattr(old, f.name), getattr(new, f.name)
+        if dataclasses.is_dataclass(a):
+            yield from _differences(a, b, f'{prefix}{f.name}.')
+        elif a != b:
+            yield f'{prefix}{f.name}', (a, b)

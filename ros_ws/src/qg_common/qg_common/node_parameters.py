@@ -6,9 +6,12 @@ under a prefix (``params.ParameterSection``; nested dataclasses give dotted name
 ``scene.geometry.peg_radius``):
 
 - the default comes from the package's YAML (``share/<pkg>/config``), else from the dataclass;
-- the description from the dataclass docstring (``:param name:``) or the field's comment;
+- the description from the dataclass docstring (``:param name:``) or the field's comment, with
+  the shipped default and where it lives appended, generated from the value itself (a number
+  written into a docstring goes stale; this cannot);
 - a ``FloatingPointRange`` / ``IntegerRange`` where the section gives one;
-- ``read_only`` unless the section lists the field as changeable while the node runs.
+- ``read_only`` unless the section lists the field as changeable while the node runs, and the
+  description says which, and why (``ParameterSection.fixed``).
 
 A value from the command line (``-p``, ``--params-file``) overrides the default; rclpy itself
 refuses one of the wrong type or out of range, and ``declare_parameters`` turns that into a
@@ -22,7 +25,7 @@ import inspect
 import re
 import typing
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import MISSING, dataclass, fields, is_dataclass
+from dataclasses import dataclass
 from typing import Any
 
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
@@ -31,11 +34,11 @@ from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValu
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from qg_common.params import (ConfigError, ParameterSection, flatten, load_ros_params,
-                              package_config, unflatten)
+from qg_common.params import (ConfigError, ParameterSection, config_fields, field_default,
+                              flatten, load_ros_params, package_config, unflatten)
 
-__all__ = ["Leaf", "leaves", "declare_parameters", "package_defaults", "unknown_overrides",
-           "on_parameter_change"]
+__all__ = ["Leaf", "leaves", "declare_parameters", "describe", "package_defaults", "ros_value",
+           "shipped_defaults", "unknown_overrides", "on_parameter_change"]
 
 #: Parameters rclpy declares or reads itself: never "unknown".
 _BUILTIN = ("use_sim_time",)
@@ -56,12 +59,28 @@ class Leaf:
     description: str
 
 
-def _descriptor(section: ParameterSection, leaf: Leaf) -> ParameterDescriptor:
+def _local(section: ParameterSection, leaf: Leaf) -> str:
+    return leaf.name[len(section.prefix) + 1:] if section.prefix else leaf.name
+
+
+def describe(section: ParameterSection, leaf: Leaf, default: Any, home: str) -> str:
+    """What ``ros2 param describe`` says of ``leaf``: its docstring, then the shipped default
+    and its home (generated from the value, so it cannot contradict it), then whether it can
+    be set while the node runs, or why not."""
+    local = _local(section, leaf)
+    settable = (f"settable with `ros2 param set`, applies {section.applies}"
+                if local in section.runtime else section.fixed)
+    text = leaf.description.rstrip(".")
+    return f"{text}. Default {default!r} ({home}); {settable}." if text else \
+        f"Default {default!r} ({home}); {settable}."
+
+
+def _descriptor(section: ParameterSection, leaf: Leaf, description: str) -> ParameterDescriptor:
     """Type, description, range and read-only flag of one leaf, as ``ros2 param describe``
     shows them."""
-    local = leaf.name[len(section.prefix) + 1:] if section.prefix else leaf.name
+    local = _local(section, leaf)
     descriptor = ParameterDescriptor(name=leaf.name, type=leaf.type.value,
-                                     description=leaf.description,
+                                     description=description,
                                      read_only=local not in section.runtime)
     if local in section.ranges:
         low, high = section.ranges[local]
@@ -107,7 +126,7 @@ def _docs(cls: type) -> dict[str, str]:
     return docs
 
 
-def _ros_value(value: Any, kind: Parameter.Type) -> Any:
+def ros_value(value: Any, kind: Parameter.Type) -> Any:
     """A config value as rclpy takes it: tuples as lists, ints as floats where floats are due,
     and ``None`` as the zero of the type (ROS parameters cannot be null: 0 / "" mean none)."""
     if value is None:
@@ -123,18 +142,12 @@ def _ros_value(value: Any, kind: Parameter.Type) -> Any:
 
 
 def _leaves(cls: type, prefix: str) -> Iterator[Leaf]:
-    hints = typing.get_type_hints(cls)
-    docs = _docs(cls)
-    for f in fields(cls):
-        name = f"{prefix}.{f.name}" if prefix else f.name
-        hint = hints[f.name]
-        if is_dataclass(hint):
-            yield from _leaves(hint, name)
-            continue
-        default = f.default if f.default is not MISSING else (
-            f.default_factory() if f.default_factory is not MISSING else None)
+    docs: dict[type, dict[str, str]] = {}
+    for name, f, hint, owner in config_fields(cls, prefix):
         kind = _parameter_type(hint)
-        yield Leaf(name, kind, _ros_value(default, kind), docs.get(f.name, ""))
+        if owner not in docs:
+            docs[owner] = _docs(owner)
+        yield Leaf(name, kind, ros_value(field_default(f), kind), docs[owner].get(f.name, ""))
 
 
 def _coerce_override(node: Node, leaf: Leaf) -> None:
@@ -142,18 +155,28 @@ def _coerce_override(node: Node, leaf: Leaf) -> None:
     given = node._parameter_overrides.get(leaf.name)     # rclpy has no public accessor
     if given is None:
         return
-    value = _ros_value(given.value, leaf.type)
+    value = ros_value(given.value, leaf.type)
     if value != given.value or type(value) is not type(given.value):
         node._parameter_overrides[leaf.name] = Parameter(leaf.name, value=value)
 
 
-def package_defaults(node_name: str, files: Sequence[tuple[str, str]]) -> dict[str, Any]:
-    """The ``ros__parameters`` for ``node_name`` (its own section over ``/**``) of the files
-    ``(package, file name)`` installed in ``share/<package>/config``, later files winning."""
-    defaults: dict[str, Any] = {}
+def shipped_defaults(node_name: str, files: Sequence[tuple[str, str]]
+                     ) -> dict[str, tuple[Any, str]]:
+    """Dotted name -> (value, ``config/<file>``) of the ``ros__parameters`` for ``node_name``
+    (its own section over ``/**``) of the files ``(package, file name)`` installed in
+    ``share/<package>/config``, later files winning: each value with its home."""
+    defaults: dict[str, tuple[Any, str]] = {}
     for package, name in files:
-        defaults.update(flatten(load_ros_params(package_config(package, name), node_name)))
-    return unflatten(defaults)
+        for key, value in flatten(load_ros_params(package_config(package, name),
+                                                  node_name)).items():
+            defaults[key] = (value, f"config/{name}")
+    return defaults
+
+
+def package_defaults(node_name: str, files: Sequence[tuple[str, str]]) -> dict[str, Any]:
+    """The ``ros__parameters`` for ``node_name`` of ``files`` (``shipped_defaults``), nested."""
+    return unflatten({key: value for key, (value, _) in
+                      shipped_defaults(node_name, files).items()})
 
 
 def declare_parameters(node: Node, sections: Sequence[ParameterSection],
@@ -165,24 +188,26 @@ def declare_parameters(node: Node, sections: Sequence[ParameterSection],
     :raises ConfigError: a given value of the wrong type or out of range, naming the parameter;
         or a key of the files under a section's prefix that the section does not have.
     """
-    flat = flatten(package_defaults(node.get_name(), files))
+    shipped = shipped_defaults(node.get_name(), files)
     values: dict[str, Any] = {}
     for section in sections:
         section_leaves = leaves(section)
         if section.prefix:
             known = {leaf.name for leaf in section_leaves}
-            stray = sorted(k for k in flat if k.startswith(section.prefix + ".") and k not in known)
+            stray = sorted(k for k in shipped
+                           if k.startswith(section.prefix + ".") and k not in known)
             if stray:
                 raise ConfigError(f"node {node.get_name()}: the package config names unknown "
                                   f"parameters {stray}")
         for leaf in section_leaves:
-            default = _ros_value(flat.get(leaf.name, leaf.default), leaf.type)
+            value, home = shipped.get(leaf.name, (leaf.default, "code default"))
+            default = ros_value(value, leaf.type)
             if isinstance(default, list) and not default:
                 raise ConfigError(f"{leaf.name}: an empty array has no ROS type; give a default")
             _coerce_override(node, leaf)
+            descriptor = _descriptor(section, leaf, describe(section, leaf, default, home))
             try:
-                values[leaf.name] = node.declare_parameter(
-                    leaf.name, default, _descriptor(section, leaf)).value
+                values[leaf.name] = node.declare_parameter(leaf.name, default, descriptor).value
             except InvalidParameterTypeException as exc:
                 raise ConfigError(f"node {node.get_name()}: parameter {leaf.name!r}: {exc}") \
                     from None
@@ -217,20 +242,26 @@ def unknown_overrides(nodes: Sequence[Node]) -> list[str]:
     return problems
 
 
-def on_parameter_change(node: Node, apply: Callable[[dict[str, Any]], None]) -> None:
+def on_parameter_change(node: Node, apply: Callable[[dict[str, Any]], None],
+                        when: str = "at once") -> None:
     """Call ``apply`` with all parameter values (nested) whenever ``ros2 param set`` changes one.
 
     rclpy has already refused read-only and out-of-range values by then. ``apply`` validates
-    and applies; a ``ValueError`` refuses the change with its message as the reason.
+    and applies; a ``ValueError`` refuses the change with its message as the reason. An applied
+    change is logged, old and new value and ``when`` it takes effect.
     """
     def callback(changed: list[Parameter]) -> SetParametersResult:
-        current = {name: p.value for name, p in node.get_parameters_by_prefix("").items()}
-        current.update({p.name: p.value for p in changed})
+        before = {name: p.value for name, p in node.get_parameters_by_prefix("").items()}
+        current = {**before, **{p.name: p.value for p in changed}}
         current = {name: value for name, value in current.items() if not _builtin(name)}
         try:
             apply(unflatten(current))
         except (ValueError, TypeError) as exc:
             return SetParametersResult(successful=False, reason=str(exc))
+        for p in changed:
+            if not _builtin(p.name) and p.value != before.get(p.name):
+                node.get_logger().info(f"parameter {p.name}: {before.get(p.name)!r} -> "
+                                       f"{p.value!r}, applies {when}")
         return SetParametersResult(successful=True)
 
     node.add_on_set_parameters_callback(callback)

@@ -11,18 +11,21 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+import typing
+from collections.abc import Iterator, Mapping
+from dataclasses import MISSING, Field, dataclass, field, fields, is_dataclass
 from pathlib import Path
 from typing import Any, TypeVar
-
-T = TypeVar("T")
 
 import yaml
 from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
 
-__all__ = ["ConfigError", "ParameterSection", "POSITIVE", "CONFIG_PACKAGES", "config_file", "config_from_dict", "flatten",
-           "load_ros_params", "merge_params", "package_config", "runs_dir", "unflatten"]
+T = TypeVar("T")
+
+__all__ = ["ConfigError", "ParameterSection", "POSITIVE", "CONFIG_PACKAGES", "FIXED_AT_START",
+           "check_section", "config_fields", "config_file", "config_from_dict", "field_default",
+           "flatten", "load_ros_params", "merge_params", "package_config", "runs_dir",
+           "section_values", "unflatten"]
 
 #: The packages that install config files (``share/<package>/config``), searched in this order.
 CONFIG_PACKAGES = ("robot_bridge_node", "sim_robot_node", "qg_learning_node", "qg_experiments")
@@ -35,6 +38,9 @@ class ConfigError(ValueError):
 #: The range of a quantity that only has to be positive (``__post_init__`` checks the rest).
 POSITIVE = (0.0, math.inf)
 
+#: Why a parameter is read-only, unless its section says better (``ParameterSection.fixed``).
+FIXED_AT_START = "read-only: read once at start; restart the node to change it"
+
 
 @dataclass(frozen=True)
 class ParameterSection:
@@ -45,11 +51,71 @@ class ParameterSection:
     :param ranges: field name (dotted below the prefix) -> ``(lowest, highest)`` allowed.
     :param runtime: field names whose change the node applies while it runs; all others are
         read-only.
+    :param applies: when a run-time change takes effect (``from the next episode``).
+    :param fixed: why the others are read-only; ``ros2 param describe`` shows both.
     """
     prefix: str
     config: type
     ranges: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     runtime: frozenset[str] = frozenset()
+    applies: str = "at once"
+    fixed: str = FIXED_AT_START
+
+
+def field_default(f: Field) -> Any:
+    """The default of a dataclass field (``None`` if it has none)."""
+    if f.default is not MISSING:
+        return f.default
+    return f.default_factory() if f.default_factory is not MISSING else None
+
+
+def config_fields(cls: type, prefix: str = "") -> Iterator[tuple[str, Field, Any, type]]:
+    """Every scalar or array field of the config dataclass ``cls`` as ``(dotted name, field,
+    type hint, owning dataclass)``, nested dataclasses flattened (``ddpg.gamma``)."""
+    hints = typing.get_type_hints(cls)
+    for f in fields(cls):
+        name = f"{prefix}.{f.name}" if prefix else f.name
+        if is_dataclass(hints[f.name]):
+            yield from config_fields(hints[f.name], name)
+        else:
+            yield name, f, hints[f.name], cls
+
+
+def section_values(section: ParameterSection, params: Mapping[str, Any]) -> dict[str, Any]:
+    """The section's own values out of a node's nested parameters: ``params[prefix]``, or for
+    prefix "" the top-level keys that are fields of the section's config."""
+    if section.prefix:
+        return dict(params.get(section.prefix) or {})
+    own = {f.name for f in fields(section.config)}
+    return {key: value for key, value in params.items() if key in own}
+
+
+def check_section(section: ParameterSection, values: Mapping[str, Any],
+                  source: str = "") -> dict[str, Any]:
+    """``values`` (the section's own, nested as in the YAML) checked as a node checks them when
+    it declares the section: every key a field of the config, every number in its range.
+
+    What reads a config file without a node (the experiments, tests) calls this, so a value the
+    node would refuse is refused there too.
+    :param source: where the values come from, for the message (``config/learner.yaml``).
+    :returns: ``values`` as a plain dict.
+    :raises ConfigError: naming the parameter, on an unknown key or a value out of range.
+    """
+    where = f" ({source})" if source else ""
+    flat = flatten(dict(values))
+    known = {name for name, *_ in config_fields(section.config)}
+    dotted = (lambda name: f"{section.prefix}.{name}") if section.prefix else (lambda name: name)
+    unknown = sorted(set(flat) - known)
+    if unknown:
+        raise ConfigError(f"unknown parameters {[dotted(n) for n in unknown]}{where}")
+    for name, (low, high) in section.ranges.items():
+        value = flat.get(name)
+        if value is None or isinstance(value, bool):
+            continue
+        if not low <= value <= high:
+            raise ConfigError(f"parameter {dotted(name)!r} = {value} is out of range "
+                              f"[{low}, {high}]{where}")
+    return dict(values)
 
 
 def package_config(package: str, name: str) -> Path:

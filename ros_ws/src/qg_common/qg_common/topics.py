@@ -14,7 +14,7 @@ __all__ = [
     "JOINT_STATES", "JOINT_COMMANDS", "GROUND_TRUTH", "GROUND_TRUTH_WRENCH", "CLOCK",
     "SIM_RESTARTED", "SIM_RESET", "WRENCH_ESTIMATE", "WRENCH_SETPOINT", "EE_POSE", "EE_TWIST",
     "EE_AT_REST", "EPISODE_STATUS", "TRANSITIONS", "ACTOR_PARAMETERS", "LEARNER_DIAGNOSTICS",
-    "START_EPISODE", "STOP_EPISODE", "LEARNER_NODE", "SENSOR_QOS", "COMMAND_QOS", "RESTARTED_QOS",
+    "START_EPISODE", "STOP_EPISODE", "TASK_SPEC", "LEARNER_NODE", "SENSOR_QOS", "COMMAND_QOS", "RESTARTED_QOS",
     "RELIABLE_DEEP", "LATCHED", "robot_topic"]
 
 # --- the robot process (1 kHz unless said otherwise) -------------------------------------------
@@ -38,6 +38,7 @@ ACTOR_PARAMETERS = "actor_parameters"
 LEARNER_DIAGNOSTICS = "learner/diagnostics"
 START_EPISODE = "executor/start_episode"       # service
 STOP_EPISODE = "executor/stop_episode"         # service
+TASK_SPEC = "executor/task_spec"               # latched: state and action sizes for the learner
 #: The learner's node name: the executor looks for it among the readers of its transitions.
 LEARNER_NODE = "learner"
 
