@@ -57,6 +57,10 @@ class SimPanda:
     def contact_wrench(self) -> np.ndarray:
         return self.scene.contact_wrench()
 
+    def close(self) -> None:
+        """Disconnect the physics and delete the scene's files (a process that builds many)."""
+        self.scene.close()
+
 
 def _panda_config(params: dict[str, Any]) -> PandaSceneConfig:
     return PandaSceneConfig.from_dict(params.get("panda_scene", {}))
@@ -140,6 +144,10 @@ class SimNextage:
 
     def contact_wrench(self) -> np.ndarray:
         return self.read_wrench()
+
+    def close(self) -> None:
+        """Disconnect the physics (a process that builds many)."""
+        self.scene.close()
 
 
 def _nextage_config(params: dict[str, Any]) -> NextageSceneConfig:

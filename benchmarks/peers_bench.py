@@ -1,0 +1,67 @@
+"""The peers' runs on ``QGInsertion-v0``: SB3's SAC, TD3 and DDPG, and ours at SB3 DDPG's settings.
+
+Usage (in the stack's environment; one run costs 1-10 min on a free core, SAC's most, since its
+test episodes run to the cap):
+
+    eval "$(.venv/bin/qgl env)"
+    nice -n 10 .venv/bin/python benchmarks/peers_bench.py --setting defaults
+    .venv/bin/python benchmarks/peers_bench.py --setting grid --algorithms td3 --cells 1e-3,50
+    .venv/bin/python benchmarks/peers_bench.py --table-only          # print what is saved
+
+Each run is saved as ``<out>/peers/<name>.json`` the moment it ends (``qg_experiments.tasks``), so
+an interrupted sweep resumes where it stopped; its TensorBoard scalars go beside ours, to
+``<out>/tensorboard/peers/<name>/``. Runs go seed by seed, one process at a time (``--workers``).
+The last line printed is the table as JSON (``peers.peer_table``).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from qg_experiments.peers import PEER_ALGORITHMS, SETTINGS, peer_specs, peer_table
+from qg_experiments.stats import Interval, format_interval
+from qg_experiments.tasks import load_results, run_specs
+
+#: The report's seeds: no tuning used them.
+REPORT_SEEDS = (100, 101, 102, 103, 104)
+#: The grid's cells (critic learning rate, gradient steps per 20 robot steps).
+GRID_CELLS = ((1e-5, 10), (1e-5, 50), (1e-4, 10), (1e-4, 50), (1e-3, 10), (1e-3, 50),
+              (1e-2, 10), (1e-2, 50))
+
+
+def _cell(text: str) -> tuple[float, int]:
+    lr, iterations = text.split(",")
+    return float(lr), int(iterations)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--setting", choices=SETTINGS, default="defaults")
+    parser.add_argument("--algorithms", nargs="+", choices=PEER_ALGORITHMS,
+                        default=["ddpg", "ours_ddpg", "td3", "sac"])
+    parser.add_argument("--seeds", nargs="+", type=int, default=list(REPORT_SEEDS))
+    parser.add_argument("--cells", nargs="+", type=_cell, default=list(GRID_CELLS),
+                        help="grid setting: lr,iterations ...")
+    parser.add_argument("--arm", choices=("realistic", "ideal"), default="realistic")
+    parser.add_argument("--out", type=Path, default=Path("runs/experiments/thesis"))
+    parser.add_argument("--workers", type=int, default=1)
+    parser.add_argument("--table-only", action="store_true")
+    args = parser.parse_args()
+    specs = peer_specs(args.setting, tuple(args.seeds), tuple(args.algorithms), tuple(args.cells),
+                       tensorboard_dir=str(args.out / "tensorboard" / "peers"), arm=args.arm)
+    if not args.table_only:
+        run_specs(specs, args.out, workers=args.workers, description="peers")
+    rows = peer_table(load_results(args.out, "peers"))
+    for row in rows:
+        steps, train = Interval(**row["mean_test_steps"]), Interval(**row["train_steps"])
+        cell = (f"lr {row['critic_lr']:g} it {row['iterations']}" if row["setting"] == "grid"
+                else "defaults")
+        print(f"{row['algorithm']:12s} {cell:18s} seeds {len(row['seeds'])}  test steps "
+              f"{format_interval(steps)}  solved {row['solved']}/{row['tests']}  training steps "
+              f"{format_interval(train, 0)}")
+    print(json.dumps(rows))
+
+
+if __name__ == "__main__":
+    main()
