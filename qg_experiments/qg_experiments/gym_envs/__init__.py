@@ -44,7 +44,8 @@ def register_envs() -> None:
     from gymnasium.envs.registration import register, registry
     for env_id, entry_point in ENV_IDS.items():
         if env_id not in registry:
-            register(id=env_id, entry_point=entry_point)
+            # A robot process's noise streams are its own: a seed cannot replay its episodes.
+            register(id=env_id, entry_point=entry_point, nondeterministic=env_id in ROS_ENV_IDS)
 
 
 register_envs()
