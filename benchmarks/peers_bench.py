@@ -6,7 +6,12 @@ test episodes run to the cap):
     eval "$(.venv/bin/qgl env)"
     nice -n 10 .venv/bin/python benchmarks/peers_bench.py --setting defaults
     .venv/bin/python benchmarks/peers_bench.py --setting grid --algorithms td3 --cells 1e-3,50
+    .venv/bin/python benchmarks/peers_bench.py --ours --cells 1e-3,50   # our DDPG, QG-DDPG
     .venv/bin/python benchmarks/peers_bench.py --table-only          # print what is saved
+
+``--ours`` runs our DDPG and QG-DDPG through the runner (``RunSpec``, the grid's protocol and
+layout, ``<out>/grid/``) at the given cells on the same seeds, for the comparison; the suite's
+own grid runs of those seeds are the same runs (same names, skipped when saved).
 
 Each run is saved as ``<out>/peers/<name>.json`` the moment it ends (``qg_experiments.tasks``), so
 an interrupted sweep resumes where it stopped; its TensorBoard scalars go beside ours, to
@@ -19,7 +24,9 @@ import argparse
 import json
 from pathlib import Path
 
+from qg_experiments.grid import grid_specs
 from qg_experiments.peers import PEER_ALGORITHMS, SETTINGS, peer_specs, peer_table
+from qg_experiments.profile import GridBudget
 from qg_experiments.stats import Interval, format_interval
 from qg_experiments.tasks import load_results, run_specs
 
@@ -46,10 +53,18 @@ def main() -> None:
     parser.add_argument("--arm", choices=("realistic", "ideal"), default="realistic")
     parser.add_argument("--out", type=Path, default=Path("runs/experiments/thesis"))
     parser.add_argument("--workers", type=int, default=1)
+    parser.add_argument("--ours", action="store_true",
+                        help="run our DDPG and QG-DDPG at --cells instead (the runner's grid)")
     parser.add_argument("--table-only", action="store_true")
     args = parser.parse_args()
-    specs = peer_specs(args.setting, tuple(args.seeds), tuple(args.algorithms), tuple(args.cells),
-                       tensorboard_dir=str(args.out / "tensorboard" / "peers"), arm=args.arm)
+    if args.ours:
+        budget = GridBudget(cells=tuple(args.cells), seeds=tuple(args.seeds), train_episodes=40,
+                            train_max_steps=50, test_max_steps=200, observation="tilt_only")
+        specs = grid_specs(budget)
+    else:
+        specs = peer_specs(args.setting, tuple(args.seeds), tuple(args.algorithms),
+                           tuple(args.cells), tensorboard_dir=str(args.out / "tensorboard" /
+                                                                  "peers"), arm=args.arm)
     if not args.table_only:
         run_specs(specs, args.out, workers=args.workers, description="peers")
     rows = peer_table(load_results(args.out, "peers"))
