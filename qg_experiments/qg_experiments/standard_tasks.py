@@ -36,7 +36,7 @@ __all__ = ["TASKS", "ALGORITHMS", "HIDDEN", "StandardSpec", "run_standard", "sta
 TASKS: dict[str, dict[str, Any]] = {
     "Pendulum-v1": {"steps": 10_000, "eval_every": 1_000, "eval_episodes": 5,
                     "noise": ("gaussian", 0.1, 0.0), "reward_range": (-16.2736044, 0.0)},
-    "MountainCarContinuous-v0": {"steps": 30_000, "eval_every": 2_500, "eval_episodes": 3,
+    "MountainCarContinuous-v0": {"steps": 20_000, "eval_every": 2_500, "eval_episodes": 3,
                                  "noise": ("ou", 0.5, 0.15), "reward_range": (-0.1, 100.0)},
 }
 #: ``sb3_*``: Stable-Baselines3's; ``qgddpg`` / ``ddpg``: ours (``gym_agent.QGDDPG``).
