@@ -25,13 +25,13 @@ import json
 from pathlib import Path
 
 from qg_experiments.grid import grid_specs
-from qg_experiments.peers import PEER_ALGORITHMS, SETTINGS, peer_specs, peer_table
+from qg_experiments.peers import (PEER_ALGORITHMS, REPORT_SEEDS, SETTINGS, peer_specs,
+                                  peer_table)
 from qg_experiments.profile import GridBudget
 from qg_experiments.stats import Interval, format_interval
 from qg_experiments.tasks import load_results, run_specs
+from qg_experiments.tensorboard_log import export_runs
 
-#: The report's seeds: no tuning used them.
-REPORT_SEEDS = (100, 101, 102, 103, 104)
 #: The grid's cells (critic learning rate, gradient steps per 20 robot steps).
 GRID_CELLS = ((1e-5, 10), (1e-5, 50), (1e-4, 10), (1e-4, 50), (1e-3, 10), (1e-3, 50),
               (1e-2, 10), (1e-2, 50))
@@ -66,7 +66,9 @@ def main() -> None:
                            tuple(args.cells), tensorboard_dir=str(args.out / "tensorboard" /
                                                                   "peers"), arm=args.arm)
     if not args.table_only:
-        run_specs(specs, args.out, workers=args.workers, description="peers")
+        results = run_specs(specs, args.out, workers=args.workers, description="peers")
+        if args.ours:      # their scalars beside the peers' (SB3 writes its own while it learns)
+            export_runs(results, args.out / "tensorboard")
     rows = peer_table(load_results(args.out, "peers"))
     for row in rows:
         steps, train = Interval(**row["mean_test_steps"]), Interval(**row["train_steps"])

@@ -16,11 +16,10 @@ import argparse
 import json
 from pathlib import Path
 
+from qg_experiments.peers import REPORT_SEEDS
 from qg_experiments.standard_tasks import ALGORITHMS, TASKS, StandardSpec, standard_table
 from qg_experiments.stats import Interval, format_interval
 from qg_experiments.tasks import load_results, run_specs
-
-REPORT_SEEDS = (100, 101, 102, 103, 104)
 
 
 def main() -> None:

@@ -33,9 +33,11 @@ from qg_experiments.runner import config_digest
 from qg_experiments.stats import Interval, mean_interval
 from qg_learning_node.learner.gym_agent import QGDDPG, SB3_DDPG_SETTINGS
 
-__all__ = ["PEER_ALGORITHMS", "SETTINGS", "PeerSpec", "EpisodeLog", "run_peer", "peer_specs",
+__all__ = ["PEER_ALGORITHMS", "SETTINGS", "REPORT_SEEDS", "PeerSpec", "EpisodeLog", "run_peer", "peer_specs",
            "peer_table"]
 
+#: The report's seeds: no tuning used them (tuning used 0-4).
+REPORT_SEEDS = (100, 101, 102, 103, 104)
 #: SB3's algorithms, and ours through the Gymnasium API at SB3 DDPG's settings.
 PEER_ALGORITHMS = ("sac", "td3", "ddpg", "ours_ddpg", "ours_qgddpg")
 SETTINGS = ("defaults", "grid")
