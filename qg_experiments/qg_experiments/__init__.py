@@ -15,7 +15,8 @@ executor's and learner's (``qg_learning_node``); robots and the free peg are loa
 toy graphs (``toys``) live here too.
 """
 
+import importlib as _importlib
 import sys as _sys
 
 if "gymnasium" in _sys.modules:      # gymnasium.make("qg_experiments:QGInsertion-v0")
-    import qg_experiments.gym_envs   # noqa: F401  (registers the environments)
+    _importlib.import_module("qg_experiments.gym_envs")      # registers the environments

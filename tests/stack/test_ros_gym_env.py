@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import qg_experiments.gym_envs  # noqa: F401  (registers the environments)
+from qg_experiments.gym_envs import ROS_ENV_IDS
 
 pytestmark = pytest.mark.ros
 
@@ -17,6 +17,7 @@ NAMESPACES = ("robot0", "robot1")
 def test_the_ros_environment_runs_episodes_on_robot_processes_side_by_side(stack) -> None:
     stack.start(*[(ns, "robot_bridge_node", "robot", ("--ros-args", "-r", f"__ns:=/{ns}"))
                   for ns in NAMESPACES])
+    assert "QGInsertionROS-v0" in ROS_ENV_IDS       # (importing gym_envs registered it)
     envs = [gymnasium.make("QGInsertionROS-v0", namespace=ns, domain_id=stack.domain_id,
                            max_steps=3).unwrapped for ns in NAMESPACES]
     try:
