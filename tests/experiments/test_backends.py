@@ -62,8 +62,9 @@ def test_a_ray_worker_that_reads_other_config_files_saves_nothing(tmp_path: Path
     edited.mkdir()
     for name in STACK_CONFIG_FILES:
         shutil.copy(config_file(name), edited / name)
-    with open(edited / "learner.yaml", "a") as f:       # same numbers, other bytes
-        f.write("# edited on the workers\n")
+    learner = (edited / "learner.yaml").read_text()
+    assert "batch_size: 64" in learner
+    (edited / "learner.yaml").write_text(learner.replace("batch_size: 64", "batch_size: 32"))
     spec = peg.peg_specs(load_profile("tiny").peg, None)[0]
     ray.init(num_cpus=1, include_dashboard=False,
              runtime_env={"env_vars": {"QG_CONFIG_DIR": str(edited)}})

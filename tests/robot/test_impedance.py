@@ -7,15 +7,16 @@ from robot_bridge_node.core.impedance import HybridImpedanceController, Impedanc
 from robot_bridge_node.core.panda_model import Q_READY, PandaModel
 from robot_bridge_node.core.hardware_interface import load_robot
 from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
-from qg_common.params import config_file, load_ros_params
 from qg_common.types import WrenchSetpoint
+
+from arms import ideal
 
 
 @pytest.fixture(scope="module")
 def loop() -> RobotLoop:
     # The ideal arm: these tests hold the control law against the model it was built on (the
     # realistic arm's unknown payload sinks along the force-controlled z axis by design).
-    loop = build_loop(load_robot("sim_panda", load_ros_params(config_file("panda_ideal.yaml"))))
+    loop = build_loop(load_robot("sim_panda", ideal()))
     yield loop
     loop.simulation.scene.close()
 

@@ -1,4 +1,5 @@
-"""The simulated shaft/bearing scene: start poses, ground truth, the torque interface."""
+"""The simulated shaft/bearing scene: start poses, ground truth, the torque interface (the
+ideal arm: geometry and balance without the realistic arm's errors)."""
 from __future__ import annotations
 
 import math
@@ -9,10 +10,12 @@ from robot_bridge_node.core.hardware_interface import load_robot
 from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from qg_common.types import N_START_POSES, WrenchSetpoint
 
+from arms import ideal
+
 
 @pytest.fixture(scope="module")
 def loop() -> RobotLoop:
-    loop = build_loop(load_robot("sim_panda"))
+    loop = build_loop(load_robot("sim_panda", ideal()))
     yield loop
     loop.simulation.scene.close()
 
@@ -85,7 +88,7 @@ def test_a_tilted_housing_moves_the_starts_the_bore_axis_and_the_goal_with_it() 
     and tilting the shaft back onto that axis (the tilt-back policy on ground truth) inserts it
     along the tilted bore."""
     tilt = math.radians(10.0)
-    loop = build_loop(load_robot("sim_panda", {"panda_scene": {"housing_tilt": tilt}}))
+    loop = build_loop(load_robot("sim_panda", ideal(housing_tilt=tilt)))
     scene = loop.simulation.scene
     try:
         for k in (1, 6):
