@@ -224,7 +224,6 @@ class QGDDPG:
         start, start_steps = time.perf_counter(), self.num_timesteps
         if self._obs is None:
             self._obs, _ = self.env.reset(seed=s.seed)
-            self.env.action_space.seed(s.seed)
         episode_steps, episode_return = 0, 0.0
         for _ in range(int(total_steps)):
             state = self._state(self._obs)
