@@ -25,10 +25,13 @@ __all__ = ["BEGIN", "END", "ours_rows", "peers_section", "write_section"]
 
 BEGIN = "<!-- peers: written by qg_experiments.peers_report -->"
 END = "<!-- /peers -->"
-NAMES = {"sac": "SB3 SAC", "td3": "SB3 TD3", "ddpg": "SB3 DDPG",
-         "ours_ddpg": "our DDPG at SB3 DDPG's settings",
-         "ours_qgddpg": "our QG-DDPG at SB3 DDPG's settings",
-         "qgddpg": "QG-DDPG (ours)", "sb3_ddpg": "SB3 DDPG", "sb3_td3": "SB3 TD3"}
+#: Names in the tables: the peers' runs (``peers.PEER_ALGORITHMS``) and the standard tasks'
+#: (``standard_tasks.ALGORITHMS``, where ``ddpg`` is ours).
+PEER_NAMES = {"sac": "SB3 SAC", "td3": "SB3 TD3", "ddpg": "SB3 DDPG",
+              "ours_ddpg": "our DDPG at SB3 DDPG's settings",
+              "ours_qgddpg": "our QG-DDPG at SB3 DDPG's settings"}
+STANDARD_NAMES = {"qgddpg": "QG-DDPG (ours)", "ddpg": "DDPG (ours)", "sb3_ddpg": "SB3 DDPG",
+                  "sb3_td3": "SB3 TD3"}
 
 
 def _train_steps(result: dict[str, Any]) -> int:
@@ -54,7 +57,7 @@ def ours_rows(grid_results: list[dict[str, Any]], seeds: set[int]) -> list[dict[
 def _row_line(row: dict[str, Any]) -> str:
     algorithm = row["algorithm"]
     name = (f"{'QG-DDPG' if algorithm.endswith('qgddpg') else 'DDPG'} (ours, the runner)"
-            if algorithm.startswith("runner_") else NAMES.get(algorithm, algorithm))
+            if algorithm.startswith("runner_") else PEER_NAMES.get(algorithm, algorithm))
     cell = ("defaults" if row["setting"] == "defaults"
             else f"lr {row['critic_lr']:g}, {row['iterations']} it/20 steps")
     steps, train = Interval(**row["mean_test_steps"]), Interval(**row["train_steps"])
@@ -63,12 +66,17 @@ def _row_line(row: dict[str, Any]) -> str:
             f"{format_interval(train, 0)} |")
 
 
-def _paired_line(label: str, a: dict[int, float], b: dict[int, float], digits: int = 1) -> str:
+def _paired_line(label: str, a: dict[int, float], b: dict[int, float], digits: int = 1,
+                 higher_is_better: bool = False) -> str:
+    """``label``: the paired difference on the common seeds, signed so that positive means A
+    is better (fewer steps, or with ``higher_is_better`` a higher return)."""
     seeds = sorted(set(a) & set(b))
     if len(seeds) < 2:
         return f"- {label}: fewer than 2 common seeds"
-    c = paired_comparison([a[s] for s in seeds], [b[s] for s in seeds])
-    return (f"- {label}: B - A = {format_interval(c.difference, digits)} over seeds {seeds} "
+    sign = -1.0 if higher_is_better else 1.0     # paired_comparison: B - A > 0 is A better
+    c = paired_comparison([sign * a[s] for s in seeds], [sign * b[s] for s in seeds])
+    which = "A - B" if higher_is_better else "B - A"
+    return (f"- {label}: {which} = {format_interval(c.difference, digits)} over seeds {seeds} "
             f"(A better on {c.wins_a}, B on {c.wins_b}, ties {c.ties}; Wilcoxon p = "
             f"{c.wilcoxon_p:.2f}, sign test p = {c.sign_p:.2f})")
 
@@ -121,7 +129,7 @@ def _standard(out: Path) -> list[str]:
     steps = {r["spec"]["task"]: r["evaluations"][-1]["steps"] for r in results}
     for row in standard_table(results):
         reach = row["steps_to_td3"] or {}
-        lines.append(f"| {row['task']} | {NAMES.get(row['algorithm'], 'our DDPG')} | "
+        lines.append(f"| {row['task']} | {STANDARD_NAMES[row['algorithm']]} | "
                      f"{steps[row['task']]} | {len(row['seeds'])} | "
                      f"{format_interval(Interval(**row['final_return']))} | "
                      + ", ".join("inf" if math.isinf(v) else str(int(v))
@@ -132,13 +140,11 @@ def _standard(out: Path) -> list[str]:
     for task in sorted({k[0] for k in final}):
         def of(algorithm: str) -> dict[int, float]:
             return {s: v for (t, a, s), v in final.items() if t == task and a == algorithm}
-        # returns: higher is better, so B - A > 0 means B better: swap to keep "A better" > 0
-        negate = {a: {s: -v for s, v in of(a).items()} for a in ("ddpg", "sb3_ddpg", "qgddpg")}
-        lines += [f"{task}, final return (A, B as named; positive: A returns more):",
-                  _paired_line("our DDPG (A) vs SB3 DDPG (B)", negate["ddpg"],
-                               negate["sb3_ddpg"]),
-                  _paired_line("QG-DDPG (A) vs our DDPG (B)", negate["qgddpg"],
-                               negate["ddpg"]), ""]
+        lines += [f"{task}, final return (positive: A returns more):"]
+        lines += [_paired_line(f"{STANDARD_NAMES[a]} (A) vs {STANDARD_NAMES[b]} (B)", of(a),
+                               of(b), higher_is_better=True)
+                  for a, b in (("ddpg", "sb3_ddpg"), ("qgddpg", "ddpg"), ("qgddpg", "sb3_ddpg"),
+                               ("qgddpg", "sb3_td3"))] + [""]
     return lines
 
 
