@@ -55,11 +55,14 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--ours", action="store_true",
                         help="run our DDPG and QG-DDPG at --cells instead (the runner's grid)")
+    parser.add_argument("--ours-algorithms", nargs="+", choices=("qgddpg", "ddpg"),
+                        default=["qgddpg", "ddpg"], help="with --ours")
     parser.add_argument("--table-only", action="store_true")
     args = parser.parse_args()
     if args.ours:
         budget = GridBudget(cells=tuple(args.cells), seeds=tuple(args.seeds), train_episodes=40,
-                            train_max_steps=50, test_max_steps=200, observation="tilt_only")
+                            train_max_steps=50, test_max_steps=200, observation="tilt_only",
+                            algorithms=tuple(args.ours_algorithms))
         specs = grid_specs(budget)
     else:
         specs = peer_specs(args.setting, tuple(args.seeds), tuple(args.algorithms),
