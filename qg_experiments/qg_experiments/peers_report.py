@@ -16,7 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from qg_experiments.peers import peer_table
+from qg_experiments.peers import REPORT_SEEDS, peer_table
+from qg_experiments.runner import config_digest
 from qg_experiments.standard_tasks import standard_table
 from qg_experiments.stats import Interval, format_interval, paired_comparison
 from qg_experiments.tasks import load_results
@@ -81,10 +82,15 @@ def _paired_line(label: str, a: dict[int, float], b: dict[int, float], digits: i
             f"{c.wilcoxon_p:.2f}, sign test p = {c.sign_p:.2f})")
 
 
+def _current(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The runs made under today's config files (a changed arm makes older runs another task)."""
+    digest = config_digest()
+    return [r for r in results if r.get("config_digest") == digest]
+
+
 def _shaft(out: Path) -> list[str]:
-    peers = load_results(out, "peers")
-    seeds = {r["spec"]["seed"] for r in peers}
-    rows = peer_table(peers) + ours_rows(load_results(out, "grid"), seeds)
+    peers = _current(load_results(out, "peers"))
+    rows = peer_table(peers) + ours_rows(_current(load_results(out, "grid")), set(REPORT_SEEDS))
     lines = ["### The shaft task (`QGInsertion-v0`): SB3 beside ours", "",
              "Protocol of the grid on the realistic arm of each seed: 40 training episodes of at "
              "most 50 robot steps (poses 0..7 in turn), then the 8 poses once each, "

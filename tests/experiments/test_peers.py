@@ -8,6 +8,7 @@ import pytest
 
 from qg_experiments import peers_report
 from qg_experiments.peers import PeerSpec, peer_table
+from qg_experiments.runner import config_digest
 from qg_experiments.standard_tasks import StandardSpec
 
 TINY = {"train_episodes": 2, "train_max_steps": 2, "test_episodes": 2, "test_max_steps": 3}
@@ -39,7 +40,7 @@ def _fake(algorithm: str, seed: int, tests: list[int], train: int) -> dict:
     episodes += [{"mode": "test", "steps": n, "success": n < 200} for n in tests]
     return {"spec": {"algorithm": algorithm, "setting": "defaults", "seed": seed,
                      "critic_lr": None, "iterations": None}, "episodes": episodes,
-            "train_steps": train, "wall_time": 1.0}
+            "train_steps": train, "wall_time": 1.0, "config_digest": config_digest()}
 
 
 def test_the_table_counts_per_seed_means_and_the_section_is_replaced_in_place(tmp_path) -> None:
@@ -50,7 +51,8 @@ def test_the_table_counts_per_seed_means_and_the_section_is_replaced_in_place(tm
     assert row["train_steps"]["mean"] == 400
     out = tmp_path / "runs"
     (out / "peers").mkdir(parents=True)
-    for r in results:
+    stale = {**_fake("td3", 102, [1, 1], 10), "config_digest": "another arm"}
+    for r in (*results, stale):       # a run under other config values is not counted
         (out / "peers" / f"{r['spec']['algorithm']}_{r['spec']['seed']}.json").write_text(
             json.dumps(r))
     results_md = tmp_path / "results.md"
