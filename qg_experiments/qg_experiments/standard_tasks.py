@@ -87,6 +87,21 @@ def _evaluate(agent: Any, env: gymnasium.Env, episodes: int, seed: int) -> float
     return float(np.mean(returns))
 
 
+def _episode_recorder(episodes: list[dict[str, float]]) -> Any:
+    """An SB3 callback appending each finished training episode's steps and return (from the
+    ``Monitor`` SB3 wraps every environment in)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class Recorder(BaseCallback):
+        def _on_step(self) -> bool:
+            for info in self.locals["infos"]:
+                if "episode" in info:
+                    episodes.append({"steps": int(info["episode"]["l"]),
+                                     "return": float(info["episode"]["r"])})
+            return True
+    return Recorder()
+
+
 def _sb3(spec: StandardSpec, env: gymnasium.Env) -> Any:
     from stable_baselines3 import DDPG, TD3
     from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
@@ -119,18 +134,20 @@ def run_standard(spec: StandardSpec) -> dict[str, Any]:
     ours = not spec.algorithm.startswith("sb3")
     agent = _ours(spec, env) if ours else _sb3(spec, env)
     evaluations: list[dict[str, float]] = []
+    episodes: list[dict[str, float]] = []     # training episodes: did exploration find the goal?
     for done in sorted({*range(every, steps, every), steps}):
         chunk = done - (evaluations[-1]["steps"] if evaluations else 0)
         if ours:
-            agent.learn(chunk)
+            agent.learn(chunk, callback=lambda e: episodes.append(
+                {"steps": e["steps"], "return": e["return"]}) or True)
         else:
-            agent.learn(chunk, reset_num_timesteps=False)
+            agent.learn(chunk, reset_num_timesteps=False, callback=_episode_recorder(episodes))
         evaluations.append({"steps": done, "return": _evaluate(
             agent, eval_env, task["eval_episodes"], 10_000 + 1000 * spec.seed)})
     env.close()
     eval_env.close()
     return {"experiment": spec.experiment, "name": spec.name, "spec": dataclasses.asdict(spec),
-            "config_digest": "", "evaluations": evaluations,
+            "config_digest": "", "evaluations": evaluations, "train_episodes": episodes,
             "final_return": evaluations[-1]["return"], "wall_time": time.perf_counter() - start}
 
 

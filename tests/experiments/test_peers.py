@@ -67,4 +67,5 @@ def test_the_table_counts_per_seed_means_and_the_section_is_replaced_in_place(tm
 def test_a_standard_task_run_evaluates_along_the_way(tmp_path) -> None:
     result = StandardSpec("Pendulum-v1", "qgddpg", 100, steps=250).run()
     assert [e["steps"] for e in result["evaluations"]] == [250]
+    assert [e["steps"] for e in result["train_episodes"]] == [200]     # one finished episode
     assert -2000 < result["final_return"] <= 0
