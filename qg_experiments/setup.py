@@ -23,4 +23,8 @@ setup(
     maintainer_email='dev@qg.local',
     description='The thesis experiments in process: the bridge loop, EKF, episode logic and learner composed without DDS, the profiles of config/experiments.yaml, the report, the Ray backend and the ch. 7 toys.',
     license='Apache-2.0',
+    entry_points={
+        # gymnasium 0.26-0.29 call this on import (1.x does not: see qg_experiments/gym_envs).
+        'gymnasium.envs': ['qg_experiments = qg_experiments.gym_envs:register_envs'],
+    },
 )

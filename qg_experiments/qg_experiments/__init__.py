@@ -14,3 +14,9 @@ executor's and learner's (``qg_learning_node``); robots and the free peg are loa
 (``robot_bridge_node.robots``, ``environments``), so it imports no simulator either. The ch. 7
 toy graphs (``toys``) live here too.
 """
+
+import importlib as _importlib
+import sys as _sys
+
+if "gymnasium" in _sys.modules:      # gymnasium.make("qg_experiments:QGInsertion-v0")
+    _importlib.import_module("qg_experiments.gym_envs")      # registers the environments

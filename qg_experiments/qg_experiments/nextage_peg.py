@@ -92,9 +92,16 @@ class NextagePeg:
                 self.task.reward(self._observation, self.reward_kind),
                 self._observation.success)
 
+    @property
+    def observation(self) -> Observation | None:
+        """What the last reset or step observed (ground truth for evaluation included)."""
+        return self._observation
+
     def close(self) -> None:
-        """Nothing to release: the plugin's simulation lives as long as its process (as the
-        robot process's does)."""
+        """Release the plugin's simulation (its pybullet client)."""
+        close = getattr(self.loop.simulation, "close", None)
+        if close is not None:
+            close()
 
     def _observe(self, result: StepResult) -> Observation:
         """What the executor would get in the ``AtRest`` message: the result and the tool pose

@@ -709,4 +709,8 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
     lines += _comparison(random_rows, bar, grids, variant_results, peg_data, gamma)
     path = docs / "results.md"
     path.write_text("\n".join(lines))
+    if (out / "peers").is_dir() or (out / "standard_tasks").is_dir():
+        # The peers' runs come from their own benchmarks; their section follows ours.
+        from qg_experiments import peers_report
+        peers_report.write_section(path, out)
     return path

@@ -183,6 +183,13 @@ class PandaTask:
         self.step_timeouts += int(result.timed_out)
         return observation_from_step(result, self.loop.controller.tool.rotation)
 
+    def close(self) -> None:
+        """Release the simulation (the robot plugin's pybullet client) where it offers that;
+        a process that builds many tasks, like a seeded Gymnasium environment, needs it."""
+        close = getattr(self.loop.simulation, "close", None)
+        if close is not None:
+            close()
+
 
 class LivePolicy:
     """The executor's copy of the actor, replaced after every training cycle."""

@@ -61,6 +61,10 @@ class SimShaftArm:
     def contact_wrench(self) -> np.ndarray:
         return self.scene.contact_wrench()
 
+    def close(self) -> None:
+        """Disconnect the physics and delete the scene's files (a process that builds many)."""
+        self.scene.close()
+
 
 def shaft_scene_section(prefix: str) -> ParameterSection:
     """A shaft scene's parameters under ``prefix``: every length, mass and friction positive,
@@ -161,6 +165,10 @@ class SimNextage:
 
     def contact_wrench(self) -> np.ndarray:
         return self.read_wrench()
+
+    def close(self) -> None:
+        """Disconnect the physics (a process that builds many)."""
+        self.scene.close()
 
 
 def _nextage_config(params: dict[str, Any]) -> NextageSceneConfig:

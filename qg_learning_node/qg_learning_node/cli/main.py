@@ -145,8 +145,9 @@ def build_parser() -> argparse.ArgumentParser:
     # (answered before qgl enters the stack's environment, see main())
     sub.add_parser("env", help='print the stack\'s environment as exports: eval "$(qgl env)"')
 
-    from qg_learning_node.cli import demo
+    from qg_learning_node.cli import demo, train
     demo.add_parser(sub)
+    train.add_parser(sub)
     try:
         from qg_learning_node.cli import bag_commands
     except ImportError:

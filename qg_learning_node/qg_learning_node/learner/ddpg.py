@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,7 +32,10 @@ from qg_learning_node.learner.replay import Batch, NStepContext
 __all__ = ['ActorMLP', 'BOUND_MODES', 'DDPG', 'DDPGConfig', 'build_mlp', 'realisable_range']
 
 BOUND_MODES = ('none', 'apriori', 'empirical', 'qgraph', 'qgraph+apriori', 'he2017')
-INITS = ('glorot_uniform', 'he_uniform')
+#: Weight inits: the thesis's two, and PyTorch's own ``nn.Linear`` init (SB3's networks).
+INITS = ('glorot_uniform', 'he_uniform', 'torch_default')
+#: Hidden activations of the actor: the thesis's tanh, or SB3's ReLU.
+ACTOR_ACTIVATIONS = {'tanh': nn.Tanh, 'relu': nn.ReLU}
 DIAGNOSTIC_KEYS = ('critic_loss', 'actor_loss', 'mean_q', 'frac_raised_lower',
                    'frac_lowered_upper', 'frac_outside_range')
 
@@ -54,6 +58,8 @@ class DDPGConfig:
         tuned on the Panda task, docs/learning.md section 4).
     :param actor_hidden: hidden layer sizes of the actor (tanh everywhere, tanh output in [-1, 1]).
     :param critic_hidden: hidden layer sizes of the critic (ReLU, linear scalar output).
+    :param actor_activation: hidden activation of the actor, one of ``ACTOR_ACTIVATIONS``
+        (its output is always tanh; the executor's torch-free ``ActorMLP`` runs tanh only).
     :param actor_init: weight init of the actor, one of ``INITS``.
     :param critic_init: weight init of the critic, one of ``INITS``.
     :param critic_lr: Adam learning rate of the critic.
@@ -71,6 +77,7 @@ class DDPGConfig:
     gamma: float = 0.9
     actor_hidden: tuple[int, ...] = (100, 100)
     critic_hidden: tuple[int, ...] = (100, 100)
+    actor_activation: str = 'tanh'
     actor_init: str = 'glorot_uniform'
     critic_init: str = 'he_uniform'
     critic_lr: float = 1e-3
@@ -94,6 +101,9 @@ class DDPGConfig:
         for name in ('actor_init', 'critic_init'):
             if getattr(self, name) not in INITS:
                 raise ValueError(f'{name} must be one of {INITS}, got {getattr(self, name)!r}')
+        if self.actor_activation not in ACTOR_ACTIVATIONS:
+            raise ValueError(f'actor_activation must be one of {sorted(ACTOR_ACTIVATIONS)}, '
+                             f'got {self.actor_activation!r}')
         if any(h < 1 for h in self.actor_hidden + self.critic_hidden):
             raise ValueError('hidden layer sizes must be >= 1')
         if self.critic_lr <= 0 or (self.actor_lr is not None and self.actor_lr <= 0):
@@ -119,16 +129,22 @@ class DDPGConfig:
 
 def build_mlp(sizes: list[int], hidden_act: type[nn.Module], out_act: type[nn.Module] | None,
               init: str, generator: torch.Generator) -> nn.Sequential:
-    """Fully connected network; weights drawn with ``init`` from ``generator``, biases zero."""
+    """Fully connected network; weights drawn with ``init`` from ``generator``, biases zero
+    (``torch_default``: ``nn.Linear``'s own init, weights and biases, drawn from ``generator``)."""
     layers: list[nn.Module] = []
     for i, (n_in, n_out) in enumerate(zip(sizes[:-1], sizes[1:])):
         linear = nn.Linear(n_in, n_out, dtype=torch.float32)
         with torch.no_grad():
             if init == 'glorot_uniform':
                 nn.init.xavier_uniform_(linear.weight, generator=generator)
-            else:
+                linear.bias.zero_()
+            elif init == 'he_uniform':
                 nn.init.kaiming_uniform_(linear.weight, nonlinearity='relu', generator=generator)
-            linear.bias.zero_()
+                linear.bias.zero_()
+            else:
+                nn.init.kaiming_uniform_(linear.weight, a=math.sqrt(5), generator=generator)
+                nn.init.uniform_(linear.bias, -1.0 / math.sqrt(n_in), 1.0 / math.sqrt(n_in),
+                                 generator=generator)
         layers.append(linear)
         last = i == len(sizes) - 2
         if not last:
@@ -186,7 +202,8 @@ class DDPG:
     def __init__(self, config: DDPGConfig, state_dim: int, action_dim: int) -> None:
         self.config = config
         generator = torch.Generator().manual_seed(config.seed)
-        self.actor = build_mlp([state_dim, *config.actor_hidden, action_dim], nn.Tanh, nn.Tanh,
+        self.actor = build_mlp([state_dim, *config.actor_hidden, action_dim],
+                               ACTOR_ACTIVATIONS[config.actor_activation], nn.Tanh,
                                config.actor_init, generator)
         self.critic = Critic(build_mlp([state_dim + action_dim, *config.critic_hidden, 1],
                                        nn.ReLU, None, config.critic_init, generator))

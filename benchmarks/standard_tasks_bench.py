@@ -1,0 +1,47 @@
+"""QG-DDPG, our DDPG, SB3's DDPG and TD3 on Pendulum-v1 (dense) and MountainCarContinuous-v0
+(sparse), same budget, the report's seeds (``qg_experiments.standard_tasks``).
+
+Usage (a run is 1-3 min on a free core; the 40 runs about an hour):
+
+    nice -n 10 .venv/bin/python benchmarks/standard_tasks_bench.py
+    .venv/bin/python benchmarks/standard_tasks_bench.py --tasks Pendulum-v1 --seeds 100 --steps 2000
+    .venv/bin/python benchmarks/standard_tasks_bench.py --table-only
+
+Each run is saved as ``<out>/standard_tasks/<name>.json`` as it ends, so the sweep resumes. The
+last line printed is the table as JSON (``standard_tasks.standard_table``).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from qg_experiments.peers import REPORT_SEEDS
+from qg_experiments.standard_tasks import ALGORITHMS, TASKS, StandardSpec, standard_table
+from qg_experiments.stats import Interval, format_interval
+from qg_experiments.tasks import load_results, run_specs
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--tasks", nargs="+", choices=sorted(TASKS), default=list(TASKS))
+    parser.add_argument("--algorithms", nargs="+", choices=ALGORITHMS, default=list(ALGORITHMS))
+    parser.add_argument("--seeds", nargs="+", type=int, default=list(REPORT_SEEDS))
+    parser.add_argument("--steps", type=int, default=None, help="default: the task's budget")
+    parser.add_argument("--out", type=Path, default=Path("runs/experiments/thesis"))
+    parser.add_argument("--table-only", action="store_true")
+    args = parser.parse_args()
+    specs = [StandardSpec(task, algorithm, seed, args.steps) for task in args.tasks
+             for seed in args.seeds for algorithm in args.algorithms]
+    if not args.table_only:
+        run_specs(specs, args.out, workers=1, description="standard tasks")
+    rows = standard_table(load_results(args.out, "standard_tasks"))
+    for row in rows:
+        print(f"{row['task']:26s} {row['algorithm']:9s} seeds {len(row['seeds'])}  final return "
+              f"{format_interval(Interval(**row['final_return']))}  steps to TD3's final "
+              f"{row['steps_to_td3']}")
+    print(json.dumps(rows))
+
+
+if __name__ == "__main__":
+    main()

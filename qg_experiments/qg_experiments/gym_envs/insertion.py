@@ -1,0 +1,81 @@
+"""``QGInsertion-v0``: the Panda shaft insertion in process, on the fast runner's ``PandaTask``.
+
+The robot side is the runner's (simulator, the bridge's 1 kHz loop, the EKF, read from the same
+``config/`` files); the MDP is the executor's (:class:`~.residual_env.ResidualEnv`). A run of
+``RunSpec(seed=s)`` and this environment after ``reset(seed=s)`` meet the same robot and, given
+the same actions, take the same steps.
+
+Seeds: ``reset(seed=s)`` builds the robot afresh, with the arm of seed ``s`` (the realistic arm's
+biases, housing error and noise streams; ``arm_seed`` fixes one instead) and the start poses from
+0 again, so a seeded episode is the same every time. A reset without a seed goes on with the
+robot as it is.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from qg_experiments.gym_envs.residual_env import ResidualEnv
+from qg_experiments.runner import ARMS, ESTIMATORS, PandaTask, StackSettings
+from qg_learning_node.executor.residual_task import Observation
+
+__all__ = ["InsertionEnv", "TRAIN_MAX_STEPS"]
+
+#: The grid's training cap (``config/experiments.yaml``, profile ``thesis``).
+TRAIN_MAX_STEPS = 50
+
+
+class InsertionEnv(ResidualEnv):
+    """The residual force policy on the simulated Panda (see the module docstring).
+
+    :param observation: the state (``residual_task.OBSERVATIONS``); ``None``: ``executor.yaml``'s.
+    :param reward: ``dense`` | ``sparse``; ``None``: ``executor.yaml``'s.
+    :param max_steps: step cap of an episode (default: the grid's training cap, 50).
+    :param arm: ``realistic`` (the imperfect arm, default) | ``ideal`` (``panda_ideal.yaml``).
+    :param arm_seed: which realistic arm; ``None``: the seed of the last seeded reset (0 before).
+    :param estimator: ``ekf`` (as the stack) | ``ground_truth`` (a perfect wrench sensor).
+    :param housing_yaw: [rad] the housing's rotation about the vertical (start tilts turn with it).
+    :param config_dir: the stack's ``config/``; ``None``: the installed files.
+    """
+
+    def __init__(self, observation: str | None = None, reward: str | None = None,
+                 max_steps: int = TRAIN_MAX_STEPS, arm: str = "realistic",
+                 arm_seed: int | None = None, estimator: str = "ekf", housing_yaw: float = 0.0,
+                 config_dir: str | None = None) -> None:
+        if arm not in ARMS:
+            raise ValueError(f"arm must be one of {ARMS}, got {arm!r}")
+        if estimator not in ESTIMATORS:
+            raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
+        settings = StackSettings.load(config_dir, arm)
+        task = dataclasses.replace(settings.task,
+                                   observation=observation or settings.task.observation)
+        super().__init__(task, reward, max_steps)
+        self.settings = dataclasses.replace(settings, task=task)
+        self.arm, self.arm_seed, self.estimator = arm, arm_seed, estimator
+        self.housing_yaw = float(housing_yaw)
+        self.robot: PandaTask | None = None
+
+    def _reseed(self, seed: int) -> None:
+        self._build(seed if self.arm_seed is None else self.arm_seed)
+
+    def _build(self, arm_seed: int) -> None:
+        self.close()
+        self.robot = PandaTask(self.settings.with_arm_seed(arm_seed), self.estimator)
+        self.robot.housing_yaw = self.housing_yaw
+
+    def _reset_robot(self, pose: int) -> Observation:
+        if self.robot is None:
+            self._build(0 if self.arm_seed is None else self.arm_seed)
+        assert self.robot is not None
+        return self.robot.reset(pose)
+
+    def _execute(self, action: np.ndarray) -> Observation:
+        assert self.robot is not None
+        return self.robot.step(action)
+
+    def close(self) -> None:
+        """Release the simulation (its pybullet client)."""
+        if self.robot is not None:
+            self.robot.close()
+            self.robot = None

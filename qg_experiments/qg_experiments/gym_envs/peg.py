@@ -1,0 +1,82 @@
+"""``QGNextagePeg-v0``: the Nextage peg-in-hole in process, on the runner's ``NextagePeg``.
+
+The simulated Nextage under the bridge's task-space position loop and the executor's
+``PegTask`` (tip position state, position-offset actions, ``exp(-d/0.03) - 1`` or sparse reward),
+read from the stack's ``config/`` files. The start is the ``k``-th seeded free tip position of the
+workspace: ``reset(options={"start": k})`` names it; otherwise it is drawn from the environment's
+generator, so ``reset(seed=s)`` starts the same episode every time.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+
+from qg_experiments.nextage_peg import NextagePeg
+from qg_learning_node.executor.peg_task import PEG_ACTION_DIM, PEG_STATE_DIM
+
+__all__ = ["NextagePegEnv"]
+
+#: Start indices are drawn below this (any int the simulator's generator takes).
+_START_RANGE = 2**31 - 1
+
+
+class NextagePegEnv(gymnasium.Env):
+    """The Nextage peg (see the module docstring).
+
+    :param reward: ``dense`` | ``sparse``.
+    :param max_steps: step cap of an episode (``truncated``; the thesis's peg: 200).
+    :param config_dir: the stack's ``config/``; ``None``: the installed files.
+    """
+
+    metadata: dict[str, Any] = {"render_modes": []}
+
+    def __init__(self, reward: str = "dense", max_steps: int = 200,
+                 config_dir: str | None = None) -> None:
+        if reward not in ("dense", "sparse"):
+            raise ValueError(f"reward must be dense or sparse, got {reward!r}")
+        if max_steps < 1:
+            raise ValueError(f"max_steps must be >= 1, got {max_steps}")
+        self.peg = NextagePeg(config_dir, episode_steps=max_steps, reward=reward)
+        self.observation_space = spaces.Box(-1.0, 1.0, (PEG_STATE_DIM,), np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, (PEG_ACTION_DIM,), np.float32)
+        self.reward_range = (-1.0, 0.0)
+        self._running = False
+
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = set(options) - {"start"}
+        if unknown:
+            raise ValueError(f"unknown reset options {sorted(unknown)}: start")
+        start = int(options["start"]) if "start" in options else int(
+            self.np_random.integers(_START_RANGE))
+        state = self.peg.reset(start)
+        self._running = True
+        return state.astype(np.float32), self._info(start)
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if not self._running:
+            raise RuntimeError("the episode has ended: call reset()")
+        a = np.asarray(action, dtype=np.float64).reshape(PEG_ACTION_DIM)
+        a = np.clip(a, -1.0, 1.0) if np.all(np.isfinite(a)) else np.zeros(PEG_ACTION_DIM)
+        state, reward, terminal = self.peg.step(a)
+        truncated = not terminal and self.peg.truncated
+        self._running = not (terminal or truncated)
+        return state.astype(np.float32), float(reward), bool(terminal), truncated, self._info()
+
+    def _info(self, start: int | None = None) -> dict[str, Any]:
+        observation = self.peg.observation
+        assert observation is not None
+        info: dict[str, Any] = {"is_success": bool(observation.success),
+                                "position_error": float(observation.position_error),
+                                "tip": self.peg.tip()}
+        if start is not None:
+            info["start"] = start
+        return info
+
+    def close(self) -> None:
+        self.peg.close()

@@ -1,0 +1,124 @@
+"""The residual shaft-insertion MDP as a Gymnasium environment, for any robot behind it.
+
+What a robot has to do is two things, as the executor node asks of the robot process: reset to a
+start pose and return the settled :class:`Observation`, and execute one residual action until the
+tool is at rest. :class:`ResidualEnv` adds everything else from the executor's own cores, so the
+in-process environment and the ROS-backed one cannot drift apart from the runner or the node:
+
+- states, rewards, the goal and the bore check from ``ResidualTask``;
+- step caps and end reasons from ``Episode`` (the executor's state machine). The goal is
+  ``terminated``; the step cap and leaving the bore are ``truncated`` (the stack records them as
+  non-terminal ``timeout`` transitions too, so bootstrapping goes on through them);
+- the start poses rotate 0..7 over episodes (as the runner's and the demo's), unless
+  ``reset(options={"pose": k})`` names one; ``options={"max_steps": n}`` sets one episode's cap
+  (the test protocol's 200 on an environment made with the training cap).
+
+``info`` carries ``is_success`` (SB3's key) and the ground-truth errors; they come from the
+simulator and are for evaluation only, never part of the observation.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+from qg_common.types import N_START_POSES
+
+from qg_learning_node.executor.episode import Episode
+from qg_learning_node.executor.residual_task import (ACTION_DIM, Observation, ResidualTask,
+                                                     TaskConfig)
+
+__all__ = ["ResidualEnv"]
+
+
+class ResidualEnv(gymnasium.Env):
+    """Base of the residual-policy environments; subclasses say how the robot resets and steps.
+
+    :param task: the executor's task settings (observation, reward scales, ...).
+    :param reward: ``dense`` | ``sparse``; ``None``: ``task.reward``.
+    :param max_steps: step cap of an episode (``truncated`` when it is reached).
+    """
+
+    metadata: dict[str, Any] = {"render_modes": []}
+
+    def __init__(self, task: TaskConfig, reward: str | None, max_steps: int) -> None:
+        if max_steps < 1:
+            raise ValueError(f"max_steps must be >= 1, got {max_steps}")
+        self.residual = ResidualTask(task)
+        self.reward_kind = reward or task.reward
+        if self.reward_kind not in ("dense", "sparse"):
+            raise ValueError(f"reward must be dense or sparse, got {self.reward_kind!r}")
+        self.max_steps = int(max_steps)
+        self.observation_space = spaces.Box(-1.0, 1.0, (self.residual.state_dim,), np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, (ACTION_DIM,), np.float32)
+        self.reward_range = ResidualTask.reward_range(self.reward_kind)
+        self.episodes = 0
+        self._episode: Episode | None = None
+
+    # --- what a robot provides ---------------------------------------------------------------
+    def _reseed(self, seed: int) -> None:
+        """``reset(seed=seed)``: start the robot's random streams over (default: nothing)."""
+
+    def _reset_robot(self, pose: int) -> Observation:
+        """Reset to start ``pose``; the settled observation."""
+        raise NotImplementedError
+
+    def _execute(self, action: np.ndarray) -> Observation:
+        """Execute the residual ``action`` (actor units) until the tool is at rest."""
+        raise NotImplementedError
+
+    # --- gymnasium -----------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = set(options) - {"pose", "max_steps"}
+        if unknown:
+            raise ValueError(f"unknown reset options {sorted(unknown)}: pose, max_steps")
+        if seed is not None:
+            self._reseed(int(seed))
+            self.episodes = 0
+        pose = int(options.get("pose", self.episodes % N_START_POSES))
+        if not 0 <= pose < N_START_POSES:
+            raise ValueError(f"pose must be in 0..{N_START_POSES - 1}, got {pose}")
+        cap = int(options.get("max_steps", self.max_steps))
+        if cap < 1:
+            raise ValueError(f"max_steps must be >= 1, got {cap}")
+        episode = Episode(f"gym{self.episodes:05d}", "train", pose, self.reward_kind,
+                          self.residual)
+        episode.max_steps = cap
+        self.episodes += 1
+        observation = self._reset_robot(pose)
+        self._episode = episode
+        return self._state(episode.begin(observation)), self._info(observation)
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        episode = self._episode
+        if episode is None or episode.done:
+            raise RuntimeError("the episode has ended: call reset()")
+        a = np.asarray(action, dtype=np.float64).reshape(ACTION_DIM)
+        # as the executor does: a non-finite action becomes the zero residual, never a command
+        a = np.clip(a, -1.0, 1.0) if np.all(np.isfinite(a)) else np.zeros(ACTION_DIM)
+        observation = self._execute(a)
+        record = episode.observe(a, observation)
+        return (self._state(record.next_state), float(record.reward), bool(record.terminal),
+                bool(record.timeout), self._info(observation))
+
+    @property
+    def episode(self) -> Episode | None:
+        """The running (or last) episode: step count, return, ``end_reason``."""
+        return self._episode
+
+    @staticmethod
+    def _state(state: np.ndarray) -> np.ndarray:
+        return np.asarray(state, dtype=np.float32)
+
+    def _info(self, observation: Observation) -> dict[str, Any]:
+        episode = self._episode
+        return {"is_success": bool(observation.success),
+                "position_error": float(observation.position_error),
+                "orientation_error": float(observation.orientation_error),
+                "lateral_offset": float(observation.lateral_offset),
+                "pose": -1 if episode is None else episode.initial_pose,
+                "end_reason": "" if episode is None else episode.end_reason}

@@ -1,0 +1,176 @@
+"""QG-DDPG beside SB3's DDPG and TD3 on standard Gymnasium tasks: where do the graph's bounds help?
+
+Two tasks, one dense and one sparse: ``Pendulum-v1`` (reward every step, no terminal state, every
+episode truncated at 200 steps) and ``MountainCarContinuous-v0`` (+100 once, at the goal, which
+is terminal; a small action cost otherwise). The Q-Graph bounds a transition only if a terminal
+or a loop is reachable from it in the data, so on Pendulum it can bound nothing (QG-DDPG then
+differs from our DDPG only by the a-priori bounds of the known reward range), while on
+MountainCar every episode that reached the goal bounds its whole chain.
+
+Same budget and settings for every algorithm: SB3 DDPG's defaults (``SB3_DDPG_SETTINGS``) with
+the networks of :data:`HIDDEN` (smaller than SB3's 400-300, so that 5 seeds of 4 algorithms fit
+on the 2 shared cores), the task's exploration noise of RL Zoo (Gaussian 0.1 on Pendulum,
+Ornstein-Uhlenbeck 0.5 on MountainCar, as ``rl-zoo3``'s hyperparameters set them), the same
+steps. Every ``eval_every`` steps the deterministic policy plays ``eval_episodes`` episodes on a
+second environment seeded apart from training (SB3's ``EvalCallback`` protocol).
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium
+import numpy as np
+import torch
+
+from qg_experiments.stats import mean_interval
+from qg_learning_node.learner.gym_agent import QGDDPG, SB3_DDPG_SETTINGS
+
+__all__ = ["TASKS", "ALGORITHMS", "HIDDEN", "StandardSpec", "run_standard", "standard_table"]
+
+#: Per task: steps, evaluation period and episodes, exploration noise, and the known reward
+#: range QG-DDPG takes a priori (Pendulum: -(pi^2 + 0.1 * 8^2 + 0.001 * 2^2) .. 0; MountainCar:
+#: -0.1 * 1^2 per step .. +100 at the goal).
+TASKS: dict[str, dict[str, Any]] = {
+    "Pendulum-v1": {"steps": 10_000, "eval_every": 1_000, "eval_episodes": 5,
+                    "noise": ("gaussian", 0.1, 0.0), "reward_range": (-16.2736044, 0.0)},
+    "MountainCarContinuous-v0": {"steps": 20_000, "eval_every": 2_500, "eval_episodes": 3,
+                                 "noise": ("ou", 0.5, 0.15), "reward_range": (-0.1, 100.0)},
+}
+#: ``sb3_*``: Stable-Baselines3's; ``qgddpg`` / ``ddpg``: ours (``gym_agent.QGDDPG``).
+ALGORITHMS = ("qgddpg", "ddpg", "sb3_ddpg", "sb3_td3")
+#: Hidden layers of every actor and critic here.
+HIDDEN = (64, 64)
+#: SB3's OU noise step (``OrnsteinUhlenbeckActionNoise``'s default dt; ``NoiseConfig``'s too).
+OU_DT = 0.01
+
+
+@dataclass(frozen=True)
+class StandardSpec:
+    """One run: ``algorithm`` on ``task`` with ``seed`` (``steps``: ``None`` = the task's)."""
+    task: str
+    algorithm: str
+    seed: int
+    steps: int | None = None
+    config_dir: str | None = None
+    experiment: str = "standard_tasks"
+
+    def __post_init__(self) -> None:
+        if self.task not in TASKS:
+            raise ValueError(f"task must be one of {sorted(TASKS)}, got {self.task!r}")
+        if self.algorithm not in ALGORITHMS:
+            raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {self.algorithm!r}")
+
+    @property
+    def name(self) -> str:
+        steps = f"_{self.steps}" if self.steps else ""
+        return f"{self.task.split('-')[0]}_{self.algorithm}{steps}_s{self.seed}"
+
+    def run(self) -> dict[str, Any]:
+        return run_standard(self)
+
+
+def _evaluate(agent: Any, env: gymnasium.Env, episodes: int, seed: int) -> float:
+    """Mean return of ``episodes`` deterministic episodes (seeded: the same starts each time)."""
+    returns = []
+    for index in range(episodes):
+        obs, _ = env.reset(seed=seed + index)
+        done, total = False, 0.0
+        while not done:
+            action, _ = agent.predict(obs, deterministic=True)
+            obs, reward, terminated, truncated, _ = env.step(action)
+            total += float(reward)
+            done = terminated or truncated
+        returns.append(total)
+    return float(np.mean(returns))
+
+
+def _episode_recorder(episodes: list[dict[str, float]]) -> Any:
+    """An SB3 callback appending each finished training episode's steps and return (from the
+    ``Monitor`` SB3 wraps every environment in)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class Recorder(BaseCallback):
+        def _on_step(self) -> bool:
+            for info in self.locals["infos"]:
+                if "episode" in info:
+                    episodes.append({"steps": int(info["episode"]["l"]),
+                                     "return": float(info["episode"]["r"])})
+            return True
+    return Recorder()
+
+
+def _sb3(spec: StandardSpec, env: gymnasium.Env) -> Any:
+    from stable_baselines3 import DDPG, TD3
+    from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
+    kind, sigma, theta = TASKS[spec.task]["noise"]
+    dim = env.action_space.shape[0]
+    noise = (NormalActionNoise(np.zeros(dim), sigma * np.ones(dim)) if kind == "gaussian" else
+             OrnsteinUhlenbeckActionNoise(np.zeros(dim), sigma * np.ones(dim), theta=theta,
+                                          dt=OU_DT))
+    cls = {"sb3_ddpg": DDPG, "sb3_td3": TD3}[spec.algorithm]
+    return cls("MlpPolicy", env, action_noise=noise, seed=spec.seed, device="cpu",
+               policy_kwargs={"net_arch": list(HIDDEN)})
+
+
+def _ours(spec: StandardSpec, env: gymnasium.Env) -> QGDDPG:
+    kind, sigma, theta = TASKS[spec.task]["noise"]
+    qg = spec.algorithm == "qgddpg"
+    return QGDDPG(env, algorithm=spec.algorithm, seed=spec.seed,
+                  **{**SB3_DDPG_SETTINGS, "actor_hidden": HIDDEN, "critic_hidden": HIDDEN,
+                     "noise": kind, "noise_sigma": sigma, "noise_theta": theta,
+                     "reward_range": TASKS[spec.task]["reward_range"] if qg else None})
+
+
+def run_standard(spec: StandardSpec) -> dict[str, Any]:
+    """Train with evaluations every ``eval_every`` steps; the curve and the final return."""
+    torch.set_num_threads(1)
+    start = time.perf_counter()
+    task = TASKS[spec.task]
+    steps, every = spec.steps or task["steps"], task["eval_every"]
+    env, eval_env = gymnasium.make(spec.task), gymnasium.make(spec.task)
+    ours = not spec.algorithm.startswith("sb3")
+    agent = _ours(spec, env) if ours else _sb3(spec, env)
+    evaluations: list[dict[str, float]] = []
+    episodes: list[dict[str, float]] = []     # training episodes: did exploration find the goal?
+    for done in sorted({*range(every, steps, every), steps}):
+        chunk = done - (evaluations[-1]["steps"] if evaluations else 0)
+        if ours:
+            agent.learn(chunk, callback=lambda e: episodes.append(
+                {"steps": e["steps"], "return": e["return"]}) or True)
+        else:
+            agent.learn(chunk, reset_num_timesteps=False, callback=_episode_recorder(episodes))
+        evaluations.append({"steps": done, "return": _evaluate(
+            agent, eval_env, task["eval_episodes"], 10_000 + 1000 * spec.seed)})
+    env.close()
+    eval_env.close()
+    return {"experiment": spec.experiment, "name": spec.name, "spec": dataclasses.asdict(spec),
+            "config_digest": "", "evaluations": evaluations, "train_episodes": episodes,
+            "final_return": evaluations[-1]["return"], "wall_time": time.perf_counter() - start}
+
+
+def _steps_to_reach(result: dict[str, Any], target: float) -> float:
+    """The first evaluation's step count at which the return reached ``target`` (inf: never)."""
+    return next((e["steps"] for e in result["evaluations"] if e["return"] >= target), np.inf)
+
+
+def standard_table(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per task and algorithm: final return over seeds with its interval, and the steps each
+    seed needed to reach SB3 TD3's mean final return on that task (inf: never)."""
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for r in results:
+        groups.setdefault((r["spec"]["task"], r["spec"]["algorithm"]), []).append(r)
+    rows = []
+    for (task, algorithm), group in sorted(groups.items()):
+        td3 = groups.get((task, "sb3_td3"), [])
+        target = float(np.mean([r["final_return"] for r in td3])) if td3 else None
+        rows.append({"task": task, "algorithm": algorithm,
+                     "seeds": sorted(r["spec"]["seed"] for r in group),
+                     "final_return": mean_interval([r["final_return"] for r in group]).as_dict(),
+                     "td3_final_return": target,
+                     "steps_to_td3": None if target is None else
+                     {r["spec"]["seed"]: _steps_to_reach(r, target) for r in group},
+                     "wall_time": float(sum(r["wall_time"] for r in group))})
+    return rows

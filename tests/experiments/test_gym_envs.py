@@ -1,0 +1,147 @@
+"""The Gymnasium environments: registered, valid by gymnasium's own checker, reproducible per
+seed, the runner's task step for step, and trainable by Stable-Baselines3 as a user would."""
+from __future__ import annotations
+
+import gymnasium
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import qg_experiments.gym_envs as gym_envs
+from qg_experiments.gym_envs.insertion import InsertionEnv
+from qg_experiments.runner import PandaTask, StackSettings, run_episode
+from qg_learning_node.executor.episode import Episode
+
+#: A fixed action sequence (actor units) for the step-by-step comparisons.
+ACTIONS = np.array([[0.8, -0.3], [-0.5, 0.9], [0.1, 0.1], [-1.0, 0.4]])
+
+
+def _rollout(env: gymnasium.Env, seed: int, actions: np.ndarray, **options):
+    obs, info = env.reset(seed=seed, options=options or None)
+    out = [(obs.copy(), 0.0, False, False, info["position_error"])]
+    for action in actions:
+        obs, reward, terminated, truncated, info = env.step(action)
+        out.append((obs.copy(), reward, terminated, truncated, info["position_error"]))
+        if terminated or truncated:
+            break
+    return out
+
+
+class _no_warnings:
+    """``check_env`` reports soft problems as warnings: none may come."""
+
+    def __enter__(self):
+        import warnings
+        self._catch = warnings.catch_warnings(record=True)
+        self.caught = self._catch.__enter__()
+        warnings.simplefilter("always")
+        return self
+
+    def __exit__(self, *exc):
+        self._catch.__exit__(*exc)
+        assert [str(w.message) for w in self.caught] == []
+
+
+def test_every_environment_is_registered_and_named_by_module() -> None:
+    for env_id in gym_envs.ENV_IDS:
+        assert env_id in gymnasium.registry
+    env = gymnasium.make("qg_experiments:QGInsertion-v0", max_steps=2)
+    assert env.unwrapped.max_steps == 2 and env.spec.max_episode_steps is None
+    env.close()
+
+
+@pytest.mark.parametrize("env_id", sorted(gym_envs.IN_PROCESS_ENV_IDS))
+def test_in_process_environments_pass_gymnasiums_checker(env_id: str) -> None:
+    env = gymnasium.make(env_id).unwrapped
+    with _no_warnings():
+        check_env(env, skip_render_check=True)
+    env.close()
+
+
+def test_a_seeded_insertion_episode_is_identical_twice() -> None:
+    env = InsertionEnv(max_steps=3)
+    first = _rollout(env, 7, ACTIONS)
+    _rollout(env, 8, ACTIONS[::-1])          # another robot in between
+    second = _rollout(env, 7, ACTIONS)
+    env.close()
+    assert len(first) == 4 and first[-1][3]               # the cap of 3 truncates, not terminal
+    for a, b in zip(first, second, strict=True):
+        np.testing.assert_array_equal(a[0], b[0])
+        assert a[1:] == b[1:]
+    assert not np.array_equal(first[1][0], _rollout(InsertionEnv(max_steps=3), 8, ACTIONS)[1][0])
+
+
+def test_a_seeded_peg_episode_is_identical_twice() -> None:
+    env = gymnasium.make("QGNextagePeg-v0", max_steps=3).unwrapped
+    actions = np.c_[ACTIONS, -ACTIONS[:, :1]]           # the peg's actions are 3-D
+    first, second = _rollout(env, 5, actions), _rollout(env, 5, actions)
+    env.close()
+    assert len(first) == 4 and first[-1][3] and not first[-1][2]
+    for a, b in zip(first, second, strict=True):
+        np.testing.assert_array_equal(a[0], b[0])
+        assert a[1:] == b[1:]
+
+
+def test_the_environment_is_the_runners_task_step_for_step() -> None:
+    """Same arm seed, same start pose, same actions: the runner's ``run_episode`` and the
+    environment see the same states and rewards (float32 states aside)."""
+    settings = StackSettings.load().with_arm_seed(3)
+    task = PandaTask(settings)
+    actions = iter(ACTIONS)
+    records = []
+    episode = Episode("e", "train", 2, "dense", task.residual)
+    episode.max_steps = len(ACTIONS)
+    run_episode(task, episode, lambda state: next(actions), records.append)
+    task.close()
+    env = InsertionEnv(max_steps=len(ACTIONS))
+    env.reset(seed=3)
+    rollout = _rollout(env, 3, ACTIONS, pose=2)
+    env.close()
+    assert len(records) == len(ACTIONS) == len(rollout) - 1
+    for record, step in zip(records, rollout[1:]):
+        np.testing.assert_array_equal(record.next_state.astype(np.float32), step[0])
+        assert record.reward == step[1]
+
+
+def test_reset_options_pick_the_pose_and_the_cap() -> None:
+    env = InsertionEnv(max_steps=50)
+    env.reset(seed=0)
+    assert env.episode.initial_pose == 0
+    env.reset()
+    assert env.episode.initial_pose == 1                 # the poses rotate
+    _, info = env.reset(options={"pose": 6, "max_steps": 1})
+    assert info["pose"] == 6 and env.episode.max_steps == 1
+    *_, truncated, info = env.step(np.zeros(2))
+    assert truncated and info["end_reason"] == "step_cap"
+    with pytest.raises(RuntimeError, match="reset"):
+        env.step(np.zeros(2))
+    with pytest.raises(ValueError, match="pose"):
+        env.reset(options={"pose": 8})
+    with pytest.raises(ValueError, match="unknown"):
+        env.reset(options={"start": 1})
+    env.close()
+    with pytest.raises(ValueError, match="arm"):
+        InsertionEnv(arm="perfect")
+
+
+def test_the_ideal_arm_and_the_arm_seed_are_options() -> None:
+    def start(**kwargs) -> np.ndarray:
+        env = InsertionEnv(**kwargs)
+        obs, _ = env.reset(seed=11)
+        env.close()
+        return obs
+    ideal = start(arm="ideal")
+    np.testing.assert_array_equal(ideal, start(arm="ideal", arm_seed=4))  # no imperfection
+    assert not np.array_equal(start(), start(arm_seed=4))                  # another robot
+    assert not np.array_equal(start(), ideal)
+
+
+def test_stable_baselines3_trains_on_the_environment_in_three_lines() -> None:
+    from stable_baselines3 import SAC
+    env = gymnasium.make("qg_experiments:QGInsertion-v0", max_steps=3)
+    model = SAC("MlpPolicy", env, learning_starts=2, batch_size=4, seed=0, device="cpu")
+    model.learn(total_timesteps=6)
+    assert model.num_timesteps == 6 and model._n_updates >= 4
+    action, _ = model.predict(env.observation_space.sample(), deterministic=True)
+    assert env.action_space.contains(action)
+    env.close()

@@ -1,0 +1,71 @@
+"""The peers' runs and their section of the report: a tiny run of an SB3 algorithm and of ours
+under the grid's protocol, counted the runner's way, and the marked block written in place."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from qg_experiments import peers_report
+from qg_experiments.peers import PeerSpec, peer_table
+from qg_experiments.runner import config_digest
+from qg_experiments.standard_tasks import StandardSpec
+
+TINY = {"train_episodes": 2, "train_max_steps": 2, "test_episodes": 2, "test_max_steps": 3}
+
+
+@pytest.mark.parametrize("algorithm", ["ddpg", "ours_ddpg"])
+def test_a_peer_run_trains_its_episodes_then_tests_the_poses(algorithm: str, tmp_path) -> None:
+    spec = PeerSpec(algorithm, "defaults", 100, tensorboard_dir=str(tmp_path), **TINY)
+    result = spec.run()
+    modes = [(e["mode"], e["pose"]) for e in result["episodes"]]
+    assert modes == [("train", 0), ("train", 1), ("test", 0), ("test", 1)]
+    assert result["train_steps"] == sum(e["steps"] for e in result["episodes"][:2]) <= 4
+    assert result["rl_steps"] == sum(e["steps"] for e in result["episodes"])
+    assert all(e["steps"] <= 3 for e in result["episodes"][2:])
+    assert (tmp_path / spec.name / "progress.csv").exists()
+    json.dumps(result)                                            # saved as JSON
+
+
+def test_peer_specs_refuse_what_the_protocol_does_not_have() -> None:
+    with pytest.raises(ValueError, match="grid"):
+        PeerSpec("td3", "grid", 100)                              # a cell needs lr and iterations
+    with pytest.raises(ValueError, match="runner"):
+        PeerSpec("ours_ddpg", "grid", 100, 1e-3, 50)
+    assert PeerSpec("td3", "grid", 100, 1e-3, 50).name == "td3_lr0.001_it50_s100"
+
+
+def _fake(algorithm: str, seed: int, tests: list[int], train: int) -> dict:
+    episodes = [{"mode": "train", "steps": train, "success": True}]
+    episodes += [{"mode": "test", "steps": n, "success": n < 200} for n in tests]
+    return {"spec": {"algorithm": algorithm, "setting": "defaults", "seed": seed,
+                     "critic_lr": None, "iterations": None}, "episodes": episodes,
+            "train_steps": train, "wall_time": 1.0, "config_digest": config_digest()}
+
+
+def test_the_table_counts_per_seed_means_and_the_section_is_replaced_in_place(tmp_path) -> None:
+    results = [_fake("td3", 100, [4, 200], 500), _fake("td3", 101, [2, 4], 300)]
+    (row,) = peer_table(results)
+    assert row["mean_test_steps"]["mean"] == pytest.approx((102 + 3) / 2)
+    assert row["solved"] == 3 and row["tests"] == 4 and row["all_solved_seeds"] == 1
+    assert row["train_steps"]["mean"] == 400
+    out = tmp_path / "runs"
+    (out / "peers").mkdir(parents=True)
+    stale = {**_fake("td3", 102, [1, 1], 10), "config_digest": "another arm"}
+    for r in (*results, stale):       # a run under other config values is not counted
+        (out / "peers" / f"{r['spec']['algorithm']}_{r['spec']['seed']}.json").write_text(
+            json.dumps(r))
+    results_md = tmp_path / "results.md"
+    results_md.write_text("# Results\n\nsection 6\n")
+    peers_report.write_section(results_md, out)
+    first = results_md.read_text()
+    peers_report.write_section(results_md, out)
+    assert results_md.read_text() == first and first.startswith("# Results\n\nsection 6\n")
+    assert "| SB3 TD3 | defaults | 2 | 52.5 [" in first and "3/4 | 1/2 | 400 [" in first
+
+
+def test_a_standard_task_run_evaluates_along_the_way(tmp_path) -> None:
+    result = StandardSpec("Pendulum-v1", "qgddpg", 100, steps=250).run()
+    assert [e["steps"] for e in result["evaluations"]] == [250]
+    assert [e["steps"] for e in result["train_episodes"]] == [200]     # one finished episode
+    assert -2000 < result["final_return"] <= 0

@@ -1,0 +1,141 @@
+"""QG-DDPG on Gymnasium environments (``learner/gym_agent.py``): spaces and units, the graph's
+bounds where a task has terminals and none where it has not, seeded determinism, SB3's tags,
+and ``qgl train``."""
+from __future__ import annotations
+
+import csv
+import os
+import subprocess
+import sys
+
+import gymnasium
+import numpy as np
+import pytest
+import torch
+from gymnasium import spaces
+
+from qg_learning_node.learner.gym_agent import QGDDPG, SB3_DDPG_SETTINGS
+
+SMALL = {"actor_hidden": (16, 16), "critic_hidden": (16, 16), "batch_size": 8}
+
+
+class Corridor(gymnasium.Env):
+    """Five cells 0..4 in a row, start at 0; the action (in [0, 2], 1 = stand still) moves one
+    cell left (< 0.7) or right (> 1.3); the last cell is the terminal goal. Sparse reward: -1 per
+    step, 0 on reaching the goal. States repeat exactly, so the data graph has loops and paths."""
+
+    observation_space = spaces.Box(0.0, 4.0, (1,), np.float32)
+    action_space = spaces.Box(0.0, 2.0, (1,), np.float32)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.cell, self.t = 0, 0
+        return np.array([self.cell], np.float32), {}
+
+    def step(self, action):
+        a = float(np.asarray(action).ravel()[0])
+        self.cell = int(np.clip(self.cell + (a > 1.3) - (a < 0.7), 0, 4))
+        self.t += 1
+        goal = self.cell == 4
+        return (np.array([self.cell], np.float32), 0.0 if goal else -1.0, goal, self.t >= 30,
+                {"is_success": goal})
+
+
+def _weights(agent: QGDDPG) -> list[np.ndarray]:
+    return [t for _, t in agent.core.agent.actor_tensors()]
+
+
+def test_the_graph_bounds_a_sparse_task_with_exact_values() -> None:
+    agent = QGDDPG(Corridor(), seed=1, noise="uniform", learning_starts=400, train_freq=10,
+                   gradient_steps=2, gamma=0.9, zero_action=(1.0,), **SMALL)
+    assert agent.core.zero_action.tolist() == [0.0]          # env units 1.0 -> actor units 0.0
+    assert agent.reward_range is None and agent.core.agent.config.bounds == "qgraph"
+    agent.learn(500)
+    graph = agent.core.graph
+    # From cell 3 a right step reaches the goal: bound 0. From cell 2: -1 + 0.9 * 0 = -1 at best.
+    right, stay = np.array([1.0]), np.array([0.0])
+    assert graph.lower_bound(np.array([0.5]), right) == 0.0      # cell 3 scaled to [-1, 1]
+    assert graph.lower_bound(np.array([0.0]), right) == pytest.approx(-1.0)
+    # standing still at cell 0 forever is a loop: -1 / (1 - 0.9) = -10
+    assert graph.lower_bound(np.array([-1.0]), stay) >= -10.0 - 1e-9
+    ddpg = QGDDPG(Corridor(), algorithm="ddpg", seed=1, **SMALL)
+    assert ddpg.core.graph is None and ddpg.core.zero_action is None
+
+
+def test_without_terminals_or_loops_qgddpg_trains_exactly_like_ddpg() -> None:
+    """Pendulum: every episode is truncated, states never repeat; no graph bound exists, so
+    without an a-priori reward range the two algorithms compute the same updates."""
+    runs = [QGDDPG(gymnasium.make("Pendulum-v1"), algorithm=a, seed=3, train_freq=5,
+                   gradient_steps=1, **SMALL).learn(250) for a in ("qgddpg", "ddpg")]
+    for a, b in zip(*map(_weights, runs)):
+        np.testing.assert_array_equal(a, b)
+    census = runs[0].core.graph.census()
+    assert census["directly_connected"] == census["connected"] == 0
+
+
+def test_a_seed_gives_the_same_learning_and_another_seed_another() -> None:
+    def run(seed: int) -> list[np.ndarray]:
+        return _weights(QGDDPG(gymnasium.make("Pendulum-v1"), seed=seed, train_freq=5,
+                               **SMALL).learn(200))
+    first, second, other = run(4), run(4), run(5)
+    for a, b in zip(first, second):
+        np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(first[0], other[0])
+
+
+def test_actions_are_mapped_onto_the_box_and_observations_scaled() -> None:
+    env = gymnasium.make("Pendulum-v1")            # torque in [-2, 2], speed in [-8, 8]
+    agent = QGDDPG(env, seed=0, **SMALL)
+    np.testing.assert_allclose(agent._state(np.array([1.0, 0.0, 8.0])), [1.0, 0.0, 1.0])
+    np.testing.assert_allclose(agent._to_env(np.array([-1.0])), [-2.0])
+    np.testing.assert_allclose(agent._to_env(np.array([0.25])), [0.5])
+    raw = QGDDPG(env, seed=0, normalize_observations=False, **SMALL)
+    np.testing.assert_allclose(raw._state(np.array([1.0, 0.0, 8.0])), [1.0, 0.0, 8.0])
+    for _ in range(5):
+        action, _ = agent.predict(env.observation_space.sample(), deterministic=False)
+        assert env.action_space.contains(action)
+    with pytest.raises(ValueError, match="Box action"):
+        QGDDPG(gymnasium.make("CartPole-v1"))
+    with pytest.raises(ValueError, match="unknown settings"):
+        QGDDPG(env, learning_rate=1e-3)
+
+
+def test_sb3_ddpg_settings_build_sb3s_networks() -> None:
+    agent = QGDDPG(gymnasium.make("Pendulum-v1"), algorithm="ddpg", **SB3_DDPG_SETTINGS)
+    actor = agent.core.agent.actor
+    assert [m.out_features for m in actor if isinstance(m, torch.nn.Linear)] == [400, 300, 1]
+    assert isinstance(actor[1], torch.nn.ReLU) and isinstance(actor[-1], torch.nn.Tanh)
+    bias = actor[0].bias.detach().numpy()            # nn.Linear's init: U(+-1/sqrt(fan_in))
+    assert np.all(np.abs(bias) <= 1 / np.sqrt(3)) and np.any(bias != 0)
+    assert agent.core.agent.config.target_networks and agent.core.config.batch_size == 256
+
+
+def test_learning_writes_sb3s_tags(tmp_path) -> None:
+    agent = QGDDPG(Corridor(), seed=0, train_freq=5, **SMALL)
+    agent.learn(70, tensorboard_log=tmp_path / "tb")
+    agent.close()
+    with (tmp_path / "tb" / "progress.csv").open() as f:
+        tags = {row["tag"] for row in csv.DictReader(f)}
+    assert {"rollout/ep_len_mean", "rollout/ep_rew_mean", "rollout/success_rate", "time/fps",
+            "train/critic_loss", "train/actor_loss", "train/mean_q"} <= tags
+    assert list((tmp_path / "tb").glob("events.out.tfevents.*"))
+
+
+def test_max_episodes_and_the_callback_stop_learning() -> None:
+    agent = QGDDPG(Corridor(), seed=0, **SMALL).learn(10_000, max_episodes=2)
+    assert agent.episodes == 2 and agent.num_timesteps <= 60
+    seen = []
+    agent = QGDDPG(Corridor(), seed=0, **SMALL).learn(10_000, callback=lambda e: seen.append(e)
+                                                      or len(seen) < 3)
+    assert agent.episodes == 3 and [e["steps"] for e in seen][0] >= 1
+
+
+def test_qgl_train_runs_on_pendulum(tmp_path) -> None:
+    env = {**os.environ, "QG_RUNS_DIR": str(tmp_path)}
+    out = subprocess.run([os.path.join(os.path.dirname(sys.executable), "qgl"), "train",
+                          "--env", "Pendulum-v1", "--steps", "60", "--test-episodes", "1",
+                          "--set", "actor_hidden=[8,8]", "--set", "critic_hidden=[8,8]"],
+                         capture_output=True, text=True, env=env, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert "60 steps" in out.stdout and "test return over 1 episodes" in out.stdout
+    assert len(list(tmp_path.glob("train_Pendulum-v1_*/progress.csv"))) == 1
