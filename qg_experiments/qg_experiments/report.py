@@ -174,7 +174,8 @@ def _grid_section(title: str, rows: list[dict[str, Any]], results: list[dict[str
     counts = {a: sum(1 for r in rows if r["algorithm"] == a) for a in algorithms}
     seeds = sorted({r["spec"]["seed"] for r in results})
     lines = [title, "",
-             f"State `{spec.get('observation') or 'the stack default'}`. "
+             (f"State `{spec['observation']}`. " if spec.get("observation") else
+              "State: the stack's default (`task.observation`, `config/executor.yaml`). ") +
              f"{spec['train_episodes']} training episodes (cap {spec['train_max_steps']} steps, "
              f"training after every {spec['cycle_steps'] or 20} steps), then "
              f"{spec['test_episodes']} test episodes without noise (cap {spec['test_max_steps']}), "
@@ -318,21 +319,45 @@ def run_excess(result: dict[str, Any], gamma: float, r_min: float, r_max: float)
                default=-math.inf)
 
 
+def run_divergence(result: dict[str, Any], gamma: float, r_min: float = -1.0,
+                   r_max: float = 0.0) -> tuple[bool, bool]:
+    """(diverged, overshot) of one run by :func:`split_by_excess`, against the range of its own
+    discount."""
+    g = result["spec"].get("gamma") or gamma
+    q_range = (min(r_min, r_min / (1 - g)), max(r_max, r_max / (1 - g)))
+    d, o = split_by_excess({result["name"]: run_excess(result, gamma, r_min, r_max)}, q_range)
+    return bool(d), bool(o)
+
+
 def divergence_counts(results: list[dict[str, Any]], gamma: float, r_min: float = -1.0,
                       r_max: float = 0.0) -> dict[str, tuple[int, int, int]]:
-    """Per algorithm: (diverged, overshot, runs) by :func:`split_by_excess`, each run against
-    the range of its own discount."""
+    """Per algorithm: (diverged, overshot, runs) by :func:`run_divergence`."""
     counts = {}
     for a in sorted({r["spec"]["algorithm"] for r in results}):
         runs = [r for r in results if r["spec"]["algorithm"] == a and r["cycles"]]
-        diverged = overshot = 0
-        for r in runs:
-            g = r["spec"].get("gamma") or gamma
-            q_range = (min(r_min, r_min / (1 - g)), max(r_max, r_max / (1 - g)))
-            d, o = split_by_excess({r["name"]: run_excess(r, gamma, r_min, r_max)}, q_range)
-            diverged, overshot = diverged + len(d), overshot + len(o)
-        counts[a] = (diverged, overshot, len(runs))
+        flags = [run_divergence(r, gamma, r_min, r_max) for r in runs]
+        counts[a] = (sum(d for d, _ in flags), sum(o for _, o in flags), len(runs))
     return counts
+
+
+def _divergence_pairs(results: list[dict[str, Any]], gamma: float) -> str:
+    """One sentence: how often the critic diverged in QG-DDPG's run and not in DDPG's on the
+    same (setting, cell, seed), and the reverse, over every setting, with McNemar's test."""
+    runs: dict[tuple, dict[str, bool]] = {}
+    for r in results:
+        s = r["spec"]
+        if r["cycles"]:
+            key = (s["critic_lr"], s["iterations"], s["reward"], s["replay_capacity"],
+                   s.get("gamma"), s.get("observation"), s["seed"])
+            runs.setdefault(key, {})[s["algorithm"]] = run_divergence(r, gamma)[0]
+    both = [v for v in runs.values() if "qgddpg" in v and "ddpg" in v]
+    if not both:
+        return ""
+    e = stats.paired_events([v["qgddpg"] for v in both], [v["ddpg"] for v in both])
+    return (f"Divergence over every setting above, on the same {len(both)} (setting, cell, "
+            f"seed) pairs: only DDPG's critic diverged in {e.only_b}, only QG-DDPG's in "
+            f"{e.only_a}, both in {e.both}, neither in {e.neither}; exact McNemar test "
+            f"p = {e.p:.2g}.")
 
 
 def _divergence_text(results: list[dict[str, Any]], gamma: float) -> str:
@@ -380,7 +405,8 @@ def _graph_section(settings: dict[str, list[dict[str, Any]]], bar: Bar | None,
                      "Wilcoxon p", "QG-DDPG beats random", "DDPG beats random",
                      "QG-DDPG diverged", "DDPG diverged", "targets raised",
                      "critic error vs MC"], table)
-    return lines + [""]
+    divergence = _divergence_pairs([r for results in settings.values() for r in results], gamma)
+    return lines + ([""] + [divergence] if divergence else []) + [""]
 
 
 def _smooth(values: np.ndarray, window: int) -> np.ndarray:

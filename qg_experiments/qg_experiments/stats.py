@@ -25,7 +25,7 @@ import numpy as np
 from scipy import stats
 
 __all__ = ["CONFIDENCE", "Interval", "mean_interval", "beats", "PairedComparison",
-           "paired_comparison", "format_interval"]
+           "paired_comparison", "PairedEvents", "paired_events", "format_interval"]
 
 #: The confidence level of every interval in the report.
 CONFIDENCE = 0.95
@@ -121,6 +121,35 @@ def paired_comparison(a: Sequence[float], b: Sequence[float]) -> PairedCompariso
     return PairedComparison(n=int(x.size), difference=mean_interval(diff), wins_a=wins_a,
                             wins_b=wins_b, ties=int(x.size) - wins_a - wins_b,
                             wilcoxon_p=wilcoxon_p, sign_p=sign_p)
+
+
+@dataclass(frozen=True)
+class PairedEvents:
+    """An event (a diverged critic, say) in A's and B's runs of the same (setting, cell, seed).
+
+    :param only_a: pairs where A's run had the event and B's did not; ``only_b`` the reverse.
+    :param both: pairs where both runs had it; ``neither`` where none did.
+    :param p: two-sided exact McNemar test: the discordant pairs against a fair coin
+        (``binomtest``); 1.0 without discordant pairs.
+    """
+    only_a: int
+    only_b: int
+    both: int
+    neither: int
+    p: float
+
+
+def paired_events(a: Sequence[bool], b: Sequence[bool]) -> PairedEvents:
+    """Compare how often an event happens in paired runs ``a[i]``, ``b[i]``. Only the pairs
+    where exactly one run had it carry information (McNemar), so the test is on those."""
+    x, y = np.asarray(a, dtype=bool), np.asarray(b, dtype=bool)
+    if x.shape != y.shape or x.ndim != 1 or x.size == 0:
+        raise ValueError(f"need two paired 1-D samples of one length, got {x.shape}, {y.shape}")
+    only_a, only_b = int(np.sum(x & ~y)), int(np.sum(~x & y))
+    p = 1.0 if only_a + only_b == 0 else float(stats.binomtest(only_a, only_a + only_b,
+                                                                0.5).pvalue)
+    return PairedEvents(only_a=only_a, only_b=only_b, both=int(np.sum(x & y)),
+                        neither=int(np.sum(~x & ~y)), p=p)
 
 
 def format_interval(interval: Interval, digits: int = 1) -> str:

@@ -75,3 +75,17 @@ def test_paired_comparison_counts_ties_and_matches_scipy_on_a_small_known_case()
     assert paired_comparison([3.0, 3.0], [3.0, 3.0]).wilcoxon_p == 1.0
     with pytest.raises(ValueError):
         paired_comparison([1.0, 2.0], [1.0])
+
+
+def test_paired_events_count_the_discordant_pairs_and_test_them_exactly():
+    from qg_experiments.stats import paired_events
+    a = [False] * 12 + [True]              # QG-DDPG: one run with the event
+    b = [True] * 10 + [False] * 2 + [True]  # DDPG: ten more
+    e = paired_events(a, b)
+    assert (e.only_a, e.only_b, e.both, e.neither) == (0, 10, 1, 2)
+    assert e.p == pytest.approx(2 * 0.5 ** 10)          # exact two-sided binomial, 10 vs 0
+    balanced = paired_events([True, False] * 5, [False, True] * 5)
+    assert balanced.only_a == balanced.only_b == 5 and balanced.p == pytest.approx(1.0)
+    assert paired_events([False] * 4, [False] * 4).p == 1.0
+    with pytest.raises(ValueError):
+        paired_events([True], [True, False])

@@ -39,12 +39,17 @@ class Episodes:
         from qg_interfaces.msg import EpisodeStatus, LearnerDiagnostics
 
         from qg_common.topics import LATCHED, robot_topic
+        from rclpy.qos import QoSProfile
         self.cli = cli
         self.robot = robot
         self.statuses: list = []
         self.learner_heartbeats: list = []
+        # Latched like the publisher (the last status reaches a late reader), but a deep queue:
+        # a busy test process must not lose "resetting" to the "running" right behind it.
+        every_status = QoSProfile(depth=1000, reliability=LATCHED.reliability,
+                                  durability=LATCHED.durability)
         cli.node.create_subscription(EpisodeStatus, robot_topic(robot, "episode_status"),
-                                     self.statuses.append, LATCHED)
+                                     self.statuses.append, every_status)
         cli.node.create_subscription(LearnerDiagnostics, "/learner/diagnostics",
                                      self.learner_heartbeats.append, 10)
 
