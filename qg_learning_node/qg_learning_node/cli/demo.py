@@ -204,7 +204,7 @@ def _plot(outcomes: list[EpisodeOutcome], path: Path, bar: dict | None,
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(7, 3.5))
+    fig, ax = plt.subplots(figsize=(7, 4.8))
     for mode, colour in (("train", "tab:blue"), ("test", "tab:green")):
         runs = [o for o in outcomes if o.mode == mode]
         ax.plot([o.index for o in runs], [o.steps for o in runs], "-", color=colour, alpha=0.5)
@@ -221,7 +221,8 @@ def _plot(outcomes: list[EpisodeOutcome], path: Path, bar: dict | None,
     ax.set_ylabel("steps to insert (cap = not inserted)")
     ax.set_title(f"QG-DDPG on {robot}, through the ROS stack")
     ax.grid(alpha=0.3)
-    ax.legend()
+    # Below the axes: inside, the legend would hide the first episodes and the bar.
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
