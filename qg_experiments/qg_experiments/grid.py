@@ -18,7 +18,7 @@ from qg_experiments import stats
 from qg_experiments.profile import GridBudget, VariantBudget
 from qg_experiments.runner import RunSpec
 
-__all__ = ["grid_specs", "variant_specs", "cell_table", "test_steps", "seed_means",
+__all__ = ["grid_specs", "pair_key", "variant_specs", "cell_table", "test_steps", "seed_means",
            "pairs", "variant_name", "graph_diagnostics"]
 
 
@@ -69,17 +69,21 @@ def seed_means(group: list[dict[str, Any]]) -> dict[int, float]:
     return {r["spec"]["seed"]: float(np.mean(test_steps(r))) for r in group if test_steps(r)}
 
 
+def pair_key(spec: dict[str, Any]) -> tuple:
+    """What two algorithms' runs share when they are a pair: cell, setting and seed."""
+    return (spec["critic_lr"], spec["iterations"], spec["reward"], spec["replay_capacity"],
+            spec.get("gamma"), spec.get("observation"), spec["seed"])
+
+
 def pairs(results: list[dict[str, Any]], a: str = "qgddpg", b: str = "ddpg"
           ) -> tuple[list[float], list[float], list[tuple]]:
     """Per-seed mean test steps of ``a`` and ``b`` on the same (cell, setting, seed), aligned:
     the pairs of the paired comparison, and their keys."""
     runs: dict[tuple, dict[str, float]] = {}
     for r in results:
-        s = r["spec"]
-        key = (s["critic_lr"], s["iterations"], s["reward"], s["replay_capacity"],
-               s.get("gamma"), s.get("observation"), s["seed"])
         if test_steps(r):
-            runs.setdefault(key, {})[s["algorithm"]] = float(np.mean(test_steps(r)))
+            runs.setdefault(pair_key(r["spec"]), {})[r["spec"]["algorithm"]] = float(
+                np.mean(test_steps(r)))
     keys = sorted((k for k, v in runs.items() if a in v and b in v), key=str)
     return [runs[k][a] for k in keys], [runs[k][b] for k in keys], keys
 

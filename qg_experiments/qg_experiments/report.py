@@ -345,11 +345,9 @@ def _divergence_pairs(results: list[dict[str, Any]], gamma: float) -> str:
     same (setting, cell, seed), and the reverse, over every setting, with McNemar's test."""
     runs: dict[tuple, dict[str, bool]] = {}
     for r in results:
-        s = r["spec"]
         if r["cycles"]:
-            key = (s["critic_lr"], s["iterations"], s["reward"], s["replay_capacity"],
-                   s.get("gamma"), s.get("observation"), s["seed"])
-            runs.setdefault(key, {})[s["algorithm"]] = run_divergence(r, gamma)[0]
+            runs.setdefault(grid.pair_key(r["spec"]), {})[r["spec"]["algorithm"]] = (
+                run_divergence(r, gamma)[0])
     both = [v for v in runs.values() if "qgddpg" in v and "ddpg" in v]
     if not both:
         return ""
