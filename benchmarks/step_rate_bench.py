@@ -1,6 +1,6 @@
 """RL steps per wall second: the in-process runner against the ROS stack, same learning episodes.
 
-Both paths run QG-DDPG training episodes with the demo's settings (tilt observation, critic lr
+Both paths run QG-DDPG training episodes with the demo's settings (the default state, critic lr
 1e-4, 50 iterations per 20-step cycle, episodes capped at 50 steps) from the repo's config/:
 first in this process (``RunSpec.run``: sim + bridge + EKF + learner on one core), then through
 the real stack (robot, executor and learner processes, episodes started by service call).
