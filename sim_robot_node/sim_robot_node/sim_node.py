@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from geometry_msgs.msg import WrenchStamped
 from qg_common import topics
-from qg_common.conversions import wrench_stamped
+from qg_common.conversions import time_ns, wrench_stamped
 from qg_common.node_runtime import LoopThread, RealtimePacer, favour_loop_thread, run_nodes
 from qg_interfaces.msg import AtRest
 from rclpy.node import Node
@@ -49,8 +49,9 @@ class SeparateSim:
     """A robot plugin's robot stepped at wall-clock 1 kHz under ``/joint_commands`` (separate
     processes).
 
-    Every tick applies the latest command if it is fresh (younger than ``command_timeout`` and
-    sent after the last reset), else the interface kind's hold; then it steps (the hardware's
+    Every tick applies the latest command if it is fresh (younger than ``command_timeout``) and
+    follows the last reset (its stamp is that reset's ``sim/restarted`` stamp: the bridge has
+    restarted from the new pose), else the interface kind's hold; then it steps (the hardware's
     ``write``) and publishes the new state and the ground truth. A reset teleports the arm and
     announces it on ``sim/restarted`` (stamped with the reset time), so the bridge and the
     estimator restart from the new state; the bridge settles under its controller and reports
@@ -72,11 +73,11 @@ class SeparateSim:
         self.n_joints = len(robot.description.joint_names)
         self.hold = kind.hold(robot.description, self.config.hold_damping)
         self.pacer = RealtimePacer(robot.description.dt)
-        self._command: tuple[float, np.ndarray] | None = None   # (arrival, command)
+        self._command: tuple[float, int, np.ndarray] | None = None  # (arrival, stamp, command)
         self._settled: AtRest | None = None     # the bridge's observation after the last reset
         self._jobs: queue.Queue[_ResetJob] = queue.Queue()
         self._job: _ResetJob | None = None
-        self._reset_time = -math.inf
+        self._restart_ns = 0                    # the stamp of the last sim/restarted
         self.restarted = node.create_publisher(Header, topics.SIM_RESTARTED, topics.RESTARTED_QOS)
         self.wrench = None if robot.wrist_sensor is None else node.create_publisher(
             WrenchStamped, topics.WRENCH_ESTIMATE, topics.SENSOR_QOS)
@@ -93,7 +94,7 @@ class SeparateSim:
                 f"ignoring joint_commands without {self.n_joints} finite "
                 f"{self.kind.command_field} values: {command.tolist()}", throttle_duration_sec=1.0)
             return
-        self._command = (time.perf_counter(), command)
+        self._command = (time.perf_counter(), time_ns(msg.header.stamp), command)
 
     def _on_at_rest(self, msg: AtRest) -> None:
         if msg.seq == 0:
@@ -130,11 +131,11 @@ class SeparateSim:
             self._take_reset(now)
             state = hardware.read()
             command = self._command
-            since_reset = command if command is not None and command[0] > self._reset_time \
+            since_reset = command if command is not None and command[1] >= self._restart_ns \
                 else None
             fresh = since_reset is not None and now - since_reset[0] < self.config.command_timeout
-            hardware.write(since_reset[1] if fresh else self.hold.command(
-                state, None if since_reset is None else since_reset[1]))
+            hardware.write(since_reset[2] if fresh else self.hold.command(
+                state, None if since_reset is None else since_reset[2]))
             tick += 1
             if tick % every == 0:
                 stamp = self.node.get_clock().now().to_msg()
@@ -157,10 +158,11 @@ class SeparateSim:
         self.simulation.reset(job.initial_pose, job.housing_yaw)
         self.hold.reset(self.robot.hardware.read())
         self._settled = None
-        self._reset_time = now
+        stamp = self.node.get_clock().now()
+        self._restart_ns = stamp.nanoseconds
         job.due = now + self.config.reset_wait
         self._job = job
-        self.restarted.publish(Header(stamp=self.node.get_clock().now().to_msg()))
+        self.restarted.publish(Header(stamp=stamp.to_msg()))
 
 
 def _start_separate_sim(nodes: list[Node]) -> Callable[[], None]:
