@@ -322,7 +322,7 @@ class RemoteRobot:
     reset from (0 before any). Until the loop has taken a restart, its commands still aim at
     the pose before it, and the sim, which applies only commands of its latest restart, holds
     the new pose instead (before this, the first reset after start-up dragged a Nextage 69 deg
-    of a joint back toward its old pose for 90 ms, and the reply's pose was 0.5-8.6 mm off).
+    of a joint back toward its old pose for 90 ms, and the reply's pose was 0.02-8.6 mm off).
     """
 
     def __init__(self, node: Node, n_joints: int, command_field: str,
