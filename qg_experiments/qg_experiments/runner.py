@@ -40,7 +40,8 @@ from qg_learning_node.executor.parameters import load_noise, load_task
 from qg_learning_node.executor.observation import observation_from_step
 from qg_learning_node.executor.residual_task import (ACTION_DIM, Observation,
                                                      ResidualTask, TaskConfig)
-from qg_learning_node.learner.ddpg import ActorMLP, DDPG
+from qg_learning_node.learner.actor_mlp import ActorMLP
+from qg_learning_node.learner.ddpg import DDPG
 from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore
 
 __all__ = ["ALGORITHMS", "ARMS", "ESTIMATORS", "StackSettings", "PandaTask", "LivePolicy",

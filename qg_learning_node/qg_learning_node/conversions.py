@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 from qg_interfaces.msg import ActorParameters, AtRest, Transition
-from scipy.spatial.transform import Rotation
+from qg_common.rotations import matrix_from_quaternion
 
 from qg_learning_node.executor.episode import TransitionRecord
 from qg_learning_node.executor.residual_task import Observation
@@ -20,7 +20,7 @@ def observation_from_msg(msg: AtRest) -> Observation:
         success=bool(gt.success), position_error=float(gt.position_error),
         orientation_error=float(np.linalg.norm(np.asarray(gt.orientation_error, float))),
         lateral_offset=float(gt.lateral_offset),
-        tool_rotation=Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix(),
+        tool_rotation=matrix_from_quaternion(q.x, q.y, q.z, q.w),
         tool_position=np.array([p.x, p.y, p.z]))
 
 

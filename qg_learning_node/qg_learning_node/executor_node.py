@@ -42,7 +42,7 @@ from qg_learning_node.executor.parameters import (EXECUTOR_SECTIONS, TASK_CHOICE
                                                   TASK_SECTIONS, ExecutorConfig)
 from qg_learning_node.executor.peg_task import PegTask, PegTaskConfig
 from qg_learning_node.executor.residual_task import ResidualTask, TaskConfig
-from qg_learning_node.learner.ddpg import ActorMLP
+from qg_learning_node.learner.actor_mlp import ActorMLP
 
 
 

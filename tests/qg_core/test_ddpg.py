@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from qg_learning_node.learner.ddpg import ActorMLP, DDPG, DDPGConfig, realisable_range
+from qg_learning_node.learner.actor_mlp import ActorMLP
+from qg_learning_node.learner.ddpg import DDPG, DDPGConfig, realisable_range
 from qg_learning_node.learner.replay import Batch, ReplayMemory
 
 torch.set_num_threads(1)

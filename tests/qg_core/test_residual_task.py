@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from qg_learning_node.executor.residual_task import (Observation, ResidualTask, TaskConfig,
                                                      state_dim, tilt_from_push_axis)
-from qg_learning_node.learner.ddpg import ActorMLP
+from qg_learning_node.learner.actor_mlp import ActorMLP
 
 DOWN = Rotation.from_rotvec([np.pi, 0.0, 0.0])     # tool z pointing down: the inserted pose
 PUSH = np.array([0.0, 0.0, -1.0])

@@ -9,7 +9,7 @@ import pytest
 from qg_common import conversions
 from robot_client import DEEP, RobotClient, wrench
 
-pytestmark = [pytest.mark.ros, pytest.mark.alone]   # paced by the wall clock
+pytestmark = pytest.mark.ros
 
 
 def stamps_for(cli, topic: str, msg_type, seconds: float) -> list[int]:
@@ -29,6 +29,7 @@ def count_for(cli, topic: str, msg_type, seconds: float) -> int:
     return len(stamps_for(cli, topic, msg_type, seconds))
 
 
+@pytest.mark.alone          # it counts states per wall second
 def test_composed_realtime_is_paced_by_the_wall_clock_and_completes_steps(stack):
     from sensor_msgs.msg import JointState
     stack.start(("robot", "robot_bridge_node", "robot",

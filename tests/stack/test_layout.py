@@ -234,6 +234,16 @@ def test_bridge_learning_and_experiments_import_without_the_simulator():
 
 
 @pytest.mark.ros
+def test_the_executor_and_the_robot_process_start_without_torch_or_scipy():
+    """Only the learner needs PyTorch: the executor runs the published actor in numpy. Each
+    import of torch and SciPy cost an executor start 1.5 s of CPU (1.71 s against 0.22 s)."""
+    code = _REFUSE + "import qg_learning_node.executor_node, robot_bridge_node.robot_process\n"
+    out = subprocess.run([sys.executable, "-c", code, "torch,scipy"], capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-3000:]
+
+
+@pytest.mark.ros
 def test_learning_imports_where_no_robot_stack_can():
     """The executor and learner nodes, the CLI and the cores import where neither bridge nor
     simulator nor experiments can: what the scan above reads, checked at run time. (Pinocchio

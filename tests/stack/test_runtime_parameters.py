@@ -91,7 +91,7 @@ def test_executor_noise_set_between_episodes_applies_to_the_next_one(stack, tmp_
 
     from qg_common.topics import LATCHED, RELIABLE_DEEP
     from qg_learning_node.conversions import actor_tensors_from_msg
-    from qg_learning_node.learner.ddpg import ActorMLP
+    from qg_learning_node.learner.actor_mlp import ActorMLP
     stack.start(ROBOT, ("learner", "qg_learning_node", "learner",
                         ("--ros-args", "-p", f"checkpoint_dir:={tmp_path / 'checkpoints'}")),
                 ("executor", "qg_learning_node", "executor",

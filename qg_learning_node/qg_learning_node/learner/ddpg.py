@@ -29,7 +29,7 @@ from torch import nn
 
 from qg_learning_node.learner.replay import Batch, NStepContext
 
-__all__ = ['ActorMLP', 'BOUND_MODES', 'DDPG', 'DDPGConfig', 'build_mlp', 'realisable_range']
+__all__ = ['BOUND_MODES', 'DDPG', 'DDPGConfig', 'build_mlp', 'realisable_range']
 
 BOUND_MODES = ('none', 'apriori', 'empirical', 'qgraph', 'qgraph+apriori', 'he2017')
 #: Weight inits: the thesis's two, and PyTorch's own ``nn.Linear`` init (SB3's networks).
@@ -163,32 +163,6 @@ class Critic(nn.Module):
 
     def forward(self, states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         return self.net(torch.cat([states, actions], dim=-1)).squeeze(-1)
-
-
-class ActorMLP:
-    """Torch-free forward pass of the actor, so the executor can run the policy from tensors."""
-
-    def __init__(self, layers: list[tuple[np.ndarray, np.ndarray]]) -> None:
-        self.layers = layers
-
-    @classmethod
-    def from_tensors(cls, tensors: list[tuple[str, np.ndarray]]) -> 'ActorMLP':
-        """Build from :meth:`DDPG.actor_tensors` (weight, bias of each layer in order)."""
-        arrays = [np.asarray(t, dtype=np.float32) for _, t in tensors]
-        if len(arrays) % 2:
-            raise ValueError('expected weight/bias pairs')
-        return cls(list(zip(arrays[0::2], arrays[1::2])))
-
-    @property
-    def input_dim(self) -> int:
-        """Length of the state the actor takes."""
-        return int(self.layers[0][0].shape[1])
-
-    def __call__(self, state: np.ndarray) -> np.ndarray:
-        x = np.asarray(state, dtype=np.float32)
-        for weight, bias in self.layers:
-            x = np.tanh(x @ weight.T + bias)
-        return x.astype(np.float64)
 
 
 class DDPG:
