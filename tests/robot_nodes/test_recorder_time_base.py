@@ -12,7 +12,7 @@ import pytest
 from live_capture import LiveCapture, stamp_ns
 from robot_client import RobotClient
 
-pytestmark = [pytest.mark.ros, pytest.mark.alone]   # a realtime robot process
+pytestmark = pytest.mark.ros   # a realtime robot process, but nothing here is timed
 
 EPISODE = "rt_0001"
 
