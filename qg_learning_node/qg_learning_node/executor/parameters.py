@@ -38,7 +38,7 @@ class ExecutorConfig:
     reset_timeout: float = 30.0
     keepalive_period: float = 0.0
     learner_timeout: float = 2.0
-    robot_grace: float = 3.0
+    robot_grace: float = 10.0
     learner_grace: float = 3.0
 
     def __post_init__(self) -> None:
