@@ -69,7 +69,7 @@ def test_zero_residual_jams_from_most_starts(loop: RobotLoop, ideal_loop: RobotL
     assert 0.0 < depth < 0.005  # wedged at the bore entrance
 
 
-@pytest.mark.ros     # full tier only: 8 episodes of up to 100 steps, 15 s on a loaded 2-core box
+@pytest.mark.ros     # full tier only: 8 episodes of up to 100 steps; 16 s alone, 22 s in the suite
 @pytest.mark.slow
 def test_uniform_random_residuals_insert_from_at_least_six_of_eight_starts(
         loop: RobotLoop, let_alone_tests_in) -> None:

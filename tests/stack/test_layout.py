@@ -235,8 +235,9 @@ def test_bridge_learning_and_experiments_import_without_the_simulator():
 
 @pytest.mark.ros
 def test_the_executor_and_the_robot_process_start_without_torch_or_scipy():
-    """Only the learner needs PyTorch: the executor runs the published actor in numpy. Each
-    import of torch and SciPy cost an executor start 1.5 s of CPU (1.71 s against 0.22 s)."""
+    """Only the learner needs PyTorch: the executor runs the published actor in numpy.
+    Importing torch and SciPy made every executor start 1.5 s slower (1.71 s against 0.22 s
+    to import the node)."""
     code = _REFUSE + "import qg_learning_node.executor_node, robot_bridge_node.robot_process\n"
     out = subprocess.run([sys.executable, "-c", code, "torch,scipy"], capture_output=True,
                          text=True, timeout=120)

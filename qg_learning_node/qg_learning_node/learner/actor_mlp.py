@@ -1,7 +1,8 @@
 """The actor's forward pass in numpy: the executor runs the policy without importing PyTorch.
 
 The executor only ever evaluates the actor the learner publishes (``ActorParameters``), one
-state per RL step; importing torch for that cost each executor start 1.3 s of CPU.
+state per RL step; importing torch for that made every executor start 1.5 s slower (importing
+the node took 1.71 s with torch and SciPy, 0.22 s without).
 """
 from __future__ import annotations
 
