@@ -35,6 +35,11 @@ from std_msgs.msg import Header
 __all__ = ["SeparateSim", "main"]
 
 
+#: [s] The bridge's commands may follow an earlier restart this long in a row (it is taking
+#: the new one) before the sim warns that they still do.
+STALE_COMMANDS_WARNING = 1.0
+
+
 @dataclass
 class _ResetJob:
     """A reset handed from the service thread to the loop thread."""
@@ -78,6 +83,7 @@ class SeparateSim:
         self._jobs: queue.Queue[_ResetJob] = queue.Queue()
         self._job: _ResetJob | None = None
         self._restart_ns = 0                    # the stamp of the last sim/restarted
+        self._stale_since: float | None = None  # since when fresh commands follow an old restart
         self.restarted = node.create_publisher(Header, topics.SIM_RESTARTED, topics.RESTARTED_QOS)
         self.wrench = None if robot.wrist_sensor is None else node.create_publisher(
             WrenchStamped, topics.WRENCH_ESTIMATE, topics.SENSOR_QOS)
@@ -134,6 +140,8 @@ class SeparateSim:
             since_reset = command if command is not None and command[1] >= self._restart_ns \
                 else None
             fresh = since_reset is not None and now - since_reset[0] < self.config.command_timeout
+            self._watch_stale(now, command is not None and since_reset is None
+                              and now - command[0] < self.config.command_timeout)
             hardware.write(since_reset[2] if fresh else self.hold.command(
                 state, None if since_reset is None else since_reset[2]))
             tick += 1
@@ -149,6 +157,18 @@ class SeparateSim:
                 self._job.observation = self._settled
                 self._job.done.set()
                 self._job = None
+
+    def _watch_stale(self, now: float, stale: bool) -> None:
+        """Warn when the bridge keeps sending commands of an earlier restart (it has not taken
+        ``sim/restarted``): a few are normal while it settles from the new pose."""
+        if not stale:
+            self._stale_since = None
+        elif self._stale_since is None:
+            self._stale_since = now
+        elif now - self._stale_since > STALE_COMMANDS_WARNING:
+            self.node.get_logger().warning(
+                "joint_commands follow an earlier restart (the bridge has not taken "
+                "sim/restarted): holding the arm", throttle_duration_sec=5.0)
 
     def _take_reset(self, now: float) -> None:
         try:

@@ -144,3 +144,27 @@ def test_a_position_robot_runs_as_separate_sim_and_bridge_processes(stack):
         print(f"position robot: drift over one held step {drift * 1e3:.3f} mm")
         assert drift < 1e-4, stack.logs()
     assert stack.stop(grace=5.0) == {"sim": 0, "bridge": 0}, stack.logs()
+
+
+def test_a_bridge_started_after_a_reset_takes_control_of_the_separate_sim(stack):
+    """The sim applies only commands that follow its latest restart, so a bridge that comes up
+    (or is discovered) after a reset must still learn of it: ``sim/restarted`` is latched.
+    Volatile, a restarted bridge's commands were ignored and the sim warned after 1 s of them."""
+    import signal
+    args = ("--ros-args", "-p", "robot:=sim_nextage")
+    stack.start(("sim", "sim_robot_node", "sim", args),
+                ("bridge", "robot_bridge_node", "bridge", args))
+    with stack.client() as cli:
+        robot = RobotClient(cli)
+        assert robot.reset(3, timeout=30.0).success, stack.logs()
+        bridge = next(r for r in stack.launcher.running if r.spec.name == "bridge").popen
+        bridge.send_signal(signal.SIGINT)
+        assert bridge.wait(timeout=10.0) == 0, stack.logs()
+        stack.start(("bridge2", "robot_bridge_node", "bridge", args))
+        log = stack.log_dir / "bridge2.log"
+        assert cli.spin_until(lambda: log.exists() and "the sim restarted" in log.read_text(),
+                              30.0), stack.logs()
+        event = robot.step(1, (0.0,) * 6, timeout=20.0, resend=0.004)
+        assert event is not None, stack.logs()
+        cli.spin_for(1.5)                       # past the sim's 1 s before it warns
+    assert "follow an earlier restart" not in stack.logs(), stack.logs()

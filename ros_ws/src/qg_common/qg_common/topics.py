@@ -63,9 +63,12 @@ def robot_topic(namespace: str, name: str) -> str:
 SENSOR_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 #: Commands and RL-step events: reliable, a few deep.
 COMMAND_QOS = 10
-RESTARTED_QOS = 10
 #: Transitions: none may be lost, even while the learner is busy training.
 RELIABLE_DEEP = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 #: The latest value is what a late joiner needs (episode status, actor parameters).
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: The separate sim's last restart, latched: a bridge or estimator that discovers the sim after
+#: a reset still learns of it (once, on a loaded machine, the bridge missed one and drove the
+#: arm with commands the sim then ignored as belonging to an earlier restart).
+RESTARTED_QOS = LATCHED
