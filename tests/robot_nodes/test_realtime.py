@@ -50,7 +50,10 @@ def test_composed_realtime_is_paced_by_the_wall_clock_and_completes_steps(stack)
                                      lambda m: received.append(time.monotonic()), DEEP)
         cli.spin_for(1.0)
         wall_rate = len(received) / 1.0
-        assert n <= 1001, f"{n} /joint_states stamped within 1 s: faster than real time"
+        # A tick's stamp is taken after its work, so stamps jitter by a tick or two and a
+        # window that opens on a late one holds a little more than 1000 (1002 seen once);
+        # running ahead of the wall clock would give thousands.
+        assert n <= 1003, f"{n} /joint_states stamped within 1 s: faster than real time"
         assert 200 <= wall_rate <= 1050, f"{wall_rate:.0f} /joint_states per wall second"
     assert stack.launcher.poll() == []
 
