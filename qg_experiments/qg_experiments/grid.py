@@ -10,7 +10,8 @@ same seeds, so every (cell, seed) is a pair for the paired comparison.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from collections.abc import Callable
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -18,8 +19,11 @@ from qg_experiments import stats
 from qg_experiments.profile import GridBudget, VariantBudget
 from qg_experiments.runner import RunSpec
 
-__all__ = ["grid_specs", "pair_key", "variant_specs", "cell_table", "test_steps", "seed_means",
-           "pairs", "variant_name", "graph_diagnostics"]
+__all__ = ["grid_specs", "pair_key", "paired_values", "variant_specs", "cell_table",
+           "test_steps", "seed_means", "pairs", "variant_name", "graph_diagnostics"]
+
+#: A per-run value compared between the two algorithms' runs of a pair.
+T = TypeVar("T")
 
 
 def grid_specs(budget: GridBudget, estimator: str = "ekf", config_dir: str | None = None,
@@ -75,17 +79,25 @@ def pair_key(spec: dict[str, Any]) -> tuple:
             spec.get("gamma"), spec.get("observation"), spec["seed"])
 
 
+def paired_values(results: list[dict[str, Any]], value: Callable[[dict[str, Any]], T | None],
+                  a: str = "qgddpg", b: str = "ddpg") -> tuple[list[T], list[T], list[tuple]]:
+    """``value(run)`` of ``a``'s and ``b``'s runs on the same (cell, setting, seed), aligned,
+    and the pairs' keys; a run whose value is None (nothing to compare) has no pair."""
+    runs: dict[tuple, dict[str, T]] = {}
+    for r in results:
+        v = value(r)
+        if v is not None:
+            runs.setdefault(pair_key(r["spec"]), {})[r["spec"]["algorithm"]] = v
+    keys = sorted((k for k, v in runs.items() if a in v and b in v), key=str)
+    return [runs[k][a] for k in keys], [runs[k][b] for k in keys], keys
+
+
 def pairs(results: list[dict[str, Any]], a: str = "qgddpg", b: str = "ddpg"
           ) -> tuple[list[float], list[float], list[tuple]]:
     """Per-seed mean test steps of ``a`` and ``b`` on the same (cell, setting, seed), aligned:
     the pairs of the paired comparison, and their keys."""
-    runs: dict[tuple, dict[str, float]] = {}
-    for r in results:
-        if test_steps(r):
-            runs.setdefault(pair_key(r["spec"]), {})[r["spec"]["algorithm"]] = float(
-                np.mean(test_steps(r)))
-    keys = sorted((k for k, v in runs.items() if a in v and b in v), key=str)
-    return [runs[k][a] for k in keys], [runs[k][b] for k in keys], keys
+    return paired_values(
+        results, lambda r: float(np.mean(test_steps(r))) if test_steps(r) else None, a, b)
 
 
 def graph_diagnostics(group: list[dict[str, Any]]) -> dict[str, float]:

@@ -343,16 +343,12 @@ def divergence_counts(results: list[dict[str, Any]], gamma: float, r_min: float 
 def _divergence_pairs(results: list[dict[str, Any]], gamma: float) -> str:
     """One sentence: how often the critic diverged in QG-DDPG's run and not in DDPG's on the
     same (setting, cell, seed), and the reverse, over every setting, with McNemar's test."""
-    runs: dict[tuple, dict[str, bool]] = {}
-    for r in results:
-        if r["cycles"]:
-            runs.setdefault(grid.pair_key(r["spec"]), {})[r["spec"]["algorithm"]] = (
-                run_divergence(r, gamma)[0])
-    both = [v for v in runs.values() if "qgddpg" in v and "ddpg" in v]
-    if not both:
+    qg, ddpg, keys = grid.paired_values(
+        results, lambda r: run_divergence(r, gamma)[0] if r["cycles"] else None)
+    if not keys:
         return ""
-    e = stats.paired_events([v["qgddpg"] for v in both], [v["ddpg"] for v in both])
-    return (f"Divergence over every setting above, on the same {len(both)} (setting, cell, "
+    e = stats.paired_events(qg, ddpg)
+    return (f"Divergence over every setting above, on the same {len(keys)} (setting, cell, "
             f"seed) pairs: only DDPG's critic diverged in {e.only_b}, only QG-DDPG's in "
             f"{e.only_a}, both in {e.both}, neither in {e.neither}; exact McNemar test "
             f"p = {e.p:.2g}.")
