@@ -2,6 +2,7 @@
 separate processes."""
 from __future__ import annotations
 
+import signal
 import time
 
 import numpy as np
@@ -153,7 +154,6 @@ def test_a_bridge_started_after_a_reset_takes_control_of_the_separate_sim(stack)
     """The sim applies only commands that follow its latest restart, so a bridge that comes up
     (or is discovered) after a reset must still learn of it: ``sim/restarted`` is latched.
     Volatile, a restarted bridge's commands were ignored and the sim warned after 1 s of them."""
-    import signal
     args = ("--ros-args", "-p", "robot:=sim_nextage")
     stack.start(("sim", "sim_robot_node", "sim", args),
                 ("bridge", "robot_bridge_node", "bridge", args))
