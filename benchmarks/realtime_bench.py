@@ -27,7 +27,7 @@ import time
 import numpy as np
 import rclpy
 from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
-from rclpy.executors import MultiThreadedExecutor
+from qg_common.callback_executor import CallbackThreadPool
 from rclpy.node import Node
 from rclpy.timer import Timer
 from qg_common.conversions import setpoint_msg
@@ -76,7 +76,7 @@ def realtime(seconds: float, publish_rate: float, switch_interval: float | None,
     timer = executor_stand_in(stand_in, np.random.default_rng(0))
     starts: list[int] = []
     process.runner.loop_observers.append(lambda ns, loop: starts.append(time.perf_counter_ns()))
-    executor = MultiThreadedExecutor(num_threads=3)
+    executor = CallbackThreadPool(num_threads=3)
     for node in [*nodes, stand_in]:
         executor.add_node(node)
     spin = threading.Thread(target=executor.spin, daemon=True)

@@ -20,11 +20,12 @@ import traceback
 from collections.abc import Callable, Sequence
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from qg_common.callback_executor import CallbackThreadPool
 from qg_common.node_parameters import unknown_overrides
 from qg_common.params import ConfigError
 
@@ -62,7 +63,7 @@ def run_nodes(factories: Sequence[Callable[[], Node]], argv: Sequence[str] | Non
         one (as a service that waits for a topic would): the callbacks then run one at a time
         on rclpy's C++ ``EventsExecutor``, which takes about twice as many 1 kHz messages per
         second as the Python executors on a loaded machine (the separate bridge ticks once per
-        state it takes). True runs them on a ``MultiThreadedExecutor``.
+        state it takes). True runs them on a thread pool (``CallbackThreadPool``).
     :returns: never: the process exits with the code (0 on SIGINT/SIGTERM, 2 on bad parameters).
     """
     # rclpy's own signal handlers shut ROS down at once, under the nodes' feet: nothing could
@@ -79,7 +80,7 @@ def run_nodes(factories: Sequence[Callable[[], Node]], argv: Sequence[str] | Non
         unknown = unknown_overrides(nodes)
         if unknown:
             raise ConfigError("; ".join(unknown))
-        executor = (MultiThreadedExecutor(num_threads=max(2, len(nodes))) if blocking_callbacks
+        executor = (CallbackThreadPool(num_threads=max(2, len(nodes))) if blocking_callbacks
                     else EventsExecutor())
         for node in nodes:
             executor.add_node(node)
