@@ -17,15 +17,19 @@ simulation and settles -> the settled ``AtRest`` is the answer. Clock modes (``s
 """
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 
 from builtin_interfaces.msg import Time
-from qg_common.node_runtime import LoopThread, RealtimePacer, favour_loop_thread, run_nodes
+from qg_common.node_runtime import LoopThread, favour_loop_thread, run_nodes
+from qg_common.realtime_pacer import RealtimePacer
 from rclpy.node import Node
 
 from robot_bridge_node.bridge_node import BridgeNode, LoopRunner
 from robot_bridge_node.core.robot_loop import RobotLoop
+from robot_bridge_node.core.tick_timing import TickTiming
 from robot_bridge_node.estimator_node import WrenchEstimatorNode
+from robot_bridge_node.loop_diagnostics import LoopDiagnostics
 from robot_bridge_node.recorder_node import RecorderNode
 from robot_bridge_node.simulation_node import SimulationNode, serve_reset
 
@@ -58,9 +62,13 @@ class RobotProcess:
         #: Realtime: holds the wall-clock tick period (``missed`` counts dropped ticks).
         self.pacer = RealtimePacer(self.loop.config.dt) if config.realtime else None
         pacer = self.pacer
+        #: Realtime: how the ticks were spaced (published on ``diagnostics``).
+        self.timing = TickTiming(self.loop.config.dt)
+        timing = self.timing
 
         def pace() -> bool:
-            pacer.wait()
+            timing.drop(pacer.wait())
+            timing.tick(time.perf_counter_ns())
             return True
         self.runner = LoopRunner(self.loop, bridge, lockstep=not config.realtime,
                                  pace=pace if pacer is not None else None,
@@ -97,6 +105,8 @@ def _start(nodes: list[Node]) -> Callable[[], None]:
     process = RobotProcess(sim, bridge, estimator)
     process.runner.loop_observers.append(recorder.observe)
     recorder.clock_ns = process.runner.now_ns
+    if sim.config.realtime:
+        LoopDiagnostics(bridge, process.timing.snapshot, str(sim.get_parameter("robot").value))
     return process.start()
 
 

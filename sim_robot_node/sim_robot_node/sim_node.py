@@ -23,7 +23,8 @@ import numpy as np
 from geometry_msgs.msg import WrenchStamped
 from qg_common import topics
 from qg_common.conversions import time_ns, wrench_stamped
-from qg_common.node_runtime import LoopThread, RealtimePacer, favour_loop_thread, run_nodes
+from qg_common.node_runtime import LoopThread, favour_loop_thread, run_nodes
+from qg_common.realtime_pacer import RealtimePacer
 from qg_interfaces.msg import AtRest
 from rclpy.node import Node
 from robot_bridge_node.core.hardware_interface import Robot

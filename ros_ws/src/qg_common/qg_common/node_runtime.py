@@ -15,7 +15,6 @@ import os
 import signal
 import sys
 import threading
-import time
 import traceback
 from collections.abc import Callable, Sequence
 
@@ -29,8 +28,7 @@ from qg_common.callback_executor import CallbackThreadPool
 from qg_common.node_parameters import unknown_overrides
 from qg_common.params import ConfigError
 
-__all__ = ["LoopThread", "RealtimePacer", "REALTIME_SWITCH_INTERVAL", "run_nodes",
-           "favour_loop_thread"]
+__all__ = ["LoopThread", "REALTIME_SWITCH_INTERVAL", "run_nodes", "favour_loop_thread"]
 
 #: [s] Python's GIL hand-over interval in a process with a wall-clock 1 kHz thread. The default
 #: 5 ms lets a ROS callback thread hold the GIL for five ticks before the loop thread gets it back.
@@ -136,44 +134,6 @@ def _stop_on_signals() -> _StopRequest:
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, handle)
     return stopping
-
-
-class RealtimePacer:
-    """Holds a fixed wall-clock period: sleeps most of the wait, busy-waits the last bit.
-
-    ``time.sleep`` on Linux wakes 50-100 us late, so the pacer sleeps until ``spin`` before the
-    deadline and spins the rest. Deadlines are absolute (``start + k * period``), so short
-    delays are made up on the next ticks; a loop more than one period behind re-anchors instead
-    of bursting through the missed ticks (hardware would have dropped them), and counts them.
-
-    :param period: [s] tick period.
-    :param spin: [s] busy-wait before each deadline.
-    """
-
-    def __init__(self, period: float, spin: float = 2e-4) -> None:
-        if period <= 0.0 or spin < 0.0:
-            raise ValueError(f"period must be > 0 and spin >= 0, got {period}, {spin}")
-        self.period = period
-        self.spin = spin
-        self.missed = 0
-        self._next: float | None = None
-
-    def wait(self) -> None:
-        """Return at the next deadline (at once on the first call)."""
-        now = time.perf_counter()
-        if self._next is None:
-            self._next = now
-            return
-        self._next += self.period
-        if now - self._next > self.period:
-            self.missed += int((now - self._next) / self.period)
-            self._next = now
-            return
-        remaining = self._next - now
-        if remaining > self.spin:
-            time.sleep(remaining - self.spin)
-        while time.perf_counter() < self._next:
-            pass
 
 
 class LoopThread:

@@ -13,7 +13,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 __all__ = [
     "JOINT_STATES", "JOINT_COMMANDS", "GROUND_TRUTH", "GROUND_TRUTH_WRENCH", "CLOCK",
     "SIM_RESTARTED", "SIM_RESET", "WRENCH_ESTIMATE", "WRENCH_SETPOINT", "EE_POSE", "EE_TWIST",
-    "EE_AT_REST", "EPISODE_STATUS", "TRANSITIONS", "ACTOR_PARAMETERS", "LEARNER_DIAGNOSTICS",
+    "EE_AT_REST", "DIAGNOSTICS", "EPISODE_STATUS", "TRANSITIONS", "ACTOR_PARAMETERS", "LEARNER_DIAGNOSTICS",
     "START_EPISODE", "STOP_EPISODE", "TASK_SPEC", "LEARNER_NODE", "SENSOR_QOS", "COMMAND_QOS", "RESTARTED_QOS",
     "RELIABLE_DEEP", "LATCHED", "robot_topic"]
 
@@ -30,6 +30,7 @@ WRENCH_SETPOINT = "wrench_setpoint"            # RL step
 EE_POSE = "ee_pose"
 EE_TWIST = "ee_twist"
 EE_AT_REST = "ee_at_rest"                      # RL step
+DIAGNOSTICS = "diagnostics"                    # 1 Hz: the realtime loop's timing
 
 # --- learning ------------------------------------------------------------------------------
 EPISODE_STATUS = "episode_status"

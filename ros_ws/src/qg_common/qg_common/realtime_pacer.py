@@ -1,0 +1,48 @@
+"""A fixed wall-clock period for a loop thread, kept without ROS (the robot's loop process has
+no rclpy; the separate sim and the composed robot process use it too)."""
+from __future__ import annotations
+
+import time
+
+__all__ = ["RealtimePacer"]
+
+
+class RealtimePacer:
+    """Holds a fixed wall-clock period: sleeps most of the wait, busy-waits the last bit.
+
+    ``time.sleep`` on Linux wakes 50-100 us late, so the pacer sleeps until ``spin`` before the
+    deadline and spins the rest. Deadlines are absolute (``start + k * period``), so short
+    delays are made up on the next ticks; a loop more than one period behind re-anchors instead
+    of bursting through the missed ticks (hardware would have dropped them), and counts them.
+
+    :param period: [s] tick period.
+    :param spin: [s] busy-wait before each deadline.
+    """
+
+    def __init__(self, period: float, spin: float = 2e-4) -> None:
+        if period <= 0.0 or spin < 0.0:
+            raise ValueError(f"period must be > 0 and spin >= 0, got {period}, {spin}")
+        self.period = period
+        self.spin = spin
+        self.missed = 0
+        self._next: float | None = None
+
+    def wait(self) -> int:
+        """Return at the next deadline (at once on the first call); the number of ticks dropped
+        on the way (0 unless the loop fell a whole period behind)."""
+        now = time.perf_counter()
+        if self._next is None:
+            self._next = now
+            return 0
+        self._next += self.period
+        if now - self._next > self.period:
+            dropped = int((now - self._next) / self.period)
+            self.missed += dropped
+            self._next = now
+            return dropped
+        remaining = self._next - now
+        if remaining > self.spin:
+            time.sleep(remaining - self.spin)
+        while time.perf_counter() < self._next:
+            pass
+        return 0
