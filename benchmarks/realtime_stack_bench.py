@@ -36,28 +36,44 @@ REALTIME = {("robot_bridge_node", "robot"): ("-p", "sim.clock_mode:=realtime"),
             ("qg_learning_node", "executor"): ("-p", "keepalive_period:=0.005")}
 
 
-def realtime_specs(robots: int) -> list:
-    """The stack's processes with the demo's learning settings, every robot in realtime."""
+def realtime_specs(robots: int, robot_args: tuple[str, ...]) -> list:
+    """The stack's processes with the demo's learning settings, every robot in realtime (with
+    ``robot_args``, ``-p name:=value`` pairs, added to the robot process's parameters)."""
     specs = []
     for spec in load_stack_config(config_file("stack.yaml")):
         spec = _with_demo_settings(spec, DemoSettings(train_max_steps=50))
         extra = REALTIME.get((spec.package, spec.executable))
         if extra:
+            if spec.executable == "robot":
+                extra = (*extra, *robot_args)
             spec = replace(spec, args=(*spec.args, "--ros-args", *extra))
         specs.append(spec)
     return fleet_specs(specs, robots)
 
 
+def _stat(pid: int) -> list[str]:
+    return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+
+
 def process_cpu(pids: dict[str, int]) -> dict[str, float]:
-    """[s] user + system CPU time of each process so far."""
+    """[s] user + system CPU time of each process so far, its children's (a robot process's
+    loop process) under ``<name>/child``."""
     tick = os.sysconf("SC_CLK_TCK")
+    children: dict[int, list[int]] = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                children.setdefault(int(_stat(int(entry))[1]), []).append(int(entry))
+            except (OSError, IndexError, ValueError):
+                pass
     cpu = {}
     for name, pid in pids.items():
-        try:
-            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-            cpu[name] = (int(fields[11]) + int(fields[12])) / tick
-        except (OSError, IndexError, ValueError):
-            cpu[name] = float("nan")
+        for key, proc in ((name, pid), *((f"{name}/child", c) for c in children.get(pid, []))):
+            try:
+                fields = _stat(proc)
+                cpu[key] = (int(fields[11]) + int(fields[12])) / tick
+            except (OSError, IndexError, ValueError):
+                cpu[key] = float("nan")
     return cpu
 
 
@@ -70,6 +86,8 @@ def main() -> None:
     parser.add_argument("--robots", type=int, default=1)
     parser.add_argument("--warmup", type=float, default=10.0,
                         help="[s] of training before the window opens")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME:=VALUE",
+                        help="a robot process parameter, e.g. sim.realtime_priority:=0")
     args = parser.parse_args()
     robots = [robot_namespace(k) for k in range(args.robots)] if args.robots > 1 else [""]
     run_dir = Path(tempfile.mkdtemp(prefix="realtime_stack_"))
@@ -77,7 +95,8 @@ def main() -> None:
     env["QG_RUNS_DIR"] = str(run_dir)
     env["ROS_DOMAIN_ID"] = os.environ.get("ROS_DOMAIN_ID", "78")
     launcher = Launcher(env=env, out=None, log_dir=run_dir / "logs")
-    launcher.start(realtime_specs(args.robots))
+    launcher.start(realtime_specs(args.robots,
+                                  tuple(x for item in args.set for x in ("-p", item))))
     latest: dict[str, TimingSnapshot] = {}
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
@@ -115,7 +134,8 @@ def main() -> None:
         codes = launcher.stop()
     (t_start, start, cpu0), (t_end, end, cpu1) = marks["start"], marks["end"]
     wall = t_end - t_start
-    result: dict = {"seconds": wall, "robots": args.robots, "loops": {}, "exit_codes": codes,
+    result: dict = {"seconds": wall, "robots": args.robots, "set": args.set, "loops": {},
+                    "exit_codes": codes,
                     "cpu_percent": {name: 100.0 * (cpu1[name] - cpu0[name]) / wall
                                     for name in cpu1}}
     for name in sorted(end):

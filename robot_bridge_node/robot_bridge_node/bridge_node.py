@@ -1,12 +1,13 @@
 """The ``bridge`` node: the robot-agnostic command interface in front of the (simulated) robot.
 
 The bridge owns the 1 kHz loop (``core/robot_loop.py``), like a robot's controller process:
-``LoopRunner`` drives it on a dedicated thread (not an rclpy timer, whose jitter is several ms),
-takes ``wrench_setpoint`` in, and publishes the tool pose and twist and
-the ``ee_at_rest`` event that ends an RL step. In the composed ``robot`` process the loop's
-hardware is the robot plugin; run on its own (``ros2 run robot_bridge_node bridge``) it is
-``RemoteRobot``, which reads ``joint_states`` from the separate sim and writes
-``joint_commands``, one tick per received state, on the states' clock (``StateClock``). Which
+it takes ``wrench_setpoint`` in, and publishes the tool pose and twist and the ``ee_at_rest``
+event that ends an RL step. In the composed ``robot`` process the loop runs in a process of its
+own with the robot plugin as its hardware (``robot_process.py``); run on its own (``ros2 run
+robot_bridge_node bridge``) a ``LoopRunner`` drives it on a dedicated thread (not an rclpy
+timer, whose jitter is several ms) with ``RemoteRobot`` as its hardware, which reads
+``joint_states`` from the separate sim and writes ``joint_commands``, one tick per received
+state, on the states' clock (``StateClock``). Which
 loop, controller and parameters a robot gets is its interface kind's (``interface_kinds``), looked
 up by the name its plugin gives: this module names no robot and no kind.
 """
@@ -14,7 +15,6 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -36,14 +36,12 @@ from robot_bridge_node.core.hardware_interface import (ROBOT_SECTION, Robot, Rob
                                                        robot_plugin)
 from robot_bridge_node.core.impedance import ToolState
 from robot_bridge_node.core.interface_kinds import interface_kind
+from robot_bridge_node.core.loop_runner import (LoopRunner, ResetCommand, SetpointCommand,
+                                                StepEvent, ThreadMailbox)
 from robot_bridge_node.core.robot_loop import RobotLoop, StateClock
-from robot_bridge_node.core.safety import SetpointRejected
 
-__all__ = ["BridgeNode", "LoopRunner", "LoopObserver", "RemoteRobot", "LatestWrench",
-           "MAX_STATE_GAP", "main"]
-
-#: Called after every tick with the simulated time [ns] (e.g. an MCAP recorder).
-LoopObserver = Callable[[int, RobotLoop], None]
+__all__ = ["BridgeNode", "RosOutlet", "log_at", "RemoteRobot", "LatestWrench", "MAX_STATE_GAP",
+           "main"]
 
 
 class BridgeNode(Node):
@@ -84,221 +82,35 @@ class BridgeNode(Node):
         self.ee_twist.publish(twist_stamped(tool.twist, stamp))
 
 
-@dataclass
-class _ResetJob:
-    """A reset handed to the loop thread; ``done`` is set with the observation or the error."""
-    initial_pose: int
-    housing_yaw: float
-    session: str
-    done: threading.Event
-    observation: AtRest | None = None
-    error: Exception | None = None
+class RosOutlet:
+    """A ``LoopRunner``'s output as the separate bridge's topics: the tool pose and twist of
+    the publishing ticks and the at-rest events, from the loop's thread."""
 
-
-class LoopRunner:
-    """Drives one ``RobotLoop`` on its own thread: setpoints and resets in, ticks, events out.
-
-    Everything that touches the loop runs on that thread; the ROS callbacks only leave work in
-    a mailbox (the latest setpoint, a pending reset). A setpoint with a new ``seq`` starts a
-    step; one with the ``seq`` of the last accepted command only feeds the watchdog (the
-    executor repeats the current setpoint every few ms in realtime mode). A rejected setpoint
-    (NaN/inf) is logged and the previous command stays.
-
-    Only the session being served steers the arm: a reset names a session (the executor's
-    episode), and from then on a setpoint of any other session is dropped before it reaches the
-    mailbox, logged and counted (``foreign_setpoints`` in every ``AtRest``). A reset with the
-    empty session serves any sender (manual use).
-
-    :param loop: the loop; its ``config.realtime`` turns the watchdog on.
-    :param bridge: publishes the tool state and ``/ee_at_rest``.
-    :param lockstep: tick only while a step runs, as fast as possible, stamped with simulated
-        time; otherwise tick continuously, stamped with the wall clock.
-    :param pace: not lockstep: called before every tick, returns once the tick is due; False
-        skips the tick (nothing to do yet).
-    :param publish_every: publish the 1 kHz topics every this many ticks.
-    :param publish: extra outputs of a published tick, given its stamp (the composed process
-        publishes the sim's and the estimator's topics and ``/clock`` there).
-    """
-
-    def __init__(self, loop: RobotLoop, bridge: BridgeNode, *, lockstep: bool,
-                 pace: Callable[[], bool] | None = None, publish_every: int = 1,
-                 publish: Callable[[Time], None] | None = None) -> None:
-        if not lockstep and pace is None:
-            raise ValueError("a free-running (realtime) loop needs a pace")
-        self.loop = loop
+    def __init__(self, bridge: BridgeNode) -> None:
         self.bridge = bridge
-        self.lockstep = lockstep
-        self.pace = pace
-        self.publish_every = max(1, publish_every)
-        self.publish = publish
-        #: The per-tick hook: each is called after every tick (and once a reset has settled)
-        #: with its stamp [ns] (``now_ns``), the one its published messages carry.
-        self.loop_observers: list[LoopObserver] = []
-        self._dt_ns = round(loop.config.dt * 1e9)
-        self._settle_ticks = round(loop.config.settle_time / loop.config.dt)
-        self.clock_ns = 0          # simulated time: ticks run since start, resets included
-        self.ticks = 0
-        self._mail = threading.Condition()
-        self._setpoint: WrenchSetpointMsg | None = None
-        self._reset: _ResetJob | None = None
-        self._seq: int | None = None        # last accepted setpoint
-        self._step_start: float | None = None   # loop time of the running step's start
-        self._session = ""                  # the served session ("" = any sender)
-        self.foreign_setpoints = 0          # setpoints of other sessions since the last reset
 
-    # --- called from ROS callbacks -----------------------------------------------------------
-    def submit_setpoint(self, msg: WrenchSetpointMsg) -> None:
-        """Hand a setpoint of the served session to the loop (the latest one wins); drop and
-        count one of another session."""
-        with self._mail:
-            if not self._serves(msg):
-                self.foreign_setpoints += 1
-                served = self._session
-            else:
-                self._setpoint = msg
-                self._mail.notify()
-                return
-        self.bridge.get_logger().warning(
-            f"setpoint {msg.seq} of session '{msg.session}' ignored: serving '{served}'",
-            throttle_duration_sec=1.0)
+    def sample(self, t_ns: int, loop: RobotLoop, publish: bool) -> None:
+        tool = loop.controller.tool
+        if publish and tool is not None:
+            self.bridge.publish_tool(time_msg(t_ns), tool)
 
-    def _serves(self, msg: WrenchSetpointMsg) -> bool:
-        """Whether ``msg`` belongs to the served session (any does while that is "")."""
-        return not self._session or msg.session == self._session
+    def at_rest(self, event: StepEvent) -> None:
+        self.bridge.ee_at_rest.publish(at_rest_msg(event.seq, event.result, event.position,
+                                                   event.rotation, time_msg(event.t_ns)))
 
-    def request_reset(self, initial_pose: int, housing_yaw: float = 0.0,
-                      session: str = "") -> _ResetJob:
-        """Ask the loop thread to reset and settle, then serve ``session``; returns at once."""
-        job = _ResetJob(initial_pose, housing_yaw, session, threading.Event())
-        with self._mail:
-            self._reset = job
-            self._session = session
-            self.foreign_setpoints = 0
-            self._mail.notify()
-        return job
+    def reset_done(self, job: int, event: StepEvent | None, error: str | None) -> None:
+        del job, event, error     # the sim restarted on its own: nobody waits for an answer
 
-    def reset(self, initial_pose: int, housing_yaw: float = 0.0, timeout: float = 30.0,
-              session: str = "") -> AtRest:
-        """Reset and settle on the loop thread; the settled observation (also on /ee_at_rest).
-        From then on only setpoints of ``session`` are executed ("" = any).
+    def log(self, level: str, message: str) -> None:
+        log_at(self.bridge, level, message)
 
-        :raises TimeoutError: if the loop thread does not finish in ``timeout`` seconds.
-        :raises RuntimeError, ValueError: what the simulation raised (e.g. IK out of reach).
-        :raises TimeoutError: also when a remote robot sends no state after its restart.
-        """
-        job = self.request_reset(initial_pose, housing_yaw, session)
-        if not job.done.wait(timeout):
-            raise TimeoutError(f"the loop did not reset within {timeout:.0f} s")
-        if job.error is not None:
-            raise job.error
-        assert job.observation is not None
-        return job.observation
 
-    # --- the loop thread ---------------------------------------------------------------------
-    def run(self, stop: threading.Event) -> None:
-        """Body of the loop thread (see ``LoopThread``)."""
-        while not stop.is_set():
-            if self.lockstep:
-                if not self._wait_for_work(stop):
-                    continue
-            elif not self.pace():
-                continue
-            self._take_mail()
-            if self.lockstep and self._step_start is None:
-                continue
-            at_rest = self.loop.tick()
-            self._after_tick(at_rest)
-
-    def _wait_for_work(self, stop: threading.Event) -> bool:
-        """Lockstep: a step runs or mail is waiting (else wait a little and say no)."""
-        if self._step_start is not None:
-            return True
-        with self._mail:
-            if self._setpoint is None and self._reset is None:
-                self._mail.wait(timeout=0.05)
-            return self._setpoint is not None or self._reset is not None
-
-    def _take_mail(self) -> None:
-        with self._mail:
-            setpoint, self._setpoint = self._setpoint, None
-            job, self._reset = self._reset, None
-        if job is not None:
-            self._do_reset(job)
-        # A command of another session that was waiting when the reset came must not run in it.
-        if setpoint is not None and self._serves(setpoint):
-            self._take_setpoint(setpoint)
-
-    def _take_setpoint(self, msg: WrenchSetpointMsg) -> None:
-        loop = self.loop
-        if msg.seq == self._seq:
-            loop.feed_watchdog()
-            return
-        try:
-            loop.command(setpoint_from_msg(msg))
-        except SetpointRejected as exc:
-            self.bridge.get_logger().error(
-                f"setpoint {msg.seq} rejected: {exc}; keeping the previous command",
-                throttle_duration_sec=1.0)
-            return
-        self._seq = msg.seq
-        self._step_start = loop.time
-
-    def _do_reset(self, job: _ResetJob) -> None:
-        try:
-            self.loop.reset(job.initial_pose, job.housing_yaw)
-        except (RuntimeError, ValueError, TimeoutError) as exc:
-            self.bridge.get_logger().error(f"reset failed: {exc}")
-            job.error = exc
-            job.done.set()
-            return
-        self._seq = None
-        self._step_start = None
-        self.clock_ns += self._settle_ticks * self._dt_ns
-        t_ns = self.now_ns()
-        self._observe(t_ns)  # the settled start state is published: it is recorded too
-        stamp = time_msg(t_ns)
-        job.observation = self._event(0, self.loop.time - self.loop.config.settle_time, stamp)
-        self.publish_sample(stamp)
-        self.bridge.ee_at_rest.publish(job.observation)
-        job.done.set()
-
-    def _after_tick(self, at_rest: bool) -> None:
-        self.ticks += 1
-        self.clock_ns += self._dt_ns
-        t_ns = self.now_ns()  # the tick's one stamp: observers record what is published
-        self._observe(t_ns)
-        stamp: Time | None = None
-        if self.ticks % self.publish_every == 0:
-            stamp = time_msg(t_ns)
-            self.publish_sample(stamp)
-        if at_rest and self._step_start is not None:
-            event = self._event(self._seq or 0, self._step_start, stamp or time_msg(t_ns))
-            self._step_start = None
-            self.bridge.ee_at_rest.publish(event)
-
-    def _observe(self, t_ns: int) -> None:
-        for observer in self.loop_observers:
-            observer(t_ns, self.loop)
-
-    def now_ns(self) -> int:
-        """The loop's clock [ns], which stamps its messages: simulated time in lockstep (it
-        stands still between steps), the bridge node's clock (wall clock) otherwise."""
-        return self.clock_ns if self.lockstep else self.bridge.get_clock().now().nanoseconds
-
-    def publish_sample(self, stamp: Time) -> None:
-        """Publish the loop's current state on the 1 kHz topics."""
-        tool = self.loop.controller.tool
-        if tool is not None:
-            self.bridge.publish_tool(stamp, tool)
-        if self.publish is not None:
-            self.publish(stamp)
-
-    def _event(self, seq: int, start: float, stamp: Time) -> AtRest:
-        """The ``AtRest`` of the step that started at loop time ``start``."""
-        tool = self.loop.controller.tool
-        return at_rest_msg(seq, self.loop.result(start), tool.position, tool.rotation, stamp,
-                           self.foreign_setpoints)
-
+def log_at(node: Node, level: str, message: str) -> None:
+    """Log a line the loop reported (``info``, ``warning``, else error), at most once a second
+    for the same call site (a loop can repeat a complaint every tick)."""
+    logger = node.get_logger()
+    {"info": logger.info, "warning": logger.warning}.get(level, logger.error)(
+        message, throttle_duration_sec=1.0)
 
 
 # --- separate-process mode ------------------------------------------------------------------
@@ -446,11 +258,10 @@ def _start_separate_bridge(nodes: list[Node]) -> Callable[[], None]:
     bridge = nodes[0]
     assert isinstance(bridge, BridgeNode)
     p = bridge.params
-    runner: LoopRunner | None = None
+    mailbox = ThreadMailbox()
 
     def restart() -> None:
-        if runner is not None:
-            runner.request_reset(0)
+        mailbox.post_reset(ResetCommand(0))
 
     # The robot's own parameters belong to the separate sim process: describe it by its defaults.
     description = bridge.plugin.describe(package_defaults("sim", bridge.plugin.config_files))
@@ -459,8 +270,9 @@ def _start_separate_bridge(nodes: list[Node]) -> Callable[[], None]:
     loop = bridge.kind.build_loop(Robot(remote, remote, description), params, {},
                                   wrench=LatestWrench(bridge),
                                   clock=StateClock(remote, MAX_STATE_GAP))
-    runner = LoopRunner(loop, bridge, lockstep=False, pace=remote.wait_ready)
-    bridge.setpoint_handler = runner.submit_setpoint
+    runner = LoopRunner(loop, mailbox, RosOutlet(bridge), lockstep=False, pace=remote.wait_ready)
+    bridge.setpoint_handler = lambda msg: mailbox.post_setpoint(
+        SetpointCommand(int(msg.seq), setpoint_from_msg(msg)))
     favour_loop_thread()
     return LoopThread("bridge loop", runner.run, bridge).start().stop
 

@@ -1,10 +1,12 @@
 """The ``recorder`` node: one MCAP bag (rosbag2 layout) per episode, written in the robot process.
 
-The 1 kHz data (joint states, wrench estimate, EEF pose/twist, ground truth) is taken straight
-from the loop after each tick, so it never crosses a process boundary and no sample is dropped;
-it is stamped with the tick's stamp, the one the live messages of that tick carry. The RL-rate
+The 1 kHz data (joint states, wrench estimate, EEF pose/twist, ground truth) is every tick of the
+loop as its loop process wrote it into the sample ring (``record_samples``, on the thread that
+reads the ring, in blocks: the loop spends no time on it and no sample is dropped); each is
+stamped with its tick's stamp, the one the live messages of that tick carry. The ground truth
+is recorded as often as the loop computes it (``sim.ground_truth_rate``). The RL-rate
 topics (setpoints, at-rest events, transitions, episode status) arrive by subscription and are
-logged at their arrival on the same clock, the loop's (``LoopRunner.now_ns``: simulated time in
+logged at their arrival on the same clock, the loop's (``LoopLink.now_ns``: simulated time in
 lockstep, the wall clock in realtime), as rosbag2 logs receive times: one time base per bag, and
 a bag starts with its first message. Episode boundaries come from ``/episode_status``: a bag
 opens when an episode starts resetting and closes once the episode has ended and all of its
@@ -14,27 +16,31 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from qg_common import topics
 from qg_common.conversions import BASE_FRAME, TOOL_FRAME, quaternion_from_matrix
 from qg_common.node_parameters import declare_parameters, on_parameter_change
 from qg_common.params import ParameterSection, config_from_dict, runs_dir
 from qg_interfaces.msg import AtRest, EpisodeStatus, Transition, WrenchSetpoint
-from qg_recording.episode_recorder import EpisodeRecorder
+from qg_recording.cdr import fixed_layout
+from qg_recording.episode_recorder import EpisodeRecorder, ground_truth_columns
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 
-from robot_bridge_node.core.robot_loop import RobotLoop
+from robot_bridge_node.core.sample_ring import HAS_TOOL, HAS_TRUTH, HAS_WRENCH
 
 __all__ = ["RecorderConfig", "RECORDER_SECTION", "RecorderNode"]
 
 _FINAL = ("done", "aborted")
+GROUND_TRUTH_LAYOUT = fixed_layout("qg_interfaces/msg/GroundTruth", TOOL_FRAME)
 #: [s] a bag stays open at least this long after its episode ended (see ``_close_if_complete``).
 _SETTLE = 0.1
 #: ``/episode_status`` as its publisher offers it (transient local: a late recorder still gets
@@ -51,18 +57,13 @@ class RecorderConfig:
     :param record: record episodes at all (changeable while running: from the next episode).
     :param episodes_dir: folder of the episode bags; "" = ``$QG_RUNS_DIR/episodes``, else
         ``runs/episodes`` in the current directory.
-    :param ground_truth_every: [ticks] between ground-truth samples (computing contact truth
-        costs more than the rest of a tick).
     :param close_timeout: [s] wait this long for late transitions after the episode ended.
     """
     record: bool = True
     episodes_dir: str = ""
-    ground_truth_every: int = 10
     close_timeout: float = 2.0
 
     def __post_init__(self) -> None:
-        if self.ground_truth_every < 1:
-            raise ValueError(f"ground_truth_every must be >= 1, got {self.ground_truth_every}")
         if not self.close_timeout >= 0.0:
             raise ValueError(f"close_timeout must be >= 0 s, got {self.close_timeout}")
 
@@ -72,15 +73,15 @@ class RecorderConfig:
 
 
 RECORDER_SECTION = ParameterSection(
-    "", RecorderConfig, ranges={"ground_truth_every": (1, 100000), "close_timeout": (0.0, 600.0)},
-    runtime=frozenset({"record", "ground_truth_every", "close_timeout"}))
+    "", RecorderConfig, ranges={"close_timeout": (0.0, 600.0)},
+    runtime=frozenset({"record", "close_timeout"}))
 
 
 class RecorderNode(Node):
-    """Per-episode recording. ``observe`` is the loop hook, called after every tick.
+    """Per-episode recording; ``record_samples`` takes the loop's ticks.
 
-    Parameters: ``RecorderConfig``; ``record``, ``ground_truth_every`` and ``close_timeout``
-    may be changed while it runs (``ros2 param set``).
+    Parameters: ``RecorderConfig``; ``record`` and ``close_timeout`` may be changed while it
+    runs (``ros2 param set``).
     """
 
     def __init__(self) -> None:
@@ -94,7 +95,6 @@ class RecorderNode(Node):
         self.transitions = 0
         self.final_steps: int | None = None
         self.ended_at = 0.0
-        self.ticks = 0
         group = MutuallyExclusiveCallbackGroup()
         self._subscribe(EpisodeStatus, topics.EPISODE_STATUS, self._on_status, _STATUS_QOS, group)
         self._subscribe(Transition, topics.TRANSITIONS, self._on_transition, topics.RELIABLE_DEEP, group)
@@ -109,29 +109,31 @@ class RecorderNode(Node):
         """``ros2 param set``: the new values (validated) apply from now on."""
         self.config = RecorderConfig.from_dict(params)
 
-    # --- the 1 kHz hook -------------------------------------------------------------------
-    def observe(self, t_ns: int, loop: RobotLoop) -> None:
-        """Record one tick of the loop (does nothing between episodes)."""
+    # --- the 1 kHz data ---------------------------------------------------------------------
+    def record_samples(self, records: np.ndarray, joint_names: Sequence[str]) -> None:
+        """Record the loop's ticks (``sample_ring`` records; nothing between episodes)."""
         if not self.episode_id:
             return
-        rec = self.recorder
-        state = loop.hardware.read()
-        rec.record_joint_state(t_ns, loop.hardware.joint_names, state.q, state.dq, state.tau)
-        if loop.wrench_estimate is not None:
-            w = loop.wrench_estimate
-            rec.record_wrench(t_ns, w[:3], w[3:], TOOL_FRAME)
-        tool = loop.controller.tool
-        if tool is not None:
-            rec.record_pose(t_ns, tool.position, quaternion_from_matrix(tool.rotation), BASE_FRAME)
-            rec.record_twist(t_ns, tool.twist[:3], tool.twist[3:], BASE_FRAME)
-        self.ticks += 1
-        if self.ticks % self.config.ground_truth_every == 0:
-            gt = loop.ground_truth()
-            rec.record_ground_truth(t_ns, gt.wrench, gt.insertion_depth, gt.plunger_travel,
-                                    gt.success, gt.position_error, gt.orientation_error,
-                                    gt.lateral_offset, gt.tilt, TOOL_FRAME)
-            rec.record_wrench(t_ns, gt.wrench[:3], gt.wrench[3:], TOOL_FRAME,
-                              topic="/sim/ground_truth_wrench")
+        rec, t = self.recorder, records["t_ns"]
+        rec.record_rows("/joint_states", t, np.hstack([records["q"], records["dq"],
+                                                       records["tau"]]), names=joint_names)
+        with_wrench = records[(records["flags"] & HAS_WRENCH) != 0]
+        rec.record_rows("/wrench_estimate", with_wrench["t_ns"], with_wrench["wrench"], TOOL_FRAME)
+        with_tool = records[(records["flags"] & HAS_TOOL) != 0]
+        quaternions = [quaternion_from_matrix(r) for r in with_tool["tool_rotation"]]
+        rec.record_rows("/ee_pose", with_tool["t_ns"],
+                        np.hstack([with_tool["tool_position"], np.reshape(quaternions, (-1, 4))]),
+                        BASE_FRAME)
+        rec.record_rows("/ee_twist", with_tool["t_ns"], with_tool["tool_twist"], BASE_FRAME)
+        truth = records[(records["flags"] & HAS_TRUTH) != 0]["truth"]
+        if len(truth):
+            t_truth = records["t_ns"][(records["flags"] & HAS_TRUTH) != 0]
+            values = np.zeros((len(truth), GROUND_TRUTH_LAYOUT.n_values))
+            ground_truth_columns(GROUND_TRUTH_LAYOUT, values, truth[:, :6], truth[:, 6:7],
+                                 truth[:, 7:8], truth[:, 8:9], truth[:, 9:10], truth[:, 10:12],
+                                 truth[:, 12:13], truth[:, 13:14])
+            rec.record_rows("/sim/ground_truth", t_truth, values, TOOL_FRAME)
+            rec.record_rows("/sim/ground_truth_wrench", t_truth, truth[:, :6], TOOL_FRAME)
 
     # --- RL-rate topics -------------------------------------------------------------------
     def _subscribe(self, msg_type: type, topic: str, handler: Callable[[int, bytes, Any], None],

@@ -1,33 +1,49 @@
 """The ``robot`` process: sim, bridge, estimator and recorder nodes around one 1 kHz loop.
 
-Sending joint states between processes at 1 kHz costs more than the loop itself, so the robot
-(the plugin named by the ``robot`` parameter, ``sim_panda`` by default), the controller and the
-EKF run as one ``RobotLoop`` on one thread (``bridge_node.LoopRunner``), and the nodes only
-publish what it produced and serve its services, under their own names, parameters and topics.
+The loop (the robot plugin named by the ``robot`` parameter, ``sim_panda`` by default, the
+controller and the EKF) runs in a loop process of its own (``core/loop_process.py``), where no
+ROS thread competes with it for Python's interpreter lock; this process keeps the nodes. Every
+tick reaches it through a shared-memory ring (``core/sample_ring.py``), read by one thread
+(``core/loop_link.py``) that publishes the ticks of the publishing rate under the nodes' names,
+hands every tick to the recorder, and publishes the at-rest events. Nothing crosses a process
+boundary at 1 kHz as a message.
 
 The reset path, end to end: the executor calls ``sim/reset`` -> ``serve_reset`` validates ->
-``LoopRunner.reset`` hands the job to the loop thread -> ``RobotLoop.reset`` resets the plugin's
-simulation and settles -> the settled ``AtRest`` is the answer. Clock modes (``sim.clock_mode``):
+``RobotProcess.reset`` opens the session and sends the reset to the loop process -> its
+``LoopRunner`` resets the plugin's simulation and settles -> the settled event is the answer.
+Clock modes (``sim.clock_mode``):
 
 - ``lockstep``: the loop ticks as fast as it can while a setpoint executes and pauses once the
   step is at rest until the next setpoint or reset; messages carry simulated time and ``/clock``
   is published, so a run is reproducible.
 - ``realtime``: the loop ticks at wall-clock 1 kHz, holds the last command like hardware, and
-  the safety watchdog holds the pose when setpoints stop coming for 10 ms.
+  the safety watchdog holds the pose when setpoints stop coming for 10 ms; its timing is on
+  ``diagnostics``.
 """
 from __future__ import annotations
 
-import time
+import threading
 from collections.abc import Callable
 
-from builtin_interfaces.msg import Time
-from qg_common.node_runtime import LoopThread, favour_loop_thread, run_nodes
-from qg_common.realtime_pacer import RealtimePacer
+import numpy as np
+import rclpy
+from qg_common.conversions import (at_rest_msg, ground_truth_msg, joint_state_msg,
+                                   pose_stamped, setpoint_from_msg, time_msg, twist_stamped,
+                                   wrench_stamped)
+from qg_common.node_runtime import run_nodes
+from qg_common.types import JointState
+from qg_interfaces.msg import AtRest
+from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
 from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
 
-from robot_bridge_node.bridge_node import BridgeNode, LoopRunner
-from robot_bridge_node.core.robot_loop import RobotLoop
-from robot_bridge_node.core.tick_timing import TickTiming
+from robot_bridge_node.bridge_node import BridgeNode, log_at
+from robot_bridge_node.core.loop_link import LoopLink
+from robot_bridge_node.core.loop_process import LoopSpec
+from robot_bridge_node.core.loop_runner import SetpointCommand, StepEvent
+from robot_bridge_node.core.sample_ring import (HAS_TOOL, HAS_TRUTH, HAS_WRENCH, PUBLISH,
+                                                truth_from_array)
+from robot_bridge_node.core.tick_timing import TimingSnapshot
 from robot_bridge_node.estimator_node import WrenchEstimatorNode
 from robot_bridge_node.loop_diagnostics import LoopDiagnostics
 from robot_bridge_node.recorder_node import RecorderNode
@@ -37,77 +53,128 @@ __all__ = ["RobotProcess", "main"]
 
 
 class RobotProcess:
-    """One ``RobotLoop`` (robot plugin, controller, safety, rest detector, EKF) and its nodes.
+    """The nodes of one robot and the link to its loop process (``LoopListener``).
 
     The loop is the robot's interface kind's (``InterfaceKind.build_loop``): a torque robot's
-    runs the hybrid force/impedance controller and the EKF; a position robot's
-    (``position_loop.PositionLoop``) the task-space IK and reads the wrist sensor.
+    runs the hybrid force/impedance controller and the EKF; a position robot's the task-space IK
+    and reads the wrist sensor. It is built from the nodes' parameters; the start pose
+    (``sim.initial_pose``) is taken before the first command, so every run has the same history
+    (lockstep runs repeat exactly).
 
-    The loop is built from the nodes' parameters: the robot plugin the sim node loaded (its
-    ``robot`` parameter) from the sim node's sections. ``runner.loop_observers`` is where a per-tick
-    recorder attaches. The start pose (``sim.initial_pose``) is taken before the loop thread
-    starts, so every run has the same history (lockstep runs repeat exactly).
+    Only the session being served steers the arm: a reset names a session (the executor's
+    episode), and from then on a setpoint of any other session is dropped before it reaches the
+    loop, logged and counted (``foreign_setpoints`` in every ``AtRest``). A reset with the empty
+    session serves any sender (manual use).
     """
 
-    def __init__(self, sim: SimulationNode, bridge: BridgeNode,
-                 estimator: WrenchEstimatorNode) -> None:
+    def __init__(self, sim: SimulationNode, bridge: BridgeNode, estimator: WrenchEstimatorNode,
+                 recorder: RecorderNode | None = None) -> None:
         self.sim = sim
         self.bridge = bridge
         self.estimator = estimator
+        self.recorder = recorder
         config = sim.config
-        robot = sim.plugin.create(sim.params)
-        bridge_params = {**bridge.params,
-                         "loop": {**bridge.params.get("loop", {}), "realtime": config.realtime}}
-        self.loop: RobotLoop = bridge.kind.build_loop(robot, bridge_params, estimator.params)
-        #: Realtime: holds the wall-clock tick period (``missed`` counts dropped ticks).
-        self.pacer = RealtimePacer(self.loop.config.dt) if config.realtime else None
-        pacer = self.pacer
-        #: Realtime: how the ticks were spaced (published on ``diagnostics``).
-        self.timing = TickTiming(self.loop.config.dt)
-        timing = self.timing
-
-        def pace() -> bool:
-            timing.drop(pacer.wait())
-            timing.tick(time.perf_counter_ns())
-            return True
-        self.runner = LoopRunner(self.loop, bridge, lockstep=not config.realtime,
-                                 pace=pace if pacer is not None else None,
-                                 publish_every=config.publish_every(self.loop.config.dt),
-                                 publish=self._publish)
-        self.truth_every = config.ground_truth_every(self.loop.config.dt)
-        bridge.setpoint_handler = self.runner.submit_setpoint
-        serve_reset(sim, self.runner)
-        self.loop.reset(config.initial_pose)     # before the loop thread exists
-
-    def _publish(self, stamp: Time) -> None:
-        """The sim's and the estimator's share of a published tick (and ``/clock``)."""
-        loop = self.loop
-        self.sim.publish_state(stamp, loop.hardware.read(),
-                               loop.ground_truth() if self.runner.ticks % self.truth_every == 0
-                               else None)
-        if self.loop.wrench_estimate is not None:
-            self.estimator.publish(stamp, self.loop.wrench_estimate)
-        if self.runner.lockstep:
-            self.sim.publish_clock(stamp)
+        dt = sim.plugin.describe(sim.params).dt
+        self.joint_names = tuple(sim.joint_names)
+        self.lockstep = not config.realtime
+        self.link = LoopLink(LoopSpec(
+            robot=str(sim.get_parameter("robot").value), sim_params=sim.params,
+            bridge_params=bridge.params, estimator_params=estimator.params,
+            realtime=config.realtime, priority=config.realtime_priority,
+            initial_pose=config.initial_pose, publish_every=config.publish_every(dt),
+            truth_every=config.ground_truth_every(dt)), len(self.joint_names), self)
+        self._lock = threading.Lock()
+        self._session = ""                  # the served session ("" = any sender)
+        self.foreign_setpoints = 0          # setpoints of other sessions since the last reset
+        self._timing: TimingSnapshot | None = None
+        bridge.setpoint_handler = self.submit_setpoint
+        if recorder is not None:
+            recorder.clock_ns = self.link.now_ns
+        if config.realtime:
+            LoopDiagnostics(bridge, lambda: self._timing, str(sim.get_parameter("robot").value))
+        serve_reset(sim, self)
 
     def start(self) -> Callable[[], None]:
-        """Start the loop thread; returns the function that stops it."""
-        if not self.runner.lockstep:
-            favour_loop_thread()
-        priority = 0 if self.runner.lockstep else self.sim.config.realtime_priority
-        return LoopThread("robot loop", self.runner.run, self.bridge, priority).start().stop
+        """Start the loop process; returns the function that stops it."""
+        self.link.start()
+        return self.link.stop
+
+    # --- commands (ROS callbacks) --------------------------------------------------------------
+    def submit_setpoint(self, msg: WrenchSetpointMsg) -> None:
+        """Hand a setpoint of the served session to the loop; drop and count one of another."""
+        with self._lock:
+            served = self._session
+            if served and msg.session != served:
+                self.foreign_setpoints += 1
+            else:
+                self.link.send_setpoint(SetpointCommand(int(msg.seq), setpoint_from_msg(msg)))
+                return
+        self.bridge.get_logger().warning(
+            f"setpoint {msg.seq} of session '{msg.session}' ignored: serving '{served}'",
+            throttle_duration_sec=1.0)
+
+    def reset(self, initial_pose: int, housing_yaw: float = 0.0, timeout: float = 30.0,
+              session: str = "") -> AtRest:
+        """Reset and settle in the loop process; the settled observation (also on
+        ``ee_at_rest``). From then on only setpoints of ``session`` are executed ("" = any).
+
+        :raises TimeoutError: if the loop does not settle in ``timeout`` seconds.
+        :raises RuntimeError: what the reset failed with (e.g. a start out of reach).
+        """
+        with self._lock:
+            self._session = session
+            self.foreign_setpoints = 0
+        return self._at_rest_msg(self.link.reset(initial_pose, housing_yaw, timeout))
+
+    # --- the loop's output (the link's reader thread) ------------------------------------------
+    def samples(self, records: np.ndarray) -> None:
+        for record in records[(records["flags"] & PUBLISH) != 0]:
+            self._publish(record)
+        if self.recorder is not None:
+            self.recorder.record_samples(records, self.joint_names)
+
+    def _publish(self, record: np.void) -> None:
+        """One tick on the 1 kHz topics, under the nodes' names."""
+        stamp = time_msg(int(record["t_ns"]))
+        flags = int(record["flags"])
+        self.sim.joint_states.publish(joint_state_msg(
+            JointState(record["q"], record["dq"], record["tau"]), stamp, self.joint_names))
+        if flags & HAS_TRUTH:
+            truth = truth_from_array(record["truth"])
+            self.sim.ground_truth.publish(ground_truth_msg(truth, stamp))
+            self.sim.ground_truth_wrench.publish(wrench_stamped(truth.wrench, stamp))
+        if flags & HAS_WRENCH:
+            self.estimator.publish(stamp, record["wrench"])
+        if flags & HAS_TOOL:
+            self.bridge.ee_pose.publish(pose_stamped(record["tool_position"],
+                                                     record["tool_rotation"], stamp))
+            self.bridge.ee_twist.publish(twist_stamped(record["tool_twist"], stamp))
+        if self.lockstep:
+            self.sim.clock.publish(Clock(clock=stamp))
+
+    def at_rest(self, event: StepEvent) -> None:
+        self.bridge.ee_at_rest.publish(self._at_rest_msg(event))
+
+    def _at_rest_msg(self, event: StepEvent) -> AtRest:
+        return at_rest_msg(event.seq, event.result, event.position, event.rotation,
+                           time_msg(event.t_ns), self.foreign_setpoints)
+
+    def timing(self, snapshot: TimingSnapshot) -> None:
+        self._timing = snapshot
+
+    def log(self, level: str, message: str) -> None:
+        log_at(self.bridge, level, message)
+
+    def failed(self, message: str) -> None:
+        self.bridge.get_logger().fatal(message)
+        rclpy.try_shutdown()      # the process ends; run_nodes reports the exit
 
 
 def _start(nodes: list[Node]) -> Callable[[], None]:
     sim, bridge, estimator, recorder = nodes
     assert isinstance(sim, SimulationNode) and isinstance(bridge, BridgeNode) \
         and isinstance(estimator, WrenchEstimatorNode) and isinstance(recorder, RecorderNode)
-    process = RobotProcess(sim, bridge, estimator)
-    process.runner.loop_observers.append(recorder.observe)
-    recorder.clock_ns = process.runner.now_ns
-    if sim.config.realtime:
-        LoopDiagnostics(bridge, process.timing.snapshot, str(sim.get_parameter("robot").value))
-    return process.start()
+    return RobotProcess(sim, bridge, estimator, recorder).start()
 
 
 def main(args: list[str] | None = None) -> int:

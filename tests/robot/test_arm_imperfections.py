@@ -27,9 +27,19 @@ def scene_with(imperfections: ArmImperfections, **config) -> PandaShaftScene:
     return PandaShaftScene(PandaSceneConfig(imperfections=imperfections, **config))
 
 
+#: The hash below from the simulator of commit 61b80b8 (before imperfections existed), per
+#: OpenBLAS kernel family: the start pose's inverse kinematics goes through numpy's BLAS, whose
+#: kernels differ in the last bits (recomputed there with OPENBLAS_CORETYPE set).
+OLD_SIMULATOR_DIGESTS = {
+    "14dfc0c2b0b7eb7973d3ae6e1ed52bf66c35d1c37041c0dccb43632326a88550": "SkylakeX (AVX-512)",
+    "f7ff6419d7e3fba982e21c2f55424e24f4c081acd258d5b70b6079cf0a13c805": "Haswell, Zen (AVX2)",
+}
+
+
 def test_the_ideal_arm_is_the_simulator_before_imperfections_bit_for_bit():
     """Hash of 300 steps of joint states under fixed torques from start 5, taken with the
-    simulator as it was before imperfections existed (commit 61b80b8)."""
+    simulator as it was before imperfections existed (commit 61b80b8) with the BLAS kernels of
+    the machine's kind."""
     scene = scene_with(IDEAL)
     scene.reset(5)
     digest = hashlib.sha256()
@@ -40,8 +50,7 @@ def test_the_ideal_arm_is_the_simulator_before_imperfections_bit_for_bit():
         scene.step()
         for values in (state.q, state.dq, state.tau):
             digest.update(np.ascontiguousarray(values, dtype=np.float64).tobytes())
-    assert digest.hexdigest() == \
-        "14dfc0c2b0b7eb7973d3ae6e1ed52bf66c35d1c37041c0dccb43632326a88550"
+    assert digest.hexdigest() in OLD_SIMULATOR_DIGESTS
 
 
 def test_the_realistic_arm_is_the_default_and_every_imperfection_is_on():

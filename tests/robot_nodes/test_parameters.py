@@ -20,7 +20,7 @@ def test_each_robot_node_declares_only_its_own_parameters_read_only(stack):
         assert {"impedance.k_null", "safety.force_max", "rest.max_time", "loop.dt"} <= bridge
         assert {"robot", "sim.clock_mode", "panda_scene.shaft_mass"} <= sim
         assert {"ekf.process_noise_force"} <= estimator
-        assert {"record", "episodes_dir", "ground_truth_every"} <= recorder
+        assert {"record", "episodes_dir", "close_timeout"} <= recorder
         assert not any(n.startswith(("panda_scene.", "sim.", "ekf.")) for n in bridge)
         assert not any(n.startswith(("impedance.", "safety.", "ekf.")) for n in sim)
         assert len(bridge) < 40 and len(recorder) < 10, (len(bridge), len(recorder))

@@ -268,7 +268,9 @@ def test_learner_killed_mid_episode_degrades_then_resumes(stack, tmp_path, let_a
     checkpoint again the episode that ended while it was down (its latched status)."""
     from qg_learning_node.learner_node import CHECKPOINT_GRACE
     checkpoints = tmp_path / "checkpoints"
-    stack.start(ROBOT, learner_spec(checkpoints), executor_spec(max_steps=25))
+    # An RL step takes ~40 ms of wall time here: 80 steps outlast the executor's 1.5 s
+    # learner_timeout after the kill at step 2 (25 steps ended before the learner was missed).
+    stack.start(ROBOT, learner_spec(checkpoints), executor_spec(max_steps=80))
     with stack.client() as cli:
         episodes = Episodes(cli)
         episodes.wait_for_learner()

@@ -15,7 +15,8 @@ ROOT = Path(__file__).resolve().parents[2]
 CORE_FILES = [
     *ROOT.glob("sim_robot_node/sim_robot_node/core/**/*.py"),
     *(p for p in ROOT.glob("ros_ws/src/qg_common/qg_common/*.py")
-      if p.name not in ("conversions.py", "node_parameters.py", "node_runtime.py", "topics.py")),
+      if p.name not in ("callback_executor.py", "conversions.py", "node_parameters.py",
+                        "node_runtime.py", "topics.py")),
     *ROOT.glob("robot_bridge_node/robot_bridge_node/core/**/*.py"),
     *ROOT.glob("qg_learning_node/qg_learning_node/executor/**/*.py"),
     *ROOT.glob("qg_learning_node/qg_learning_node/learner/**/*.py"),

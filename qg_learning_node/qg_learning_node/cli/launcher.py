@@ -6,11 +6,10 @@ name, and stopping sends SIGINT, then SIGTERM, then SIGKILL, each after a grace 
 
 Each child runs in a session of its own (a Ctrl-C in the terminal reaches the launcher, which
 stops the children in order) but asks the kernel for SIGTERM when the launcher dies
-(``PR_SET_PDEATHSIG``), so a killed launcher leaves no node behind.
+(``qg_common.process_guard``), so a killed launcher leaves no node behind.
 """
 from __future__ import annotations
 
-import ctypes
 import os
 import re
 import signal
@@ -18,7 +17,6 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
@@ -27,25 +25,13 @@ import yaml
 
 from ament_index_python.packages import (PackageNotFoundError, get_package_prefix,
                                          get_package_share_directory)
+from qg_common.process_guard import die_with_parent
 
 __all__ = ["ProcessSpec", "Launcher", "load_stack_config", "StackConfigError"]
 
 
 class StackConfigError(ValueError):
     """The launch configuration is missing or malformed (one line, fit for a user)."""
-
-
-_PR_SET_PDEATHSIG = 1     # prctl option (linux/prctl.h)
-
-
-def _die_with_parent(parent: int) -> Callable[[], None]:
-    """What the child runs before exec: SIGTERM when the launcher ``parent`` goes away (and
-    exit at once if it already went between fork and here)."""
-    def arm() -> None:
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
-        if os.getppid() != parent:
-            os._exit(1)
-    return arm
 
 
 @dataclass(frozen=True)
@@ -145,7 +131,7 @@ class Launcher:
             popen = subprocess.Popen(spec.command(), env=self.env, stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT, text=True, bufsize=1,
                                      start_new_session=True,
-                                     preexec_fn=_die_with_parent(os.getpid()))
+                                     preexec_fn=die_with_parent(os.getpid()))
             pump = threading.Thread(target=self._pump, args=(spec, popen, width), daemon=True)
             pump.start()
             self.running.append(_Running(spec, popen, pump))

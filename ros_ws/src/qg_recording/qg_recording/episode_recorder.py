@@ -28,7 +28,7 @@ import numpy as np
 from . import cdr
 from .bag_writer import BagWriter
 
-__all__ = ["TOPICS", "EpisodeRecorder", "TopicSpec"]
+__all__ = ["TOPICS", "EpisodeRecorder", "TopicSpec", "ground_truth_columns"]
 
 
 @dataclass(frozen=True)
@@ -57,6 +57,23 @@ TOPICS: dict[str, TopicSpec] = {
 _EPISODE_ID = re.compile(r"^[A-Za-z0-9_.\-]+$")
 ROWS = 200  # messages of a 1 kHz topic handed to the writer thread at once (0.2 s)
 Vector = cdr.Vector
+
+
+def ground_truth_columns(layout: cdr.FixedLayout, values: np.ndarray, contact_wrench: Any,
+                         insertion_depth: Any, plunger_travel: Any, success: Any,
+                         position_error: Any, orientation_error: Any, lateral_offset: Any,
+                         tilt: Any) -> None:
+    """Fill `qg_interfaces/GroundTruth` numbers by field name (a renamed field fails loudly):
+    one row (scalars and vectors) or many (columns and blocks), as `values` is 1-D or 2-D."""
+    c = layout.slices
+    values[..., c["contact_wrench"]] = contact_wrench
+    values[..., c["insertion_depth"]] = insertion_depth
+    values[..., c["plunger_travel"]] = plunger_travel
+    values[..., c["success"]] = success
+    values[..., c["position_error"]] = position_error
+    values[..., c["orientation_error"]] = orientation_error
+    values[..., c["lateral_offset"]] = lateral_offset
+    values[..., c["tilt"]] = tilt
 
 
 class _Rows:
@@ -251,15 +268,9 @@ class EpisodeRecorder:
         with self._lock:
             if self._writer is not None:
                 v = self._stamped_row(topic, "qg_interfaces/msg/GroundTruth", frame_id, t_ns)
-                c = self._pending[topic].layout.slices
-                v[c["contact_wrench"]] = contact_wrench
-                v[c["insertion_depth"]] = insertion_depth
-                v[c["plunger_travel"]] = plunger_travel
-                v[c["success"]] = success
-                v[c["position_error"]] = position_error
-                v[c["orientation_error"]] = orientation_error
-                v[c["lateral_offset"]] = lateral_offset
-                v[c["tilt"]] = tilt
+                ground_truth_columns(self._pending[topic].layout, v, contact_wrench,
+                                     insertion_depth, plunger_travel, success, position_error,
+                                     orientation_error, lateral_offset, tilt)
 
     def record_fixed(self, topic: str, t_ns: int, values: Vector, frame_id: str = "",
                      type_name: str | None = None) -> None:
@@ -272,6 +283,28 @@ class EpisodeRecorder:
             if self._writer is not None:
                 writer = self._ensure_topic(topic, type_name)
                 self._stamped_row(topic, writer.topic_type(topic), frame_id, t_ns)[:] = values
+
+    def record_rows(self, topic: str, t_ns: np.ndarray, values: np.ndarray, frame_id: str = "",
+                    names: Sequence[str] | None = None) -> None:
+        """Many messages of a fixed-layout topic at once, one row of numbers each (as
+        `record_fixed` takes them; a JointState's rows are position, velocity, effort of
+        `names`): the loop's ticks as its sample ring hands them over, encoded by the writer
+        thread in one block.
+
+        :param t_ns: (n,) stamps; :param values: (n, layout.n_values).
+        """
+        with self._lock:
+            if self._writer is None or len(t_ns) == 0:
+                return
+            writer = self._ensure_topic(topic, None)
+            type_name = writer.topic_type(topic)
+            layout = (cdr.joint_state_layout(frame_id, tuple(names)) if names is not None
+                      else cdr.fixed_layout(type_name, frame_id))
+            rows = self._pending.pop(topic, None)
+            if rows is not None:             # single messages of this topic go first
+                rows.hand_off()
+            writer.write_rows(topic, layout, np.array(t_ns, dtype=np.int64),
+                              np.array(values, dtype=float).reshape(len(t_ns), layout.n_values))
 
     # -- RL-rate messages ----------------------------------------------------------------------
 

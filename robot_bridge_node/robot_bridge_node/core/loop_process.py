@@ -1,0 +1,209 @@
+"""The robot's 1 kHz loop in a process of its own, with no ROS in it.
+
+In one Python process every thread shares one interpreter lock: a 1 kHz loop beside rclpy's
+executor threads, the publishers and the recorder waited for them (issue 25 measured 87 % of
+ticks on time with the stack up). Here the loop (robot plugin, estimator, controller, safety
+filter, rest detector: a ``LoopRunner``) is the only thread of its process. It takes commands
+from a socket (``PipeMailbox``), writes every tick into a shared-memory ring (``SampleRing``)
+and sends its events (at rest, reset done, its timing once a second, log lines) back on the
+socket (``RingOutlet``); ``loop_link.LoopLink`` is the other end, in the robot process.
+
+Started by ``LoopLink`` as ``python -m robot_bridge_node.core.loop_process --socket FD --ring
+FD``; the first message on the socket is the ``LoopSpec``. It ignores SIGINT (the robot process
+stops it, after its nodes' shutdown work) and ends when told to, when the socket closes, or
+with the process that started it (``qg_common.process_guard``).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import sys
+import threading
+import time
+import traceback
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from typing import Any
+
+from robot_bridge_node.core.hardware_interface import robot_plugin
+from robot_bridge_node.core.interface_kinds import interface_kind
+from robot_bridge_node.core.loop_runner import (LoopRunner, ResetCommand, SetpointCommand,
+                                                StepEvent)
+from robot_bridge_node.core.robot_loop import RobotLoop
+from robot_bridge_node.core.sample_ring import (HAS_TOOL, HAS_TRUTH, HAS_WRENCH, PUBLISH,
+                                                SampleRing, truth_to_array)
+from robot_bridge_node.core.tick_timing import TickTiming
+
+__all__ = ["LoopSpec", "RingOutlet", "PipeMailbox", "TIMING_PERIOD", "main"]
+
+#: [s] how often a realtime loop sends its timing counts.
+TIMING_PERIOD = 1.0
+
+
+@dataclass(frozen=True)
+class LoopSpec:
+    """What the loop process builds: the robot plugin and the nodes' parameters.
+
+    :param robot: the robot plugin's registered name.
+    :param sim_params: the ``sim`` node's parameters (the robot's own sections).
+    :param bridge_params: the bridge's (the interface kind's controller sections).
+    :param estimator_params: the wrench estimator's.
+    :param realtime: wall-clock 1 kHz with the watchdog; otherwise lockstep.
+    :param priority: realtime: ``SCHED_FIFO`` priority of the loop (0: the normal scheduler).
+    :param initial_pose: the start pose taken before the first command.
+    :param publish_every: a sample every this many ticks is marked for publishing.
+    :param truth_every: the ground truth is computed every this many ticks.
+    """
+    robot: str
+    sim_params: dict[str, Any]
+    bridge_params: dict[str, Any]
+    estimator_params: dict[str, Any]
+    realtime: bool
+    priority: int
+    initial_pose: int
+    publish_every: int
+    truth_every: int
+
+
+class RingOutlet:
+    """The runner's output: every tick into the ring, events onto the socket."""
+
+    def __init__(self, ring: SampleRing, conn: Connection, truth_every: int) -> None:
+        self.ring = ring
+        self.conn = conn
+        self.truth_every = truth_every
+        self.ticks = 0
+
+    def sample(self, t_ns: int, loop: RobotLoop, publish: bool) -> None:
+        record = self.ring.next_record()
+        state = loop.hardware.read()
+        flags = PUBLISH if publish else 0
+        record["t_ns"], record["tick"] = t_ns, self.ticks
+        record["q"], record["dq"], record["tau"] = state.q, state.dq, state.tau
+        if loop.wrench_estimate is not None:
+            record["wrench"] = loop.wrench_estimate
+            flags |= HAS_WRENCH
+        tool = loop.controller.tool
+        if tool is not None:
+            record["tool_position"], record["tool_rotation"], record["tool_twist"] = (
+                tool.position, tool.rotation, tool.twist)
+            flags |= HAS_TOOL
+        if publish and self.ticks % self.truth_every == 0:
+            truth_to_array(loop.ground_truth(), record["truth"])
+            flags |= HAS_TRUTH
+        record["flags"] = flags
+        self.ring.commit()
+        self.ticks += 1
+
+    def at_rest(self, event: StepEvent) -> None:
+        self.conn.send(("at_rest", event))
+
+    def reset_done(self, job: int, event: StepEvent | None, error: str | None) -> None:
+        self.conn.send(("reset_done", job, event, error))
+
+    def log(self, level: str, message: str) -> None:
+        self.conn.send(("log", level, message))
+
+
+class PipeMailbox:
+    """The runner's commands from the socket: the newest setpoint, a reset; ``stop`` is set by
+    a ``("stop",)`` message or when the socket closes."""
+
+    def __init__(self, conn: Connection, stop: threading.Event) -> None:
+        self.conn = conn
+        self.stop = stop
+
+    def take(self, timeout: float) -> tuple[SetpointCommand | None, ResetCommand | None]:
+        setpoint: SetpointCommand | None = None
+        reset: ResetCommand | None = None
+        try:
+            wait = timeout
+            while self.conn.poll(wait):
+                message = self.conn.recv()
+                wait = 0.0
+                if isinstance(message, SetpointCommand):
+                    setpoint = message
+                elif isinstance(message, ResetCommand):
+                    reset, setpoint = message, None   # a setpoint from before the reset is stale
+                elif message == ("stop",):
+                    self.stop.set()
+        except (EOFError, OSError):        # the robot process is gone
+            self.stop.set()
+        return setpoint, reset
+
+
+def _build(spec: LoopSpec) -> RobotLoop:
+    plugin = robot_plugin(spec.robot)
+    robot = plugin.create(spec.sim_params)
+    bridge_params = {**spec.bridge_params,
+                     "loop": {**spec.bridge_params.get("loop", {}), "realtime": spec.realtime}}
+    return interface_kind(plugin.interface).build_loop(robot, bridge_params,
+                                                       spec.estimator_params)
+
+
+def _pace(loop: RobotLoop, conn: Connection) -> Any:
+    """The realtime pace: the pacer's deadline, the tick's timing, the counts once a second."""
+    from qg_common.realtime_pacer import RealtimePacer
+    pacer = RealtimePacer(loop.config.dt)
+    timing = TickTiming(loop.config.dt)
+    next_report = time.monotonic() + TIMING_PERIOD
+
+    def pace() -> bool:
+        nonlocal next_report
+        timing.drop(pacer.wait())
+        timing.tick(time.perf_counter_ns())
+        if time.monotonic() >= next_report:
+            next_report += TIMING_PERIOD
+            conn.send(("timing", timing.snapshot()))
+        return True
+    return pace
+
+
+def run(conn: Connection, ring: SampleRing) -> int:
+    """Receive the spec, build the loop, say ``ready`` (or why not), run until stopped."""
+    spec: LoopSpec = conn.recv()
+    try:
+        loop = _build(spec)
+        loop.reset(spec.initial_pose)
+    except Exception:  # noqa: BLE001 - whatever fails, the robot process must hear why
+        conn.send(("error", f"the robot loop could not be built:\n{traceback.format_exc()}"))
+        return 1
+    if spec.realtime and spec.priority > 0:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(spec.priority))
+        except OSError as exc:
+            conn.send(("log", "warning", f"no realtime priority {spec.priority} ({exc}); "
+                                         f"running unprioritised"))
+    stop = threading.Event()
+    runner = LoopRunner(loop, PipeMailbox(conn, stop), RingOutlet(ring, conn, spec.truth_every),
+                        lockstep=not spec.realtime,
+                        pace=_pace(loop, conn) if spec.realtime else None,
+                        publish_every=spec.publish_every)
+    conn.send(("ready", runner.clock_ns))
+    try:
+        runner.run(stop)
+    except (BrokenPipeError, ConnectionResetError):   # the robot process is gone
+        return 0
+    except Exception:  # noqa: BLE001
+        conn.send(("error", f"the robot loop failed:\n{traceback.format_exc()}"))
+        return 1
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--socket", type=int, required=True, help="file descriptor")
+    parser.add_argument("--ring", type=int, required=True, help="file descriptor")
+    args = parser.parse_args(argv)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    conn = Connection(args.socket)
+    ring = SampleRing.attach(args.ring)
+    try:
+        return run(conn, ring)
+    finally:
+        conn.close()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,214 @@
+"""Drives one ``RobotLoop``: setpoints and resets in, ticks, samples and at-rest events out.
+
+The same driver runs the loop in its own process (``loop_process``: the composed robot) and on
+a thread of the separate bridge (``bridge_node``); what differs is where its commands come from
+(a ``Mailbox``) and where its output goes (a ``LoopOutlet``). A setpoint with a new ``seq``
+starts a step; one with the ``seq`` of the running step only feeds the watchdog (a realtime
+commander repeats its setpoint every few ms). A rejected setpoint (NaN/inf) is reported and the
+previous command stays.
+
+Clock modes: ``lockstep`` ticks only while a step runs, as fast as it can, stamped with simulated
+time (deterministic); otherwise the loop ticks whenever ``pace`` says a tick is due, stamped with
+the wall clock, and the watchdog holds the pose when setpoints stop coming.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+from qg_common.types import StepResult, WrenchSetpoint
+
+from robot_bridge_node.core.robot_loop import RobotLoop
+from robot_bridge_node.core.safety import SetpointRejected
+
+__all__ = ["SetpointCommand", "ResetCommand", "StepEvent", "LoopOutlet", "Mailbox",
+           "ThreadMailbox", "LoopRunner"]
+
+
+@dataclass(frozen=True)
+class SetpointCommand:
+    """An RL step's setpoint, numbered by its sender (the same ``seq`` again: keep-alive)."""
+    seq: int
+    setpoint: WrenchSetpoint
+
+
+@dataclass(frozen=True)
+class ResetCommand:
+    """Reset to a start pose and settle; ``job`` names it in the answer."""
+    initial_pose: int
+    housing_yaw: float = 0.0
+    job: int = 0
+
+
+@dataclass(frozen=True)
+class StepEvent:
+    """How a step ended (``seq`` 0: a reset settled), with the tool pose and the tick's stamp."""
+    seq: int
+    result: StepResult
+    position: np.ndarray
+    rotation: np.ndarray
+    t_ns: int
+
+
+class LoopOutlet(Protocol):
+    """Where the runner's output goes."""
+
+    def sample(self, t_ns: int, loop: RobotLoop, publish: bool) -> None:
+        """After every tick, and once when a reset has settled (``publish``: a tick of the
+        publishing rate)."""
+        ...
+
+    def at_rest(self, event: StepEvent) -> None:
+        """A step ended (at rest or at its time limit)."""
+        ...
+
+    def reset_done(self, job: int, event: StepEvent | None, error: str | None) -> None:
+        """Reset ``job`` settled (``event``, also passed to ``at_rest``) or failed."""
+        ...
+
+    def log(self, level: str, message: str) -> None:
+        """``level``: ``info``, ``warning`` or ``error``."""
+        ...
+
+
+class Mailbox(Protocol):
+    """Where the runner takes its commands from."""
+
+    def take(self, timeout: float) -> tuple[SetpointCommand | None, ResetCommand | None]:
+        """The newest setpoint and the pending reset, if any; waits up to ``timeout`` seconds
+        for either (0: not at all)."""
+        ...
+
+
+@dataclass
+class ThreadMailbox:
+    """Commands left by other threads of the same process (ROS callbacks)."""
+    _mail: threading.Condition = field(default_factory=threading.Condition)
+    _setpoint: SetpointCommand | None = None
+    _reset: ResetCommand | None = None
+
+    def post_setpoint(self, command: SetpointCommand) -> None:
+        with self._mail:
+            self._setpoint = command
+            self._mail.notify()
+
+    def post_reset(self, command: ResetCommand) -> None:
+        with self._mail:
+            self._reset = command
+            self._mail.notify()
+
+    def take(self, timeout: float) -> tuple[SetpointCommand | None, ResetCommand | None]:
+        with self._mail:
+            if timeout > 0.0 and self._setpoint is None and self._reset is None:
+                self._mail.wait(timeout)
+            taken = self._setpoint, self._reset
+            self._setpoint = self._reset = None
+        return taken
+
+
+class LoopRunner:
+    """Runs one ``RobotLoop`` from a ``Mailbox`` into a ``LoopOutlet`` (see the module doc).
+
+    :param loop: the loop; its ``config.realtime`` turns the watchdog on.
+    :param mailbox: setpoints and resets.
+    :param outlet: samples, events, answers to resets, log lines.
+    :param lockstep: tick only while a step runs, stamped with simulated time.
+    :param pace: not lockstep: called before every tick, returns once the tick is due; False
+        skips the tick (nothing to do yet).
+    :param publish_every: every this many ticks a sample is marked for publishing.
+    """
+
+    def __init__(self, loop: RobotLoop, mailbox: Mailbox, outlet: LoopOutlet, *,
+                 lockstep: bool, pace: Callable[[], bool] | None = None,
+                 publish_every: int = 1) -> None:
+        if not lockstep and pace is None:
+            raise ValueError("a free-running (realtime) loop needs a pace")
+        self.loop = loop
+        self.mailbox = mailbox
+        self.outlet = outlet
+        self.lockstep = lockstep
+        self.pace = pace
+        self.publish_every = max(1, publish_every)
+        self._dt_ns = round(loop.config.dt * 1e9)
+        self._settle_ticks = round(loop.config.settle_time / loop.config.dt)
+        self.clock_ns = 0          # simulated time: ticks run since start, resets included
+        self.ticks = 0
+        self._seq: int | None = None            # the running step's setpoint
+        self._step_start: float | None = None   # loop time of the running step's start
+
+    def run(self, stop: threading.Event) -> None:
+        """Tick until ``stop`` is set (the body of the loop's thread or process)."""
+        while not stop.is_set():
+            if self.lockstep:
+                waiting = self._step_start is None
+                setpoint, reset = self.mailbox.take(0.05 if waiting else 0.0)
+                if waiting and setpoint is None and reset is None:
+                    continue
+            elif not self.pace():
+                continue
+            else:
+                setpoint, reset = self.mailbox.take(0.0)
+            self._take(setpoint, reset)
+            if self.lockstep and self._step_start is None:
+                continue
+            at_rest = self.loop.tick()
+            self._after_tick(at_rest)
+
+    def _take(self, setpoint: SetpointCommand | None, reset: ResetCommand | None) -> None:
+        if reset is not None:
+            self._reset(reset)
+        if setpoint is None:
+            return
+        loop = self.loop
+        if setpoint.seq == self._seq:
+            loop.feed_watchdog()
+            return
+        try:
+            loop.command(setpoint.setpoint)
+        except SetpointRejected as exc:
+            self.outlet.log("error", f"setpoint {setpoint.seq} rejected: {exc}; keeping the "
+                                     f"previous command")
+            return
+        self._seq = setpoint.seq
+        self._step_start = loop.time
+
+    def _reset(self, command: ResetCommand) -> None:
+        try:
+            self.loop.reset(command.initial_pose, command.housing_yaw)
+        except (RuntimeError, ValueError, TimeoutError) as exc:
+            self.outlet.log("error", f"reset failed: {exc}")
+            self.outlet.reset_done(command.job, None, f"{exc}")
+            return
+        self._seq = None
+        self._step_start = None
+        self.clock_ns += self._settle_ticks * self._dt_ns
+        t_ns = self.now_ns()
+        self.outlet.sample(t_ns, self.loop, True)  # the settled start: published and recorded
+        event = self._event(0, self.loop.time - self.loop.config.settle_time, t_ns)
+        self.outlet.at_rest(event)
+        self.outlet.reset_done(command.job, event, None)
+
+    def _after_tick(self, at_rest: bool) -> None:
+        self.ticks += 1
+        self.clock_ns += self._dt_ns
+        t_ns = self.now_ns()   # the tick's one stamp: every output of this tick carries it
+        self.outlet.sample(t_ns, self.loop, self.ticks % self.publish_every == 0)
+        if at_rest and self._step_start is not None:
+            event = self._event(self._seq or 0, self._step_start, t_ns)
+            self._step_start = None
+            self.outlet.at_rest(event)
+
+    def now_ns(self) -> int:
+        """The loop's clock [ns]: simulated time in lockstep (it stands still between steps),
+        the wall clock otherwise."""
+        return self.clock_ns if self.lockstep else time.time_ns()
+
+    def _event(self, seq: int, start: float, t_ns: int) -> StepEvent:
+        """The event of the step that started at loop time ``start``."""
+        tool = self.loop.controller.tool
+        return StepEvent(seq, self.loop.result(start), tool.position.copy(),
+                         tool.rotation.copy(), t_ns)

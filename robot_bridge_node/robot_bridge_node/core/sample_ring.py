@@ -1,0 +1,150 @@
+"""The loop's every tick, handed to another process through shared memory without a lock.
+
+The 1 kHz loop runs in a process of its own (``loop_process``) and writes one record per tick
+(joint state, wrench estimate, tool pose and twist, ground truth when computed) into a ring of
+records in an anonymous shared-memory file (``memfd``) that the ROS side of the robot process
+maps too. One writer, one reader: the writer fills the record at ``count % capacity`` and then
+advances ``count``; the reader copies the records it has not seen and checks ``count`` again, so
+a record the writer overwrote while it was being copied is counted as lost, never read torn.
+Writing a record costs the loop a few numpy assignments (``benchmarks/loop_process_bench.py``),
+and no call, lock or system call. Stores become visible in program order on x86-64, which this
+relies on; the file has no name, so nothing is left behind when both processes are gone.
+"""
+from __future__ import annotations
+
+import mmap
+import os
+from dataclasses import dataclass
+
+import numpy as np
+from qg_common.types import GroundTruth
+
+__all__ = ["SampleRing", "record_dtype", "truth_to_array", "truth_from_array", "TRUTH_SIZE",
+           "PUBLISH", "HAS_WRENCH", "HAS_TRUTH", "HAS_TOOL", "DEFAULT_CAPACITY"]
+
+#: Record flags.
+PUBLISH, HAS_WRENCH, HAS_TRUTH, HAS_TOOL = 1, 2, 4, 8
+#: [records] 16 s at 1 kHz: the reader may stall this long (a loaded machine) without loss.
+DEFAULT_CAPACITY = 16384
+_HEADER = 8                     # int64 words before the records: count, capacity, joints
+#: ``GroundTruth`` as numbers: wrench 6, depth, travel, success, position error, orientation
+#: error 2, lateral offset, tilt.
+TRUTH_SIZE = 14
+
+
+def record_dtype(n_joints: int) -> np.dtype:
+    """One tick's record for an arm of ``n_joints`` joints."""
+    return np.dtype([("t_ns", np.int64), ("tick", np.int64), ("flags", np.int64),
+                     ("q", np.float64, n_joints), ("dq", np.float64, n_joints),
+                     ("tau", np.float64, n_joints), ("wrench", np.float64, 6),
+                     ("tool_position", np.float64, 3), ("tool_rotation", np.float64, (3, 3)),
+                     ("tool_twist", np.float64, 6), ("truth", np.float64, TRUTH_SIZE)])
+
+
+def truth_to_array(truth: GroundTruth, out: np.ndarray) -> None:
+    """Write ``truth`` into ``out`` (``TRUTH_SIZE`` numbers)."""
+    out[:6] = truth.wrench
+    out[6:10] = (truth.insertion_depth, truth.plunger_travel, float(truth.success),
+                 truth.position_error)
+    out[10:12] = truth.orientation_error
+    out[12:14] = (truth.lateral_offset, truth.tilt)
+
+
+def truth_from_array(values: np.ndarray) -> GroundTruth:
+    """The ``GroundTruth`` that ``truth_to_array`` wrote."""
+    return GroundTruth(wrench=values[:6].copy(), insertion_depth=float(values[6]),
+                       plunger_travel=float(values[7]), success=bool(values[8] > 0.5),
+                       position_error=float(values[9]), orientation_error=values[10:12].copy(),
+                       lateral_offset=float(values[12]), tilt=float(values[13]))
+
+
+@dataclass
+class SampleRing:
+    """A ring of tick records in a shared-memory file; ``create`` it on one side, ``attach`` to
+    its file descriptor on the other (passed to the child process).
+
+    :param fd: the shared-memory file.
+    :param n_joints: the arm's joint count (the records' size).
+    :param capacity: records in the ring.
+    """
+    fd: int
+    n_joints: int
+    capacity: int
+
+    def __post_init__(self) -> None:
+        self.dtype = record_dtype(self.n_joints)
+        size = _HEADER * 8 + self.capacity * self.dtype.itemsize
+        self._map = mmap.mmap(self.fd, size)
+        self._header = np.frombuffer(self._map, dtype=np.int64, count=_HEADER)
+        self.records = np.frombuffer(self._map, dtype=self.dtype, count=self.capacity,
+                                     offset=_HEADER * 8)
+        self._read = int(self._header[0])   # the reader's position (records already taken)
+        self.lost = 0                       # records overwritten before the reader took them
+
+    @classmethod
+    def create(cls, n_joints: int, capacity: int = DEFAULT_CAPACITY) -> SampleRing:
+        """A new, empty ring in an anonymous shared-memory file (``fd`` to pass on)."""
+        if capacity < 2:
+            raise ValueError(f"capacity must be >= 2 records, got {capacity}")
+        fd = os.memfd_create("qg_loop_samples", 0)
+        os.ftruncate(fd, _HEADER * 8 + capacity * record_dtype(n_joints).itemsize)
+        ring = cls(fd, n_joints, capacity)
+        ring._header[1:3] = (capacity, n_joints)
+        return ring
+
+    @classmethod
+    def attach(cls, fd: int) -> SampleRing:
+        """The ring another process created, from its file descriptor.
+
+        :raises ValueError: if the file holds no ring.
+        """
+        header = np.frombuffer(mmap.mmap(fd, _HEADER * 8), dtype=np.int64, count=_HEADER)
+        capacity, n_joints = int(header[1]), int(header[2])
+        if capacity < 2 or n_joints < 1:
+            raise ValueError(f"file descriptor {fd} holds no sample ring")
+        return cls(fd, n_joints, capacity)
+
+    # --- the writer (the loop) ---------------------------------------------------------------
+    def next_record(self) -> np.void:
+        """The record to fill for the next tick (``commit`` publishes it)."""
+        return self.records[int(self._header[0]) % self.capacity]
+
+    def commit(self) -> None:
+        """The record from ``next_record`` is complete: the reader may take it."""
+        self._header[0] += 1
+
+    @property
+    def written(self) -> int:
+        """Records written since the ring was created."""
+        return int(self._header[0])
+
+    def latest_t_ns(self) -> int | None:
+        """The stamp of the newest record (None before the first)."""
+        count = int(self._header[0])
+        return None if count == 0 else int(self.records[(count - 1) % self.capacity]["t_ns"])
+
+    # --- the reader --------------------------------------------------------------------------
+    def take(self) -> np.ndarray:
+        """Copies of the records written since the last ``take``, oldest first; records the
+        writer overwrote before they were taken are counted in ``lost``."""
+        count = int(self._header[0])
+        start = max(self._read, count - self.capacity)
+        self.lost += start - self._read
+        if count == start:
+            return self.records[:0].copy()
+        first, last = start % self.capacity, count % self.capacity
+        if first < last:
+            taken = self.records[first:last].copy()
+        else:
+            taken = np.concatenate([self.records[first:], self.records[:last]])
+        # Records the writer reached again while they were being copied are not trusted.
+        overwritten = max(0, int(self._header[0]) - self.capacity - start)
+        self.lost += min(overwritten, len(taken))
+        self._read = count
+        return taken[overwritten:]
+
+    def close(self) -> None:
+        """Unmap the ring and close this process's file descriptor."""
+        self.records = self._header = None   # type: ignore[assignment]
+        self._map.close()
+        os.close(self.fd)
