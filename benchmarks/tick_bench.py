@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 from qg_common.types import N_START_POSES, WrenchSetpoint
-from qg_learning_node.experiments.runner import PandaTask, StackSettings
+from qg_experiments.runner import PandaTask, StackSettings
 
 #: What the tick calls, by the attribute path from the loop.
 PARTS = {"read": ("hardware", "read"), "ekf": ("estimator", "update"),

@@ -3,7 +3,7 @@
 What ``ros2 topic echo /diagnostics`` (or rqt's robot monitor) shows of the 1 kHz loop: the last
 second's tick period p50/p99/max and share of ticks on time, and the counts since start,
 histogram included, so a client can take the percentiles of any window by subtracting two
-messages (``snapshot_from_status``; ``benchmarks/realtime_stack_bench.py`` does). The level is
+messages (``snapshot_from_status``; ``benchmarks/realtime_bench.py`` does). The level is
 WARN when more than 0.5 % of the last second's ticks were late.
 """
 from __future__ import annotations

@@ -24,23 +24,20 @@ from typing import Any
 import numpy as np
 
 from qg_common import topics
-from qg_common.conversions import BASE_FRAME, TOOL_FRAME, quaternion_from_matrix
 from qg_common.node_parameters import declare_parameters, on_parameter_change
 from qg_common.params import ParameterSection, config_from_dict, runs_dir
 from qg_interfaces.msg import AtRest, EpisodeStatus, Transition, WrenchSetpoint
-from qg_recording.cdr import fixed_layout
-from qg_recording.episode_recorder import EpisodeRecorder, ground_truth_columns
+from qg_recording.episode_recorder import EpisodeRecorder
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 
-from robot_bridge_node.core.sample_ring import HAS_TOOL, HAS_TRUTH, HAS_WRENCH
+from robot_bridge_node.core.tick_recording import record_ticks
 
 __all__ = ["RecorderConfig", "RECORDER_SECTION", "RecorderNode"]
 
 _FINAL = ("done", "aborted")
-GROUND_TRUTH_LAYOUT = fixed_layout("qg_interfaces/msg/GroundTruth", TOOL_FRAME)
 #: [s] a bag stays open at least this long after its episode ended (see ``_close_if_complete``).
 _SETTLE = 0.1
 #: ``/episode_status`` as its publisher offers it (transient local: a late recorder still gets
@@ -112,28 +109,8 @@ class RecorderNode(Node):
     # --- the 1 kHz data ---------------------------------------------------------------------
     def record_samples(self, records: np.ndarray, joint_names: Sequence[str]) -> None:
         """Record the loop's ticks (``sample_ring`` records; nothing between episodes)."""
-        if not self.episode_id:
-            return
-        rec, t = self.recorder, records["t_ns"]
-        rec.record_rows("/joint_states", t, np.hstack([records["q"], records["dq"],
-                                                       records["tau"]]), names=joint_names)
-        with_wrench = records[(records["flags"] & HAS_WRENCH) != 0]
-        rec.record_rows("/wrench_estimate", with_wrench["t_ns"], with_wrench["wrench"], TOOL_FRAME)
-        with_tool = records[(records["flags"] & HAS_TOOL) != 0]
-        quaternions = [quaternion_from_matrix(r) for r in with_tool["tool_rotation"]]
-        rec.record_rows("/ee_pose", with_tool["t_ns"],
-                        np.hstack([with_tool["tool_position"], np.reshape(quaternions, (-1, 4))]),
-                        BASE_FRAME)
-        rec.record_rows("/ee_twist", with_tool["t_ns"], with_tool["tool_twist"], BASE_FRAME)
-        truth = records[(records["flags"] & HAS_TRUTH) != 0]["truth"]
-        if len(truth):
-            t_truth = records["t_ns"][(records["flags"] & HAS_TRUTH) != 0]
-            values = np.zeros((len(truth), GROUND_TRUTH_LAYOUT.n_values))
-            ground_truth_columns(GROUND_TRUTH_LAYOUT, values, truth[:, :6], truth[:, 6:7],
-                                 truth[:, 7:8], truth[:, 8:9], truth[:, 9:10], truth[:, 10:12],
-                                 truth[:, 12:13], truth[:, 13:14])
-            rec.record_rows("/sim/ground_truth", t_truth, values, TOOL_FRAME)
-            rec.record_rows("/sim/ground_truth_wrench", t_truth, truth[:, :6], TOOL_FRAME)
+        if self.episode_id:
+            record_ticks(self.recorder, records, joint_names)
 
     # --- RL-rate topics -------------------------------------------------------------------
     def _subscribe(self, msg_type: type, topic: str, handler: Callable[[int, bytes, Any], None],

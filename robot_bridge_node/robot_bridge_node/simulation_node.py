@@ -48,7 +48,7 @@ class SimConfig:
         controller manager asks for 50; 0 keeps the normal scheduler. Where the system refuses
         it (no CAP_SYS_NICE), the loop warns and runs unprioritised. With the whole stack up and
         training, 60 s: 98.2 % of ticks on time without it, 99.7 % with it
-        (``benchmarks/realtime_stack_bench.py``).
+        (``benchmarks/realtime_bench.py``).
     :param initial_pose: start pose (0..7) taken when the process starts.
     :param command_timeout: [s] separate sim: a ``/joint_commands`` older than this is stale.
     :param hold_damping: [Nms/rad] separate sim: joint damping added to the gravity hold.

@@ -56,6 +56,21 @@ def test_composed_realtime_is_paced_by_the_wall_clock_and_completes_steps(stack)
         # running ahead of the wall clock would give thousands.
         assert n <= 1003, f"{n} /joint_states stamped within 1 s: faster than real time"
         assert 200 <= wall_rate <= 1050, f"{wall_rate:.0f} /joint_states per wall second"
+        # The loop reports its own timing once a second: counts and a histogram of periods.
+        from diagnostic_msgs.msg import DiagnosticArray
+        from robot_bridge_node.loop_diagnostics import snapshot_from_status
+        reports: list = []
+        cli.node.create_subscription(DiagnosticArray, "/diagnostics",
+                                     lambda m: reports.append((time.monotonic(), m)), DEEP)
+        assert cli.spin_until(lambda: len(reports) >= 3, 10.0), f"{len(reports)} /diagnostics"
+        (t1, first), (t2, second) = reports[-2:]
+        (status,) = second.status
+        assert (status.name, status.hardware_id) == ("robot loop timing", "sim_panda")
+        earlier, later = snapshot_from_status(first.status[0]), snapshot_from_status(status)
+        window = later.since(earlier)
+        due = window.ticks + window.missed        # every millisecond of the second in between
+        assert abs(due - 1000 * (t2 - t1)) < 100, (due, t2 - t1)
+        assert window.histogram.sum() == window.ticks and window.late <= window.ticks
     assert stack.launcher.poll() == []
 
 

@@ -131,7 +131,7 @@ def test_train_episode_is_recorded_and_replays_into_the_same_graph(stack, tmp_pa
     bag = wait_for_bag(Path(stack.env["QG_RUNS_DIR"]) / "episodes", response.episode_id)
     recorded = check_bag_against_live(bag, live, graph, response.episode_id)
     counts: dict[str, int] = {}
-    steps = []
+    steps, step_ticks = [], []
     with open(next(bag.glob("*.mcap")), "rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         for _, channel, _, msg in reader.iter_decoded_messages():
@@ -139,7 +139,11 @@ def test_train_episode_is_recorded_and_replays_into_the_same_graph(stack, tmp_pa
             if channel.topic == "/transitions":
                 steps.append(msg.step)
                 assert len(msg.state) == 2 and np.all(np.abs(msg.state) <= 1.0)   # tilt_only
+            if channel.topic == "/ee_at_rest" and msg.seq > 0:
+                step_ticks.append(round(msg.duration / 1e-3))
     assert counts["/transitions"] == final.step, counts
+    # Every tick of the loop is in the bag: the settled start, then each step's 1 ms ticks.
+    assert len(step_ticks) == final.step and counts["/joint_states"] == 1 + sum(step_ticks)
     assert sorted(steps) == list(range(final.step))
     for topic in ("/joint_states", "/wrench_estimate", "/ee_pose", "/ee_twist",
                   "/wrench_setpoint", "/episode_status", "/sim/ground_truth"):

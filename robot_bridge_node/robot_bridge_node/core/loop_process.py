@@ -26,6 +26,8 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from typing import Any
 
+import numpy as np
+
 from robot_bridge_node.core.hardware_interface import robot_plugin
 from robot_bridge_node.core.interface_kinds import interface_kind
 from robot_bridge_node.core.loop_runner import (LoopRunner, ResetCommand, SetpointCommand,
@@ -39,6 +41,7 @@ __all__ = ["LoopSpec", "RingOutlet", "PipeMailbox", "TIMING_PERIOD", "main"]
 
 #: [s] how often a realtime loop sends its timing counts.
 TIMING_PERIOD = 1.0
+_ZEROS = np.zeros(9)
 
 
 @dataclass(frozen=True)
@@ -53,7 +56,8 @@ class LoopSpec:
     :param priority: realtime: ``SCHED_FIFO`` priority of the loop (0: the normal scheduler).
     :param initial_pose: the start pose taken before the first command.
     :param publish_every: a sample every this many ticks is marked for publishing.
-    :param truth_every: the ground truth is computed every this many ticks.
+    :param truth_every: the ground truth is computed every this many ticks (a multiple of
+        ``publish_every``: on every so many published samples).
     """
     robot: str
     sim_params: dict[str, Any]
@@ -67,32 +71,38 @@ class LoopSpec:
 
 
 class RingOutlet:
-    """The runner's output: every tick into the ring, events onto the socket."""
+    """The runner's output: every tick into the ring, events onto the socket.
+
+    :param truth_every: compute the ground truth on every this many published samples.
+    """
 
     def __init__(self, ring: SampleRing, conn: Connection, truth_every: int) -> None:
         self.ring = ring
         self.conn = conn
-        self.truth_every = truth_every
+        self.truth_every = max(1, truth_every)
         self.ticks = 0
+        self.published = 0
 
     def sample(self, t_ns: int, loop: RobotLoop, publish: bool) -> None:
-        record = self.ring.next_record()
         state = loop.hardware.read()
         flags = PUBLISH if publish else 0
-        record["t_ns"], record["tick"] = t_ns, self.ticks
-        record["q"], record["dq"], record["tau"] = state.q, state.dq, state.tau
-        if loop.wrench_estimate is not None:
-            record["wrench"] = loop.wrench_estimate
+        wrench = loop.wrench_estimate
+        if wrench is None:
+            wrench = _ZEROS[:6]
+        else:
             flags |= HAS_WRENCH
         tool = loop.controller.tool
-        if tool is not None:
-            record["tool_position"], record["tool_rotation"], record["tool_twist"] = (
-                tool.position, tool.rotation, tool.twist)
+        if tool is None:
+            position, rotation, twist = _ZEROS[:3], _ZEROS[:9], _ZEROS[:6]
+        else:
+            position, rotation, twist = tool.position, tool.rotation, tool.twist
             flags |= HAS_TOOL
-        if publish and self.ticks % self.truth_every == 0:
-            truth_to_array(loop.ground_truth(), record["truth"])
-            flags |= HAS_TRUTH
-        record["flags"] = flags
+        truth = publish and self.published % self.truth_every == 0
+        self.published += publish
+        values = self.ring.write(t_ns, self.ticks, flags | HAS_TRUTH if truth else flags,
+                                 state.q, state.dq, state.tau, wrench, position, rotation, twist)
+        if truth:
+            truth_to_array(loop.ground_truth(), values)
         self.ring.commit()
         self.ticks += 1
 
@@ -176,8 +186,8 @@ def run(conn: Connection, ring: SampleRing) -> int:
             conn.send(("log", "warning", f"no realtime priority {spec.priority} ({exc}); "
                                          f"running unprioritised"))
     stop = threading.Event()
-    runner = LoopRunner(loop, PipeMailbox(conn, stop), RingOutlet(ring, conn, spec.truth_every),
-                        lockstep=not spec.realtime,
+    outlet = RingOutlet(ring, conn, spec.truth_every // spec.publish_every)
+    runner = LoopRunner(loop, PipeMailbox(conn, stop), outlet, lockstep=not spec.realtime,
                         pace=_pace(loop, conn) if spec.realtime else None,
                         publish_every=spec.publish_every)
     conn.send(("ready", runner.clock_ns))

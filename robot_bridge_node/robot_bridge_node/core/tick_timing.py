@@ -49,7 +49,7 @@ class TimingSnapshot:
         if total == 0:
             return float("nan")
         index = int(np.searchsorted(np.cumsum(self.histogram), q / 100.0 * total))
-        return (min(index, N_BINS - 1) + 1) * BIN_NS * 1e-6
+        return (min(index, N_BINS - 1) + 1) * BIN_NS / 1e6
 
     @property
     def on_time_fraction(self) -> float:

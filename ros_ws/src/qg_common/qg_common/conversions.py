@@ -16,16 +16,14 @@ from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
 from sensor_msgs.msg import JointState as JointStateMsg
 
 from qg_common.rotations import matrix_from_quaternion, quaternion_from_matrix
-from qg_common.types import GroundTruth, JointState, PoseReference, StepResult, WrenchSetpoint
+from qg_common.types import (BASE_FRAME, TOOL_FRAME, GroundTruth, JointState, PoseReference,
+                             StepResult, WrenchSetpoint)
 
 __all__ = ["BASE_FRAME", "TOOL_FRAME", "time_msg", "time_ns", "joint_state_msg",
            "joint_state_from_msg", "wrench_msg", "wrench_from_msg", "wrench_stamped",
            "ground_truth_msg", "ground_truth_from_msg", "quaternion_from_matrix",
            "matrix_from_quaternion", "pose_msg", "pose_stamped", "twist_stamped", "at_rest_msg",
            "setpoint_from_msg", "setpoint_msg"]
-
-BASE_FRAME = "panda_link0"
-TOOL_FRAME = "tool"
 
 
 # --- time ---------------------------------------------------------------------------------------

@@ -18,11 +18,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["N_START_POSES", "JointState", "GroundTruth", "NO_GROUND_TRUTH", "StepResult",
-           "PoseReference", "WrenchSetpoint"]
+__all__ = ["N_START_POSES", "BASE_FRAME", "TOOL_FRAME", "JointState", "GroundTruth",
+           "NO_GROUND_TRUTH", "StepResult", "PoseReference", "WrenchSetpoint"]
 
 #: The task's initial poses, used in a fixed rotating order (SPEC 1).
 N_START_POSES = 8
+#: Frames: poses and twists are in the robot base frame, wrenches in the tool frame.
+BASE_FRAME = "panda_link0"
+TOOL_FRAME = "tool"
 
 
 @dataclass(frozen=True)

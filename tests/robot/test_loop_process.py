@@ -1,0 +1,164 @@
+"""The robot's loop in its own process: every tick reaches the robot process in order and the
+events after their ticks, the numbers are those of the same loop run in process, and neither
+process outlives the other silently."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+
+import numpy as np
+import pytest
+from qg_common.node_parameters import package_defaults
+from qg_common.types import WrenchSetpoint
+
+from robot_bridge_node.core.hardware_interface import robot_defaults, robot_plugin
+from robot_bridge_node.core.interface_kinds import interface_kind
+from robot_bridge_node.core.loop_link import LoopLink
+from robot_bridge_node.core.loop_process import LoopSpec
+from robot_bridge_node.core.loop_runner import SetpointCommand, StepEvent
+from robot_bridge_node.core.sample_ring import HAS_TRUTH, PUBLISH
+
+SETPOINT = WrenchSetpoint.residual(-15.0, 1.5, -0.5)
+
+
+def spec(robot: str = "sim_panda", realtime: bool = False) -> LoopSpec:
+    plugin = robot_plugin("sim_panda")
+    return LoopSpec(
+        robot=robot,
+        sim_params=package_defaults("sim", (("robot_bridge_node", "sim.yaml"),
+                                            *plugin.config_files)),
+        bridge_params=robot_defaults(plugin, (("robot_bridge_node", "bridge.yaml"),), "bridge"),
+        estimator_params=package_defaults("wrench_estimator",
+                                          (("robot_bridge_node", "wrench_estimator.yaml"),)),
+        realtime=realtime, priority=0, initial_pose=0, publish_every=10, truth_every=10)
+
+
+class Listener:
+    """Keeps what the link hands over, and in which order."""
+
+    def __init__(self) -> None:
+        self.records: list[np.ndarray] = []
+        self.events: list[StepEvent] = []
+        self.last_t_at_event: list[int] = []
+        self.failures: list[str] = []
+        self.arrived = threading.Event()
+
+    def samples(self, records: np.ndarray) -> None:
+        self.records.append(records)
+
+    def at_rest(self, event: StepEvent) -> None:
+        self.last_t_at_event.append(int(self.records[-1]["t_ns"][-1]))
+        self.events.append(event)
+        self.arrived.set()
+
+    def timing(self, snapshot) -> None:
+        pass
+
+    def log(self, level: str, message: str) -> None:
+        pass
+
+    def failed(self, message: str) -> None:
+        self.failures.append(message)
+        self.arrived.set()
+
+    def wait_for_event(self, seq: int, timeout: float = 30.0) -> StepEvent:
+        deadline = time.monotonic() + timeout
+        while not any(e.seq == seq for e in self.events):
+            assert time.monotonic() < deadline, f"no at-rest event {seq}"
+            self.arrived.wait(0.05)
+            self.arrived.clear()
+        return next(e for e in self.events if e.seq == seq)
+
+
+def test_every_tick_arrives_in_order_and_the_loop_computes_what_it_does_in_process() -> None:
+    listener = Listener()
+    link = LoopLink(spec(), 7, listener)
+    link.start()
+    try:
+        start = link.reset(3)
+        link.send_setpoint(SetpointCommand(1, SETPOINT))
+        step = listener.wait_for_event(1)
+        time.sleep(0.1)
+    finally:
+        link.stop()
+    records = np.concatenate(listener.records)
+    ticks = records["tick"]
+    assert np.array_equal(ticks, np.arange(len(ticks))) and link.ring.lost == 0
+    # the settled start (one sample), then one sample per tick of the step, 1 ms apart
+    step_ticks = round(step.result.duration / 1e-3)
+    assert len(records) == 1 + step_ticks
+    assert np.all(np.diff(records["t_ns"][1:]) == 1_000_000)
+    assert [e.seq for e in listener.events] == [0, 1]
+    assert listener.last_t_at_event == [start.t_ns, step.t_ns]   # events after their ticks
+    assert records["t_ns"][-1] == step.t_ns and not listener.failures
+    # every 10th tick published (publish_every), each with the ground truth (truth_every 10)
+    published = (records["flags"] & PUBLISH) != 0
+    assert published.sum() == 1 + step_ticks // 10
+    assert np.array_equal(published, (records["flags"] & HAS_TRUTH) != 0)
+
+    # The same loop in this process, from the same history: the same numbers, bit for bit.
+    s = spec()
+    plugin = robot_plugin(s.robot)
+    loop = interface_kind(plugin.interface).build_loop(
+        plugin.create(s.sim_params), s.bridge_params, s.estimator_params)
+    loop.reset(s.initial_pose)
+    loop.reset(3)
+    result = loop.execute(SETPOINT)
+    assert result.duration == step.result.duration
+    assert np.array_equal(result.wrench_estimate, step.result.wrench_estimate)
+    assert np.array_equal(loop.controller.tool.position, step.position)
+    assert np.array_equal(loop.hardware.read().q, records["q"][-1])
+
+
+def test_a_loop_that_cannot_be_built_says_why_and_leaves_no_process() -> None:
+    link = LoopLink(spec(robot="sim_pandaa"), 7, Listener())
+    with pytest.raises(RuntimeError, match="no robot plugin named 'sim_pandaa'"):
+        link.start()
+    assert link.process.poll() is not None
+
+
+def test_a_killed_loop_process_is_reported_and_stop_raises() -> None:
+    listener = Listener()
+    link = LoopLink(spec(), 7, listener)
+    link.start()
+    link.process.send_signal(signal.SIGKILL)
+    deadline = time.monotonic() + 10.0
+    while not listener.failures:
+        assert time.monotonic() < deadline, "the link did not notice"
+        time.sleep(0.02)
+    assert "exited (-9)" in listener.failures[0]
+    with pytest.raises(RuntimeError, match="exited"):
+        link.stop()
+
+
+def test_the_loop_process_ends_with_the_process_that_started_it() -> None:
+    parent = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
+        import sys, time
+        sys.path.insert(0, {os.path.dirname(__file__)!r})
+        from test_loop_process import Listener, spec
+        from robot_bridge_node.core.loop_link import LoopLink
+        link = LoopLink(spec(), 7, Listener())
+        link.start()
+        print(link.process.pid, flush=True)
+        time.sleep(60)
+        """)], stdout=subprocess.PIPE, text=True)
+    child = int(parent.stdout.readline())
+    parent.send_signal(signal.SIGKILL)           # no cleanup runs in the parent
+    parent.wait()
+    deadline = time.monotonic() + 10.0
+    while os.path.exists(f"/proc/{child}") and "Z" not in _state(child):
+        assert time.monotonic() < deadline, "the loop process outlived its parent"
+        time.sleep(0.05)
+
+
+def _state(pid: int) -> str:
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return "gone"
