@@ -41,6 +41,7 @@ from robot_bridge_node.bridge_node import BridgeNode, log_at
 from robot_bridge_node.core.loop_link import LoopLink
 from robot_bridge_node.core.loop_process import LoopSpec
 from robot_bridge_node.core.loop_runner import SetpointCommand, StepEvent
+from robot_bridge_node.core.robot_loop import LoopConfig
 from robot_bridge_node.core.sample_ring import (HAS_TOOL, HAS_TRUTH, HAS_WRENCH, PUBLISH,
                                                 truth_from_array)
 from robot_bridge_node.core.tick_timing import TimingSnapshot
@@ -74,7 +75,7 @@ class RobotProcess:
         self.estimator = estimator
         self.recorder = recorder
         config = sim.config
-        dt = sim.plugin.describe(sim.params).dt
+        dt = LoopConfig.from_dict(bridge.params.get("loop", {})).dt
         self.joint_names = tuple(sim.joint_names)
         self.lockstep = not config.realtime
         self.link = LoopLink(LoopSpec(

@@ -15,6 +15,7 @@ import subprocess
 import sys
 import threading
 import time
+import traceback
 from multiprocessing.connection import Connection
 from typing import Protocol
 
@@ -76,28 +77,29 @@ class LoopLink:
         self.listener = listener
         self.poll = poll
         self.ring = SampleRing.create(n_joints, capacity)
-        ours, theirs = socket.socketpair()
-        self._socket = ours
-        self.conn = Connection(os.dup(ours.fileno()))
+        self._socket, self._theirs = socket.socketpair()
+        self.conn = Connection(os.dup(self._socket.fileno()))
         self._send_lock = threading.Lock()
         self._resets: dict[int, _Reset] = {}
         self._next_job = 0
         self._stopping = False
         #: Why the loop process failed (``stop`` raises it), or None.
         self.error: str | None = None
+        self.process: subprocess.Popen | None = None
+        self._reader = threading.Thread(target=self._read, name="loop link", daemon=True)
+
+    def start(self) -> None:
+        """Start the loop process, send it the spec, wait until the loop is built, relay.
+
+        :raises RuntimeError: if the loop process reports an error or exits.
+        :raises TimeoutError: if it is not ready within ``START_TIMEOUT`` seconds.
+        """
+        theirs = self._theirs
         self.process = subprocess.Popen(
             [sys.executable, "-m", "robot_bridge_node.core.loop_process",
              "--socket", str(theirs.fileno()), "--ring", str(self.ring.fd)],
             pass_fds=(theirs.fileno(), self.ring.fd), preexec_fn=die_with_parent(os.getpid()))
         theirs.close()
-        self._reader = threading.Thread(target=self._read, name="loop link", daemon=True)
-
-    def start(self) -> None:
-        """Send the spec, wait for the loop to be built, start relaying.
-
-        :raises RuntimeError: if the loop process reports an error or exits.
-        :raises TimeoutError: if it is not ready within ``START_TIMEOUT`` seconds.
-        """
         try:
             self.conn.send(self.spec)
             deadline = time.monotonic() + START_TIMEOUT
@@ -166,6 +168,7 @@ class LoopLink:
         :raises RuntimeError: if the loop process had failed (``error``).
         """
         self._stopping = True
+        assert self.process is not None, "stop() before start()"
         try:
             self._send(("stop",))
         except OSError:
@@ -195,6 +198,9 @@ class LoopLink:
             self._relay_samples()
             if not self._stopping:
                 self._fail(f"the loop process exited ({self.process.wait()})")
+        except Exception:  # noqa: BLE001 - the listener failed: nothing would relay any more
+            if not self._stopping:
+                self._fail(f"relaying the loop's output failed:\n{traceback.format_exc()}")
 
     def _relay_samples(self) -> None:
         records = self.ring.take()

@@ -27,6 +27,7 @@ from multiprocessing.connection import Connection
 from typing import Any
 
 import numpy as np
+from qg_common.realtime_pacer import RealtimePacer
 
 from robot_bridge_node.core.hardware_interface import robot_plugin
 from robot_bridge_node.core.interface_kinds import interface_kind
@@ -154,7 +155,6 @@ def _build(spec: LoopSpec) -> RobotLoop:
 
 def _pace(loop: RobotLoop, conn: Connection) -> Any:
     """The realtime pace: the pacer's deadline, the tick's timing, the counts once a second."""
-    from qg_common.realtime_pacer import RealtimePacer
     pacer = RealtimePacer(loop.config.dt)
     timing = TickTiming(loop.config.dt)
     next_report = time.monotonic() + TIMING_PERIOD
