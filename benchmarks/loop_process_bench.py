@@ -25,32 +25,19 @@ import time
 from pathlib import Path
 
 import numpy as np
-from qg_common.node_parameters import package_defaults
 from qg_common.types import N_START_POSES, WrenchSetpoint
 from qg_recording.bag_reader import bag_info
 from qg_recording.episode_recorder import EpisodeRecorder
 
-from robot_bridge_node.core.hardware_interface import robot_defaults, robot_plugin
+from robot_bridge_node.core.hardware_interface import robot_plugin
 from robot_bridge_node.core.interface_kinds import interface_kind
 from robot_bridge_node.core.loop_link import LoopLink
-from robot_bridge_node.core.loop_process import LoopSpec, RingOutlet
+from robot_bridge_node.core.loop_process import RingOutlet
 from robot_bridge_node.core.loop_runner import SetpointCommand
 from robot_bridge_node.core.robot_loop import RobotLoop
 from robot_bridge_node.core.sample_ring import SampleRing
 from robot_bridge_node.core.tick_recording import record_ticks
-
-
-def loop_spec(robot: str = "sim_panda") -> LoopSpec:
-    """The composed robot's loop with the shipped config files, lockstep."""
-    plugin = robot_plugin(robot)
-    return LoopSpec(
-        robot=robot,
-        sim_params=package_defaults("sim", (("robot_bridge_node", "sim.yaml"),
-                                            *plugin.config_files)),
-        bridge_params=robot_defaults(plugin, (("robot_bridge_node", "bridge.yaml"),), "bridge"),
-        estimator_params=package_defaults("wrench_estimator",
-                                          (("robot_bridge_node", "wrench_estimator.yaml"),)),
-        realtime=False, priority=0, initial_pose=0, publish_every=10, truth_every=10)
+from robot_bridge_node.robot_process import shipped_loop_spec
 
 
 def setpoints(steps: int, seed: int = 0) -> list[tuple[int, WrenchSetpoint]]:
@@ -73,7 +60,7 @@ class _NoOutput:
 def in_process(steps: int, rounds: int) -> dict:
     """The loop's time per tick spent in its output (timed around each ``sample`` call), with
     and without the ground truth, and per tick with no output at all; alternating, medians."""
-    spec = loop_spec()
+    spec = shipped_loop_spec("sim_panda")
     plugin = robot_plugin(spec.robot)
     loop = interface_kind(plugin.interface).build_loop(
         plugin.create(spec.sim_params), spec.bridge_params, spec.estimator_params)
@@ -146,7 +133,7 @@ def _cpu_seconds(pid: int) -> float:
 
 def through_process(steps: int, record: bool) -> dict:
     """The loop process running ``steps`` steps, its ticks recorded or not."""
-    spec = loop_spec()
+    spec = shipped_loop_spec("sim_panda")
     names = robot_plugin(spec.robot).describe(spec.sim_params).joint_names
     folder = Path(tempfile.mkdtemp(prefix="loop_bench_"))
     recorder = EpisodeRecorder(folder) if record else None

@@ -30,6 +30,7 @@ import rclpy
 from qg_common.conversions import (at_rest_msg, ground_truth_msg, joint_state_msg,
                                    pose_stamped, setpoint_from_msg, time_msg, twist_stamped,
                                    wrench_stamped)
+from qg_common.node_parameters import package_defaults
 from qg_common.node_runtime import run_nodes
 from qg_common.types import JointState
 from qg_interfaces.msg import AtRest
@@ -40,6 +41,7 @@ from rosgraph_msgs.msg import Clock
 from robot_bridge_node.bridge_node import BridgeNode, log_at
 from robot_bridge_node.core.loop_link import LoopLink
 from robot_bridge_node.core.loop_process import LoopSpec
+from robot_bridge_node.core.hardware_interface import robot_defaults, robot_plugin
 from robot_bridge_node.core.loop_runner import SetpointCommand, StepEvent
 from robot_bridge_node.core.robot_loop import LoopConfig
 from robot_bridge_node.core.sample_ring import (HAS_TOOL, HAS_TRUTH, HAS_WRENCH, PUBLISH,
@@ -48,9 +50,9 @@ from robot_bridge_node.core.tick_timing import TimingSnapshot
 from robot_bridge_node.estimator_node import WrenchEstimatorNode
 from robot_bridge_node.loop_diagnostics import LoopDiagnostics
 from robot_bridge_node.recorder_node import RecorderNode
-from robot_bridge_node.simulation_node import SimulationNode, serve_reset
+from robot_bridge_node.simulation_node import SimConfig, SimulationNode, serve_reset
 
-__all__ = ["RobotProcess", "main"]
+__all__ = ["RobotProcess", "shipped_loop_spec", "main"]
 
 
 class RobotProcess:
@@ -169,6 +171,24 @@ class RobotProcess:
     def failed(self, message: str) -> None:
         self.bridge.get_logger().fatal(message)
         rclpy.try_shutdown()      # the process ends; run_nodes reports the exit
+
+
+def shipped_loop_spec(robot: str) -> LoopSpec:
+    """What ``ros2 run robot_bridge_node robot`` sends its loop process when started with no
+    overrides (the shipped ``sim.yaml``: lockstep, start pose 0): ``robot``'s plugin and the installed config files. Tests
+    and benchmarks start a loop process with it."""
+    plugin = robot_plugin(robot)
+    sim_params = package_defaults("sim", (("robot_bridge_node", "sim.yaml"), *plugin.config_files))
+    bridge_params = robot_defaults(plugin, (("robot_bridge_node", "bridge.yaml"),), "bridge")
+    config = SimConfig.from_dict(sim_params["sim"])
+    dt = LoopConfig.from_dict(bridge_params.get("loop", {})).dt
+    return LoopSpec(
+        robot=robot, sim_params=sim_params, bridge_params=bridge_params,
+        estimator_params=package_defaults("wrench_estimator",
+                                          (("robot_bridge_node", "wrench_estimator.yaml"),)),
+        realtime=config.realtime, priority=config.realtime_priority,
+        initial_pose=config.initial_pose,
+        publish_every=config.publish_every(dt), truth_every=config.ground_truth_every(dt))
 
 
 def _start(nodes: list[Node]) -> Callable[[], None]:

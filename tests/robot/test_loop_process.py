@@ -3,6 +3,7 @@ events after their ticks, the numbers are those of the same loop run in process,
 process outlives the other silently."""
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 import subprocess
@@ -13,29 +14,17 @@ import time
 
 import numpy as np
 import pytest
-from qg_common.node_parameters import package_defaults
 from qg_common.types import WrenchSetpoint
 
-from robot_bridge_node.core.hardware_interface import robot_defaults, robot_plugin
+from robot_bridge_node.core.hardware_interface import robot_plugin
 from robot_bridge_node.core.interface_kinds import interface_kind
 from robot_bridge_node.core.loop_link import LoopLink
-from robot_bridge_node.core.loop_process import LoopSpec
 from robot_bridge_node.core.loop_runner import SetpointCommand, StepEvent
 from robot_bridge_node.core.sample_ring import HAS_TRUTH, PUBLISH
+from robot_bridge_node.robot_process import shipped_loop_spec
 
+ROBOT = "sim_panda"
 SETPOINT = WrenchSetpoint.residual(-15.0, 1.5, -0.5)
-
-
-def spec(robot: str = "sim_panda", realtime: bool = False) -> LoopSpec:
-    plugin = robot_plugin("sim_panda")
-    return LoopSpec(
-        robot=robot,
-        sim_params=package_defaults("sim", (("robot_bridge_node", "sim.yaml"),
-                                            *plugin.config_files)),
-        bridge_params=robot_defaults(plugin, (("robot_bridge_node", "bridge.yaml"),), "bridge"),
-        estimator_params=package_defaults("wrench_estimator",
-                                          (("robot_bridge_node", "wrench_estimator.yaml"),)),
-        realtime=realtime, priority=0, initial_pose=0, publish_every=10, truth_every=10)
 
 
 class Listener:
@@ -77,7 +66,7 @@ class Listener:
 
 def test_every_tick_arrives_in_order_and_the_loop_computes_what_it_does_in_process() -> None:
     listener = Listener()
-    link = LoopLink(spec(), 7, listener)
+    link = LoopLink(shipped_loop_spec(ROBOT), 7, listener)
     link.start()
     try:
         start = link.reset(3)
@@ -102,7 +91,7 @@ def test_every_tick_arrives_in_order_and_the_loop_computes_what_it_does_in_proce
     assert np.array_equal(published, (records["flags"] & HAS_TRUTH) != 0)
 
     # The same loop in this process, from the same history: the same numbers, bit for bit.
-    s = spec()
+    s = shipped_loop_spec(ROBOT)
     plugin = robot_plugin(s.robot)
     loop = interface_kind(plugin.interface).build_loop(
         plugin.create(s.sim_params), s.bridge_params, s.estimator_params)
@@ -116,7 +105,8 @@ def test_every_tick_arrives_in_order_and_the_loop_computes_what_it_does_in_proce
 
 
 def test_a_loop_that_cannot_be_built_says_why_and_leaves_no_process() -> None:
-    link = LoopLink(spec(robot="sim_pandaa"), 7, Listener())
+    misnamed = dataclasses.replace(shipped_loop_spec(ROBOT), robot="sim_pandaa")
+    link = LoopLink(misnamed, 7, Listener())
     with pytest.raises(RuntimeError, match="no robot plugin named 'sim_pandaa'"):
         link.start()
     assert link.process.poll() is not None
@@ -124,7 +114,7 @@ def test_a_loop_that_cannot_be_built_says_why_and_leaves_no_process() -> None:
 
 def test_a_killed_loop_process_is_reported_and_stop_raises() -> None:
     listener = Listener()
-    link = LoopLink(spec(), 7, listener)
+    link = LoopLink(shipped_loop_spec(ROBOT), 7, listener)
     link.start()
     link.process.send_signal(signal.SIGKILL)
     deadline = time.monotonic() + 10.0
@@ -140,9 +130,10 @@ def test_the_loop_process_ends_with_the_process_that_started_it() -> None:
     parent = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
         import sys, time
         sys.path.insert(0, {os.path.dirname(__file__)!r})
-        from test_loop_process import Listener, spec
+        from test_loop_process import ROBOT, Listener
+        from robot_bridge_node.robot_process import shipped_loop_spec
         from robot_bridge_node.core.loop_link import LoopLink
-        link = LoopLink(spec(), 7, Listener())
+        link = LoopLink(shipped_loop_spec(ROBOT), 7, Listener())
         link.start()
         print(link.process.pid, flush=True)
         time.sleep(60)
