@@ -153,8 +153,13 @@ def test_a_position_robot_runs_as_separate_sim_and_bridge_processes(stack):
         # bridge's commands for the pose before the reset until the bridge took the restart:
         # one joint 69 deg back toward the old pose (3 of 3 runs), the reply's pose off by
         # 0.02-8.6 mm (7 runs). Now it holds until the bridge's commands follow the restart.
-        after = [q for stamp, q in states if stamp >= restarts[-1]]
-        assert len(after) >= 10, f"{len(after)} joint states after the restart"
+        # The states of the step may still be on their way when its at-rest event is in (one
+        # CI run had 7 of them by then, on loaded cores): the sim goes on publishing at 1 kHz.
+        def since_restart() -> list[np.ndarray]:
+            return [q for stamp, q in states if stamp >= restarts[-1]]
+        assert cli.spin_until(lambda: len(since_restart()) >= 10, 5.0), \
+            f"{len(since_restart())} joint states after the restart"
+        after = since_restart()
         moved = np.degrees(np.max(np.abs(np.array(after) - after[0])))
         print(f"position robot: largest joint motion after the reset {moved:.3f} deg")
         assert moved < 0.5, stack.logs()
