@@ -119,11 +119,14 @@ class LoopRunner:
     :param lockstep: tick only while a step runs, stamped with simulated time.
     :param pace: not lockstep: called before every tick, returns once the tick is due; False
         skips the tick (nothing to do yet).
+    :param after_reset: not lockstep: called once a reset has settled (it ran as fast as it
+        could, off the wall clock): the pace starts afresh.
     :param publish_every: every this many ticks a sample is marked for publishing.
     """
 
     def __init__(self, loop: RobotLoop, mailbox: Mailbox, outlet: LoopOutlet, *,
                  lockstep: bool, pace: Callable[[], bool] | None = None,
+                 after_reset: Callable[[], None] | None = None,
                  publish_every: int = 1) -> None:
         if not lockstep and pace is None:
             raise ValueError("a free-running (realtime) loop needs a pace")
@@ -132,6 +135,7 @@ class LoopRunner:
         self.outlet = outlet
         self.lockstep = lockstep
         self.pace = pace
+        self.after_reset = after_reset
         self.publish_every = max(1, publish_every)
         self._dt_ns = round(loop.config.dt * 1e9)
         self._settle_ticks = round(loop.config.settle_time / loop.config.dt)
@@ -191,6 +195,8 @@ class LoopRunner:
         event = self._event(0, self.loop.time - self.loop.config.settle_time, t_ns)
         self.outlet.at_rest(event)
         self.outlet.reset_done(command.job, event, None)
+        if self.after_reset is not None:
+            self.after_reset()
 
     def _after_tick(self, at_rest: bool) -> None:
         self.ticks += 1

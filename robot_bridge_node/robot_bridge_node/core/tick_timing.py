@@ -37,6 +37,13 @@ class TimingSnapshot:
     max_ns: int
     histogram: np.ndarray
 
+    def __reduce__(self) -> tuple:
+        """Pickled with its nonzero bins only: the loop process sends one every second, ~0.5 kB
+        instead of the 16 kB of the whole histogram."""
+        bins = np.flatnonzero(self.histogram)
+        return (_from_bins, (self.period_ns, self.late_after_ns, self.ticks, self.missed,
+                             self.late, self.max_ns, bins, self.histogram[bins]))
+
     def since(self, earlier: TimingSnapshot) -> TimingSnapshot:
         """The window from ``earlier`` to this snapshot (``max_ns`` stays this one's)."""
         return TimingSnapshot(self.period_ns, self.late_after_ns, self.ticks - earlier.ticks,
@@ -63,6 +70,14 @@ class TimingSnapshot:
                 "on_time_percent": 100.0 * self.on_time_fraction,
                 "period_p50_ms": self.percentile_ms(50), "period_p99_ms": self.percentile_ms(99),
                 "period_max_ms": self.max_ns * 1e-6}
+
+
+def _from_bins(period_ns: int, late_after_ns: int, ticks: int, missed: int, late: int,
+               max_ns: int, bins: np.ndarray, counts: np.ndarray) -> TimingSnapshot:
+    """The snapshot ``TimingSnapshot.__reduce__`` pickled."""
+    histogram = np.zeros(N_BINS, dtype=np.int64)
+    histogram[bins] = counts
+    return TimingSnapshot(period_ns, late_after_ns, ticks, missed, late, max_ns, histogram)
 
 
 class TickTiming:

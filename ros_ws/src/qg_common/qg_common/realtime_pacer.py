@@ -27,6 +27,11 @@ class RealtimePacer:
         self.missed = 0
         self._next: float | None = None
 
+    def restart(self) -> None:
+        """Forget the deadline: the next ``wait`` returns at once and anchors the period anew
+        (after a pause on purpose, whose missed ticks are not dropped ones)."""
+        self._next = None
+
     def wait(self) -> int:
         """Return at the next deadline (at once on the first call); the number of ticks dropped
         on the way (0 unless the loop fell a whole period behind)."""
