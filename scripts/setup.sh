@@ -120,9 +120,9 @@ if [[ "$(cat "$STAMPS/native" 2>/dev/null)" != "$native_hash" || ! -f "$native_s
   echo "$native_hash" > "$STAMPS/native"
 fi
 # 7. The bytecode of the stack's own modules and of the generated interfaces, compiled here once
-#    (a second when nothing changed): where PYTHONDONTWRITEBYTECODE is set, as on the CI machine,
-#    no process caches it, and every node process compiled them again as it started (0.15 s of
-#    CPU for the robot process's imports, 0.25 s for the learner's, measured).
+#    (a second when nothing changed): where PYTHONDONTWRITEBYTECODE is set, as on our development
+#    machine, no process caches it, and every node process compiled them again as it started
+#    (0.15 s of CPU for the robot process's imports, 0.25 s for the learner's, measured).
 ( cd "$ROOT" && "$PY" -m compileall -q ros_ws/install "${PY_PACKAGES[@]}" >/dev/null ) \
   || log "compileall reported errors (the modules still run from source)"
 log "ready: .venv, ros_ws/install, qgl, native kernels, bytecode"

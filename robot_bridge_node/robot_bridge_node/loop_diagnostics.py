@@ -15,7 +15,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from qg_common import topics
 from rclpy.node import Node
 
-from robot_bridge_node.core.tick_timing import N_BINS, TimingSnapshot
+from robot_bridge_node.core.tick_timing import TimingSnapshot
 
 __all__ = ["STATUS_NAME", "LoopDiagnostics", "timing_status", "snapshot_from_status"]
 
@@ -52,11 +52,10 @@ def snapshot_from_status(status: DiagnosticStatus) -> TimingSnapshot:
     """
     values = {kv.key: kv.value for kv in status.values}
     try:
-        histogram = np.zeros(N_BINS, dtype=np.int64)
-        for item in values["histogram_10us"].split():
-            index, count = item.split(":")
-            histogram[int(index)] = int(count)
-        return TimingSnapshot(*(int(values[key]) for key in _COUNTS), histogram=histogram)
+        pairs = [item.split(":") for item in values["histogram_10us"].split()]
+        return TimingSnapshot.from_bins(*(int(values[key]) for key in _COUNTS),
+                                        bins=[int(index) for index, _ in pairs],
+                                        counts=[int(count) for _, count in pairs])
     except (KeyError, ValueError) as exc:
         raise ValueError(f"{status.name!r} is not a loop timing status: {exc}") from exc
 

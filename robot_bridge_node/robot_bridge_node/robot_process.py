@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import rclpy
@@ -39,9 +40,9 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
 from robot_bridge_node.bridge_node import BridgeNode, log_at
+from robot_bridge_node.core.hardware_interface import robot_defaults, robot_plugin
 from robot_bridge_node.core.loop_link import LoopLink
 from robot_bridge_node.core.loop_process import LoopSpec
-from robot_bridge_node.core.hardware_interface import robot_defaults, robot_plugin
 from robot_bridge_node.core.loop_runner import SetpointCommand, StepEvent
 from robot_bridge_node.core.robot_loop import LoopConfig
 from robot_bridge_node.core.sample_ring import (HAS_TOOL, HAS_TRUTH, HAS_WRENCH, PUBLISH,
@@ -52,7 +53,7 @@ from robot_bridge_node.loop_diagnostics import LoopDiagnostics
 from robot_bridge_node.recorder_node import RecorderNode
 from robot_bridge_node.simulation_node import SimConfig, SimulationNode, serve_reset
 
-__all__ = ["RobotProcess", "shipped_loop_spec", "main"]
+__all__ = ["RobotProcess", "loop_spec", "shipped_loop_spec", "main"]
 
 
 class RobotProcess:
@@ -77,15 +78,11 @@ class RobotProcess:
         self.estimator = estimator
         self.recorder = recorder
         config = sim.config
-        dt = LoopConfig.from_dict(bridge.params.get("loop", {})).dt
         self.joint_names = tuple(sim.joint_names)
         self.lockstep = not config.realtime
-        self.link = LoopLink(LoopSpec(
-            robot=str(sim.get_parameter("robot").value), sim_params=sim.params,
-            bridge_params=bridge.params, estimator_params=estimator.params,
-            realtime=config.realtime, priority=config.realtime_priority,
-            initial_pose=config.initial_pose, publish_every=config.publish_every(dt),
-            truth_every=config.ground_truth_every(dt)), len(self.joint_names), self)
+        spec = loop_spec(str(sim.get_parameter("robot").value), sim.params, bridge.params,
+                         estimator.params)
+        self.link = LoopLink(spec, len(self.joint_names), self)
         self._lock = threading.Lock()
         self._session = ""                  # the served session ("" = any sender)
         self.foreign_setpoints = 0          # setpoints of other sessions since the last reset
@@ -173,22 +170,28 @@ class RobotProcess:
         rclpy.try_shutdown()      # the process ends; run_nodes reports the exit
 
 
-def shipped_loop_spec(robot: str) -> LoopSpec:
-    """What ``ros2 run robot_bridge_node robot`` sends its loop process when started with no
-    overrides (the shipped ``sim.yaml``: lockstep, start pose 0): ``robot``'s plugin and the installed config files. Tests
-    and benchmarks start a loop process with it."""
-    plugin = robot_plugin(robot)
-    sim_params = package_defaults("sim", (("robot_bridge_node", "sim.yaml"), *plugin.config_files))
-    bridge_params = robot_defaults(plugin, (("robot_bridge_node", "bridge.yaml"),), "bridge")
+def loop_spec(robot: str, sim_params: dict[str, Any], bridge_params: dict[str, Any],
+              estimator_params: dict[str, Any]) -> LoopSpec:
+    """What the robot process sends its loop process, from the nodes' parameters: the clock
+    mode, priority, start pose and rates are the ``sim`` node's, the tick the bridge's."""
     config = SimConfig.from_dict(sim_params["sim"])
     dt = LoopConfig.from_dict(bridge_params.get("loop", {})).dt
     return LoopSpec(
         robot=robot, sim_params=sim_params, bridge_params=bridge_params,
-        estimator_params=package_defaults("wrench_estimator",
-                                          (("robot_bridge_node", "wrench_estimator.yaml"),)),
-        realtime=config.realtime, priority=config.realtime_priority,
-        initial_pose=config.initial_pose,
+        estimator_params=estimator_params, realtime=config.realtime,
+        priority=config.realtime_priority, initial_pose=config.initial_pose,
         publish_every=config.publish_every(dt), truth_every=config.ground_truth_every(dt))
+
+
+def shipped_loop_spec(robot: str) -> LoopSpec:
+    """The ``loop_spec`` of ``ros2 run robot_bridge_node robot`` with no overrides: ``robot``'s
+    plugin and the installed config files (the shipped ``sim.yaml``: lockstep, start pose 0).
+    Tests and benchmarks start a loop process with it."""
+    plugin = robot_plugin(robot)
+    return loop_spec(
+        robot, package_defaults("sim", (("robot_bridge_node", "sim.yaml"), *plugin.config_files)),
+        robot_defaults(plugin, (("robot_bridge_node", "bridge.yaml"),), "bridge"),
+        package_defaults("wrench_estimator", (("robot_bridge_node", "wrench_estimator.yaml"),)))
 
 
 def _start(nodes: list[Node]) -> Callable[[], None]:

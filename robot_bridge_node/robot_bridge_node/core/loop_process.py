@@ -42,7 +42,8 @@ from robot_bridge_node.core.sample_ring import (HAS_TOOL, HAS_TRUTH, HAS_WRENCH,
                                                 SampleRing, truth_to_array)
 from robot_bridge_node.core.tick_timing import TickTiming
 
-__all__ = ["LoopSpec", "RingOutlet", "EventSender", "PipeMailbox", "RealtimePace", "TIMING_PERIOD", "main"]
+__all__ = ["LoopSpec", "RingOutlet", "EventSender", "PipeMailbox", "RealtimePace", "TIMING_PERIOD",
+           "main"]
 
 #: [s] how often a realtime loop sends its timing counts.
 TIMING_PERIOD = 1.0

@@ -9,6 +9,7 @@ up to 20 ms, so the counts of any window (the difference of two snapshots) give 
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,12 +38,21 @@ class TimingSnapshot:
     max_ns: int
     histogram: np.ndarray
 
+    @classmethod
+    def from_bins(cls, period_ns: int, late_after_ns: int, ticks: int, missed: int, late: int,
+                  max_ns: int, bins: Sequence[int], counts: Sequence[int]) -> TimingSnapshot:
+        """A snapshot whose histogram is given by its nonzero bins (their indices and counts)."""
+        histogram = np.zeros(N_BINS, dtype=np.int64)
+        histogram[np.asarray(bins, dtype=np.int64)] = counts
+        return cls(period_ns, late_after_ns, ticks, missed, late, max_ns, histogram)
+
     def __reduce__(self) -> tuple:
         """Pickled with its nonzero bins only: the loop process sends one every second, ~0.5 kB
         instead of the 16 kB of the whole histogram."""
         bins = np.flatnonzero(self.histogram)
-        return (_from_bins, (self.period_ns, self.late_after_ns, self.ticks, self.missed,
-                             self.late, self.max_ns, bins, self.histogram[bins]))
+        return (TimingSnapshot.from_bins, (self.period_ns, self.late_after_ns, self.ticks,
+                                           self.missed, self.late, self.max_ns, bins,
+                                           self.histogram[bins]))
 
     def since(self, earlier: TimingSnapshot) -> TimingSnapshot:
         """The window from ``earlier`` to this snapshot (``max_ns`` stays this one's)."""
@@ -70,14 +80,6 @@ class TimingSnapshot:
                 "on_time_percent": 100.0 * self.on_time_fraction,
                 "period_p50_ms": self.percentile_ms(50), "period_p99_ms": self.percentile_ms(99),
                 "period_max_ms": self.max_ns * 1e-6}
-
-
-def _from_bins(period_ns: int, late_after_ns: int, ticks: int, missed: int, late: int,
-               max_ns: int, bins: np.ndarray, counts: np.ndarray) -> TimingSnapshot:
-    """The snapshot ``TimingSnapshot.__reduce__`` pickled."""
-    histogram = np.zeros(N_BINS, dtype=np.int64)
-    histogram[bins] = counts
-    return TimingSnapshot(period_ns, late_after_ns, ticks, missed, late, max_ns, histogram)
 
 
 class TickTiming:
