@@ -89,6 +89,7 @@ class RecorderNode(Node):
         self.recorder = EpisodeRecorder(Path(self.config.episodes_dir or runs_dir() / "episodes"))
         self.lock = threading.Lock()
         self.episode_id = ""
+        self.opened_ns = 0                  # the loop's clock when the open bag began
         self.transitions = 0
         self.final_steps: int | None = None
         self.ended_at = 0.0
@@ -110,7 +111,11 @@ class RecorderNode(Node):
     def record_samples(self, records: np.ndarray, joint_names: Sequence[str]) -> None:
         """Record the loop's ticks (``sample_ring`` records; nothing between episodes)."""
         if self.episode_id:
-            record_ticks(self.recorder, records, joint_names)
+            # The ticks come in blocks, up to a few ms after their stamps: those stamped before
+            # the bag opened (its first message) belong to no episode.
+            records = records[records["t_ns"] >= self.opened_ns]
+            if len(records):
+                record_ticks(self.recorder, records, joint_names)
 
     # --- RL-rate topics -------------------------------------------------------------------
     def _subscribe(self, msg_type: type, topic: str, handler: Callable[[int, bytes, Any], None],
@@ -131,6 +136,7 @@ class RecorderNode(Node):
                 self.recorder.start(msg.episode_id, {"mode": msg.mode,
                                                      "initial_pose": int(msg.initial_pose),
                                                      "reward": msg.reward_type})
+                self.opened_ns = t_ns
                 self.episode_id, self.transitions, self.final_steps = msg.episode_id, 0, None
         if msg.episode_id == self.episode_id:
             self.recorder.record_raw("/episode_status", t_ns, data)

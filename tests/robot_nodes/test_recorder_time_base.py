@@ -68,3 +68,38 @@ def test_realtime_bag_is_stamped_like_the_live_messages(stack) -> None:
     assert [e.seq for e in events][-1] == 1
     for (t_ns, _), event in zip(recorded["/ee_at_rest"], events):
         assert 0 <= t_ns - stamp_ns(event) < 10**9, (t_ns, stamp_ns(event))
+
+
+def test_ticks_stamped_before_the_bag_opened_are_not_recorded(tmp_path: Path) -> None:
+    """The loop's ticks reach the recorder in blocks, a few ms after their stamps: a block that
+    arrives just after an episode's first status holds ticks from before it (a suite run found a
+    bag whose first message was a tick 4.6 ms older than its opening status)."""
+    import numpy as np
+    import rclpy
+    from qg_interfaces.msg import EpisodeStatus
+    from qg_recording.bag_reader import read_raw
+    from qg_recording.episode_recorder import EpisodeRecorder
+    from rclpy.serialization import serialize_message
+
+    from robot_bridge_node.core.sample_ring import record_dtype
+    from robot_bridge_node.recorder_node import RecorderNode
+
+    rclpy.init(domain_id=232)          # no test's processes use it; nothing is published
+    try:
+        node = RecorderNode()
+        node.recorder = EpisodeRecorder(tmp_path)
+        opened = 1_000_000_000
+        msg = status("resetting")
+        node._on_status(opened, serialize_message(msg), msg)
+        ticks = np.zeros(10, dtype=record_dtype(7))
+        ticks["t_ns"] = opened + np.arange(-5, 5) * 1_000_000     # 5 before, 5 from the opening
+        node.record_samples(ticks, [f"j{i}" for i in range(7)])
+        node._close()
+        node.destroy_node()
+    finally:
+        rclpy.shutdown()
+    bag = tmp_path / EPISODE
+    stamps = [m.t_ns for m in read_raw(bag, ["/joint_states"])]
+    assert stamps == [opened + k * 1_000_000 for k in range(5)]
+    first = next(iter(read_raw(bag)))
+    assert (first.topic, first.t_ns) == ("/episode_status", opened)
