@@ -76,7 +76,6 @@ def test_ticks_stamped_before_the_bag_opened_are_not_recorded(tmp_path: Path) ->
     bag whose first message was a tick 4.6 ms older than its opening status)."""
     import numpy as np
     import rclpy
-    from qg_interfaces.msg import EpisodeStatus
     from qg_recording.bag_reader import read_raw
     from qg_recording.episode_recorder import EpisodeRecorder
     from rclpy.serialization import serialize_message
