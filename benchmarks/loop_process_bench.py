@@ -36,7 +36,7 @@ from robot_bridge_node.core.loop_process import RingOutlet
 from robot_bridge_node.core.loop_runner import SetpointCommand
 from robot_bridge_node.core.robot_loop import RobotLoop
 from robot_bridge_node.core.sample_ring import SampleRing
-from robot_bridge_node.core.tick_recording import record_ticks
+from robot_bridge_node.core.tick_messages import record_ticks
 from robot_bridge_node.robot_process import shipped_loop_spec
 
 

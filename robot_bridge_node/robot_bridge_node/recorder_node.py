@@ -33,7 +33,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 
-from robot_bridge_node.core.tick_recording import record_ticks
+from robot_bridge_node.core.tick_messages import record_ticks
 
 __all__ = ["RecorderConfig", "RECORDER_SECTION", "RecorderNode"]
 

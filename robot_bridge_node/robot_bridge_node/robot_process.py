@@ -28,16 +28,13 @@ from typing import Any
 
 import numpy as np
 import rclpy
-from qg_common.conversions import (at_rest_msg, ground_truth_msg, joint_state_msg,
-                                   pose_stamped, setpoint_from_msg, time_msg, twist_stamped,
-                                   wrench_stamped)
+from qg_common.conversions import at_rest_msg, setpoint_from_msg, time_msg
 from qg_common.node_parameters import package_defaults
 from qg_common.node_runtime import run_nodes
-from qg_common.types import JointState
 from qg_interfaces.msg import AtRest
+from qg_recording.cdr import CdrBuffer
 from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
 from rclpy.node import Node
-from rosgraph_msgs.msg import Clock
 
 from robot_bridge_node.bridge_node import BridgeNode, log_at
 from robot_bridge_node.core.hardware_interface import robot_defaults, robot_plugin
@@ -45,8 +42,8 @@ from robot_bridge_node.core.loop_link import LoopLink
 from robot_bridge_node.core.loop_process import LoopSpec
 from robot_bridge_node.core.loop_runner import SetpointCommand, StepEvent
 from robot_bridge_node.core.robot_loop import LoopConfig
-from robot_bridge_node.core.sample_ring import (HAS_TOOL, HAS_TRUTH, HAS_WRENCH, PUBLISH,
-                                                truth_from_array)
+from robot_bridge_node.core.sample_ring import PUBLISH
+from robot_bridge_node.core.tick_messages import serialized_ticks
 from robot_bridge_node.core.tick_timing import TimingSnapshot
 from robot_bridge_node.estimator_node import WrenchEstimatorNode
 from robot_bridge_node.loop_diagnostics import LoopDiagnostics
@@ -128,29 +125,26 @@ class RobotProcess:
 
     # --- the loop's output (the link's reader thread) ------------------------------------------
     def samples(self, records: np.ndarray) -> None:
-        for record in records[(records["flags"] & PUBLISH) != 0]:
-            self._publish(record)
+        published = records[(records["flags"] & PUBLISH) != 0]
+        if len(published):
+            self._publish(published)
         if self.recorder is not None:
             self.recorder.record_samples(records, self.joint_names)
 
-    def _publish(self, record: np.void) -> None:
-        """One tick on the 1 kHz topics, under the nodes' names."""
-        stamp = time_msg(int(record["t_ns"]))
-        flags = int(record["flags"])
-        self.sim.joint_states.publish(joint_state_msg(
-            JointState(record["q"], record["dq"], record["tau"]), stamp, self.joint_names))
-        if flags & HAS_TRUTH:
-            truth = truth_from_array(record["truth"])
-            self.sim.ground_truth.publish(ground_truth_msg(truth, stamp))
-            self.sim.ground_truth_wrench.publish(wrench_stamped(truth.wrench, stamp))
-        if flags & HAS_WRENCH:
-            self.estimator.publish(stamp, record["wrench"])
-        if flags & HAS_TOOL:
-            self.bridge.ee_pose.publish(pose_stamped(record["tool_position"],
-                                                     record["tool_rotation"], stamp))
-            self.bridge.ee_twist.publish(twist_stamped(record["tool_twist"], stamp))
-        if self.lockstep:
-            self.sim.clock.publish(Clock(clock=stamp))
+    def _publish(self, records: np.ndarray) -> None:
+        """The ticks on the 1 kHz topics under the nodes' names, tick by tick, each message
+        published serialized (``tick_messages``: the bytes the recorder writes)."""
+        publishers = {"/joint_states": self.sim.joint_states,
+                      "/sim/ground_truth": self.sim.ground_truth,
+                      "/sim/ground_truth_wrench": self.sim.ground_truth_wrench,
+                      "/wrench_estimate": self.estimator.wrench,
+                      "/ee_pose": self.bridge.ee_pose, "/ee_twist": self.bridge.ee_twist}
+        ticks = serialized_ticks(records, self.joint_names)
+        for t_ns, messages in zip(records["t_ns"].tolist(), ticks):
+            for topic, message in messages:
+                publishers[topic].publish(message)
+            if self.lockstep:       # rosgraph_msgs/Clock: the stamp alone
+                self.sim.clock.publish(CdrBuffer().stamp(t_ns).message())
 
     def at_rest(self, event: StepEvent) -> None:
         self.bridge.ee_at_rest.publish(self._at_rest_msg(event))

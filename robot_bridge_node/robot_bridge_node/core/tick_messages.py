@@ -1,0 +1,104 @@
+"""The loop's ticks as the 1 kHz topics' messages, for the episode bag and for the live topics.
+
+Every tick is a message on ``/joint_states``, ``/wrench_estimate`` (when the loop has an
+estimate), ``/ee_pose`` and ``/ee_twist`` (once the controller has a tool pose), and the ticks
+the loop computed the ground truth for are messages on ``/sim/ground_truth`` and
+``/sim/ground_truth_wrench``, each stamped with its tick's stamp. A block of the sample ring's
+records becomes one row of numbers per message (a few numpy operations and one quaternion per
+tick). The bag writer's thread encodes the rows it is handed; the robot process publishes the
+same rows encoded as serialized messages (``TopicRows.encode``), so the live messages and the
+recorded ones are the same bytes, and no tick costs a Python message object per topic (the
+robot process spent 128 µs of every tick on them, `benchmarks/publish_bench.py`).
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from qg_common.rotations import quaternion_from_matrix
+from qg_common.types import BASE_FRAME, TOOL_FRAME
+from qg_recording.cdr import FixedLayout, fixed_layout, joint_state_layout
+from qg_recording.episode_recorder import TOPICS, EpisodeRecorder, ground_truth_columns
+
+from robot_bridge_node.core.sample_ring import HAS_TOOL, HAS_TRUTH, HAS_WRENCH
+
+__all__ = ["TopicRows", "tick_rows", "serialized_ticks", "record_ticks"]
+
+_GROUND_TRUTH = fixed_layout("qg_interfaces/msg/GroundTruth", TOOL_FRAME)
+
+
+@dataclass(frozen=True)
+class TopicRows:
+    """The messages of one topic in a block of ticks, as rows of numbers.
+
+    :param ticks: (n_records,) which of the block's records have a message on this topic.
+    :param t_ns: (n,) the messages' stamps; :param values: (n, layout.n_values) their numbers.
+    :param names: the joint names of a ``JointState`` (None for the other types).
+    """
+    topic: str
+    ticks: np.ndarray
+    t_ns: np.ndarray
+    values: np.ndarray
+    frame_id: str = ""
+    names: tuple[str, ...] | None = None
+
+    @property
+    def layout(self) -> FixedLayout:
+        if self.names is not None:
+            return joint_state_layout(self.frame_id, self.names)
+        return fixed_layout(TOPICS[self.topic].type_name, self.frame_id)
+
+    def encode(self) -> list[bytes]:
+        """The serialized messages (CDR, as rclpy publishes and subscribes them), in order."""
+        layout = self.layout
+        data = layout.encode_many(self.t_ns, self.values).tobytes()
+        return [data[k:k + layout.size] for k in range(0, len(data), layout.size)]
+
+
+def tick_rows(records: np.ndarray, joint_names: Sequence[str]) -> list[TopicRows]:
+    """The messages of ``records`` (``sample_ring.record_dtype``), topic by topic."""
+    flags = records["flags"]
+    every = np.ones(len(records), dtype=bool)
+    rows = [TopicRows("/joint_states", every, records["t_ns"],
+                      np.hstack([records["q"], records["dq"], records["tau"]]),
+                      names=tuple(joint_names))]
+    has_wrench = (flags & HAS_WRENCH) != 0
+    wrench = records[has_wrench]
+    rows.append(TopicRows("/wrench_estimate", has_wrench, wrench["t_ns"], wrench["wrench"],
+                          TOOL_FRAME))
+    has_tool = (flags & HAS_TOOL) != 0
+    tool = records[has_tool]
+    quaternions = np.reshape([quaternion_from_matrix(r) for r in tool["tool_rotation"]], (-1, 4))
+    rows.append(TopicRows("/ee_pose", has_tool, tool["t_ns"],
+                          np.hstack([tool["tool_position"], quaternions]), BASE_FRAME))
+    rows.append(TopicRows("/ee_twist", has_tool, tool["t_ns"], tool["tool_twist"], BASE_FRAME))
+    has_truth = (flags & HAS_TRUTH) != 0
+    if has_truth.any():
+        truth = records[has_truth]
+        v = truth["truth"]
+        values = np.zeros((len(truth), _GROUND_TRUTH.n_values))
+        ground_truth_columns(_GROUND_TRUTH, values, v[:, :6], v[:, 6:7], v[:, 7:8], v[:, 8:9],
+                             v[:, 9:10], v[:, 10:12], v[:, 12:13], v[:, 13:14])
+        rows.append(TopicRows("/sim/ground_truth", has_truth, truth["t_ns"], values,
+                              TOOL_FRAME))
+        rows.append(TopicRows("/sim/ground_truth_wrench", has_truth, truth["t_ns"], v[:, :6],
+                              TOOL_FRAME))
+    return rows
+
+
+def serialized_ticks(records: np.ndarray, joint_names: Sequence[str]
+                     ) -> list[list[tuple[str, bytes]]]:
+    """The serialized messages of each of ``records``, as (topic, CDR bytes), tick by tick."""
+    by_tick: list[list[tuple[str, bytes]]] = [[] for _ in range(len(records))]
+    for rows in tick_rows(records, joint_names):
+        for tick, message in zip(np.flatnonzero(rows.ticks).tolist(), rows.encode()):
+            by_tick[tick].append((rows.topic, message))
+    return by_tick
+
+
+def record_ticks(recorder: EpisodeRecorder, records: np.ndarray,
+                 joint_names: Sequence[str]) -> None:
+    """Record ``records`` (``sample_ring.record_dtype``) into ``recorder``'s episode, if any."""
+    for rows in tick_rows(records, joint_names):
+        recorder.record_rows(rows.topic, rows.t_ns, rows.values, rows.frame_id, rows.names)
