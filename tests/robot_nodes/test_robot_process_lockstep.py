@@ -3,9 +3,11 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
+from conftest import Stack
 from robot_client import DEEP, RobotClient, wrench
 
 pytestmark = pytest.mark.ros
@@ -62,31 +64,22 @@ def test_reset_and_setpoints_complete_with_their_seq_and_a_rerun_repeats_them_ex
             assert again.ee_pose == first[seq - 1].ee_pose
 
 
-def test_bad_reset_and_nan_setpoint_are_rejected_and_the_process_stays_up(stack):
-    stack.start(ROBOT)
-    with stack.client() as cli:
-        robot = RobotClient(cli)
-        bad = robot.reset(9)
-        assert not bad.success
-        assert "initial_pose" in bad.message and "0..7" in bad.message
-
-        assert robot.step(1, (0.0, 0.0, math.nan, 0.0, 0.0, 0.0), timeout=1.0) is None
-        logs = stack.logs()
-        assert "setpoint 1 rejected" in logs and "NaN" in logs, logs
-
-        event = robot.step(2, (0.0, 0.0, -5.0, 0.2, 0.0, 0.0))
-        assert event is not None, stack.logs()
-        assert np.all(np.isfinite(wrench(event.wrench_estimate)))
-    assert stack.launcher.poll() == []
-    t0 = time.monotonic()
-    codes = stack.stop(grace=5.0)
-    assert codes == {"robot": 0}, stack.logs()
-    assert time.monotonic() - t0 < 5.0
+@pytest.fixture(scope="module")
+def robot_process(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
+    """One robot process for the three tests below, which each begin with a reset of their own
+    and leave nothing behind that the next one reads (their sequence numbers, sessions and
+    request ids differ); the last one stops it. One start instead of three."""
+    stack = Stack(tmp_path_factory.mktemp("robot_process"))
+    try:
+        stack.start(ROBOT)
+        yield stack
+    finally:
+        stack.stop(grace=3.0)
 
 
-def test_only_the_served_session_steers_the_arm(stack):
+def test_only_the_served_session_steers_the_arm(robot_process: Stack) -> None:
     """Setpoints of another session are dropped, counted and logged; a reset opens a session."""
-    stack.start(ROBOT)
+    stack = robot_process
     with stack.client() as cli:
         robot = RobotClient(cli)
         assert robot.reset(2, session="episode_a").success
@@ -104,14 +97,15 @@ def test_only_the_served_session_steers_the_arm(stack):
         assert event is not None and event.foreign_setpoints == 0
 
 
-def test_a_reset_asked_again_with_its_request_id_is_answered_not_redone(stack):
+def test_a_reset_asked_again_with_its_request_id_is_answered_not_redone(
+        robot_process: Stack) -> None:
     """A client whose reply got lost asks again with the same id: it gets the first reply, and
     the arm, which has moved on, is not reset again (no settling: the lockstep clock stands)."""
     from qg_interfaces.srv import ResetSim
     from rosgraph_msgs.msg import Clock
 
     from qg_learning_node.cli.ros_client import call_service
-    stack.start(ROBOT)
+    stack = robot_process
     with stack.client() as cli:
         clock: list[int] = []
         cli.node.create_subscription(
@@ -134,3 +128,27 @@ def test_a_reset_asked_again_with_its_request_id_is_answered_not_redone(stack):
                              ResetSim.Request(initial_pose=2, request_id="reset-twice"), 60.0)
         cli.spin_for(0.3)
         assert fresh.success and clock[-1] >= before + 0.1e9 - 1   # a new id: settled again
+
+
+def test_bad_reset_and_nan_setpoint_are_rejected_and_the_process_stays_up(
+        robot_process: Stack) -> None:
+    """The shared process's last test: after the others, it stops it."""
+    stack = robot_process
+    with stack.client() as cli:
+        robot = RobotClient(cli)
+        bad = robot.reset(9)
+        assert not bad.success
+        assert "initial_pose" in bad.message and "0..7" in bad.message
+
+        assert robot.step(1, (0.0, 0.0, math.nan, 0.0, 0.0, 0.0), timeout=1.0) is None
+        logs = stack.logs()
+        assert "setpoint 1 rejected" in logs and "NaN" in logs, logs
+
+        event = robot.step(2, (0.0, 0.0, -5.0, 0.2, 0.0, 0.0))
+        assert event is not None, stack.logs()
+        assert np.all(np.isfinite(wrench(event.wrench_estimate)))
+    assert stack.launcher.poll() == []
+    t0 = time.monotonic()
+    codes = stack.stop(grace=5.0)
+    assert codes == {"robot": 0}, stack.logs()
+    assert time.monotonic() - t0 < 5.0
