@@ -32,8 +32,8 @@ from qg_common.conversions import at_rest_msg, setpoint_from_msg, time_msg
 from qg_common.node_parameters import package_defaults
 from qg_common.node_runtime import run_nodes
 from qg_interfaces.msg import AtRest
-from qg_recording.cdr import CdrBuffer
 from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
+from qg_recording.cdr import CdrBuffer
 from rclpy.node import Node
 
 from robot_bridge_node.bridge_node import BridgeNode, log_at
