@@ -31,7 +31,7 @@ from multiprocessing.connection import Connection
 from typing import Any
 
 import numpy as np
-from qg_common.realtime_pacer import RealtimePacer
+from qg_common.realtime_pacer import DEFAULT_SPIN, FIFO_SPIN, RealtimePacer
 
 from robot_bridge_node.core.hardware_interface import robot_plugin
 from robot_bridge_node.core.interface_kinds import interface_kind
@@ -206,8 +206,8 @@ class RealtimePace:
     ~25 at every episode's reset).
     """
 
-    def __init__(self, dt: float, events: EventSender) -> None:
-        self.pacer = RealtimePacer(dt)
+    def __init__(self, dt: float, events: EventSender, spin: float = DEFAULT_SPIN) -> None:
+        self.pacer = RealtimePacer(dt, spin)
         self.timing = TickTiming(dt)
         self.events = events
         self._next_report = time.monotonic() + TIMING_PERIOD
@@ -240,16 +240,18 @@ def run(conn: Connection, ring: SampleRing) -> int:
     # so; after the freeze it takes no measurable time.
     gc.collect()
     gc.freeze()
+    spin = DEFAULT_SPIN
     if spec.realtime and spec.priority > 0:
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(spec.priority))
+            spin = FIFO_SPIN
         except OSError as exc:
             conn.send(("log", "warning", f"no realtime priority {spec.priority} ({exc}); "
                                          f"running unprioritised"))
     stop = threading.Event()
     events = EventSender(conn, stop)      # after the priority: its thread has the loop's
     outlet = RingOutlet(ring, events, spec.truth_every // spec.publish_every)
-    pace = RealtimePace(loop.config.dt, events) if spec.realtime else None
+    pace = RealtimePace(loop.config.dt, events, spin) if spec.realtime else None
     runner = LoopRunner(loop, PipeMailbox(conn, stop), outlet, lockstep=not spec.realtime,
                         pace=pace, after_reset=pace.restart if pace is not None else None,
                         publish_every=spec.publish_every)
