@@ -7,8 +7,8 @@ domain and no subscriber:
 - ``objects``: a message object per topic and tick, built by ``qg_common.conversions`` and
   serialized by rclpy (what the separate sim, bridge and estimator processes still do, and the
   robot process did before);
-- ``serialized``: the block's rows of numbers per topic (``tick_messages.serialized_ticks``), encoded
-  by numpy and published as bytes (what the robot process does).
+- ``serialized``: the block's rows of numbers per topic (``tick_messages.serialized_ticks``),
+  encoded by numpy and published as bytes (what the robot process does).
 
 The records are synthetic (the Panda's 7 joints, a tool pose and an estimate on every tick,
 the ground truth every ``--truth-every`` ticks); the cost does not depend on the numbers.

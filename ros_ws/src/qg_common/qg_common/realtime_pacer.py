@@ -19,9 +19,10 @@ class RealtimePacer:
     """Holds a fixed wall-clock period: sleeps most of the wait, busy-waits the last bit.
 
     ``time.sleep`` on Linux wakes tens of microseconds late, so the pacer sleeps until ``spin``
-    before the deadline and spins the rest. Deadlines are absolute (``start + k * period``), so short
-    delays are made up on the next ticks; a loop more than one period behind re-anchors instead
-    of bursting through the missed ticks (hardware would have dropped them), and counts them.
+    before the deadline and spins the rest. Deadlines are absolute (``start + k * period``), so
+    short delays are made up on the next ticks; a loop more than one period behind re-anchors
+    instead of bursting through the missed ticks (hardware would have dropped them), and counts
+    them.
 
     :param period: [s] tick period.
     :param spin: [s] busy-wait before each deadline.
