@@ -84,6 +84,12 @@ class RobotProcess:
         self._session = ""                  # the served session ("" = any sender)
         self.foreign_setpoints = 0          # setpoints of other sessions since the last reset
         self._timing: TimingSnapshot | None = None
+        # The 1 kHz topics' publishers, by the topic names of ``tick_messages``.
+        self._publishers = {"/joint_states": sim.joint_states,
+                            "/sim/ground_truth": sim.ground_truth,
+                            "/sim/ground_truth_wrench": sim.ground_truth_wrench,
+                            "/wrench_estimate": estimator.wrench,
+                            "/ee_pose": bridge.ee_pose, "/ee_twist": bridge.ee_twist}
         bridge.setpoint_handler = self.submit_setpoint
         if recorder is not None:
             recorder.clock_ns = self.link.now_ns
@@ -134,15 +140,10 @@ class RobotProcess:
     def _publish(self, records: np.ndarray) -> None:
         """The ticks on the 1 kHz topics under the nodes' names, tick by tick, each message
         published serialized (``tick_messages``: the bytes the recorder writes)."""
-        publishers = {"/joint_states": self.sim.joint_states,
-                      "/sim/ground_truth": self.sim.ground_truth,
-                      "/sim/ground_truth_wrench": self.sim.ground_truth_wrench,
-                      "/wrench_estimate": self.estimator.wrench,
-                      "/ee_pose": self.bridge.ee_pose, "/ee_twist": self.bridge.ee_twist}
         ticks = serialized_ticks(records, self.joint_names)
         for t_ns, messages in zip(records["t_ns"].tolist(), ticks):
             for topic, message in messages:
-                publishers[topic].publish(message)
+                self._publishers[topic].publish(message)
             if self.lockstep:       # rosgraph_msgs/Clock: the stamp alone
                 self.sim.clock.publish(CdrBuffer().stamp(t_ns).message())
 
