@@ -26,6 +26,7 @@ def write_bag(directory: Path) -> None:
 
 
 @pytest.mark.ros
+@pytest.mark.alone
 def test_replay_at_rate_two_takes_half_the_time(stack, tmp_path: Path) -> None:
     from geometry_msgs.msg import TwistStamped, WrenchStamped
     from rclpy.qos import QoSProfile, ReliabilityPolicy

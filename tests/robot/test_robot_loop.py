@@ -72,13 +72,16 @@ def test_zero_residual_jams_from_most_starts(loop: RobotLoop, ideal_loop: RobotL
 @pytest.mark.ros     # full tier only: 8 episodes of up to 100 steps; 16 s alone, 22 s in the suite
 @pytest.mark.slow
 def test_uniform_random_residuals_insert_from_at_least_six_of_eight_starts(
-        loop: RobotLoop) -> None:
+        loop: RobotLoop, let_alone_tests_in) -> None:
     """The issue's bar: uniform random residuals insert from >= 6 of the 8 starts, each within
     100 steps (benchmarks/force_depth.py: 16/16 over two seeds, mean 41 steps; real robot: 32;
     the report's random bar, Gaussian: 48.4 steps). The cap was 1000: one start took 270 steps
     and half the test's time."""
     rng = np.random.default_rng(0)
-    outcomes = [run_episode(loop, k, 100, rng) for k in range(8)]
+    outcomes = []
+    for k in range(8):
+        let_alone_tests_in()
+        outcomes.append(run_episode(loop, k, 100, rng))
     inserted = [steps for success, steps, _ in outcomes if success]
     print(f"random residual: {len(inserted)}/8 inserted, mean {np.mean(inserted):.1f} steps")
     assert len(inserted) >= 6, outcomes

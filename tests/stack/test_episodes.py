@@ -266,7 +266,7 @@ def test_async_learner_trains_while_the_robot_moves(stack, tmp_path):
 
 
 @pytest.mark.slow                 # three episodes and two learners: 20-30 s on loaded cores
-def test_learner_killed_mid_episode_degrades_then_resumes(stack, tmp_path):
+def test_learner_killed_mid_episode_degrades_then_resumes(stack, tmp_path, let_alone_tests_in):
     """The executor runs degraded without the learner and is back to normal as soon as a
     restarted learner speaks; the restarted learner resumes from the checkpoint and does not
     checkpoint again the episode that ended while it was down (its latched status)."""
@@ -283,6 +283,7 @@ def test_learner_killed_mid_episode_degrades_then_resumes(stack, tmp_path):
         episodes.final(first.episode_id, timeout=240.0)
         assert wait_for_file(checkpoints / "learner.pt").exists(), stack.logs()
 
+        let_alone_tests_in()   # between two episodes
         second = episodes.start(mode="train", initial_pose=1)
         assert second.success, second.message
         assert cli.spin_until(lambda: any(s.episode_id == second.episode_id and s.step >= 2

@@ -73,6 +73,7 @@ def test_stopping_the_stack_mid_episode_records_the_abort(stack):
     assert (statuses[-1].state, statuses[-1].message) == ("aborted", "shutdown"), stack.logs()
 
 
+@pytest.mark.alone
 def test_learner_heartbeat_goes_on_while_it_trains(stack, tmp_path):
     """A training cycle of several seconds must not silence the heartbeat, or the executor
     would run degraded (zero residual) while the learner is merely busy.
