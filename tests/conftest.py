@@ -9,6 +9,7 @@ says why and every ``ros`` test fails with that reason.
 """
 from __future__ import annotations
 
+import contextlib
 import itertools
 import os
 import sys
@@ -105,15 +106,20 @@ def pytest_report_header(config: pytest.Config) -> str:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Files holding an ``alone`` test first, then those holding a ``slow`` one, the order
-    otherwise kept. Two workers that take whole files finish together only if the longest
-    files start early; and an ``alone`` test waits for the other worker's test in progress,
-    which at the start is a short one, not a minute-long ``slow`` one."""
+    """Files in the order two workers that take whole files finish together: those holding an
+    ``alone`` test first (its alone part waits only for the other worker's first test, not for
+    a minute-long one in full swing), then those holding a ``slow`` test, then the other ``ros``
+    files, then the in-process ones, small enough to even out the end. Within a file its
+    ``alone`` tests come first; the order is otherwise kept. (``scripts/test.sh`` passes
+    ``--no-loadscope-reorder``: pytest-xdist would otherwise order the files by their number of
+    tests.)"""
     def files(marker: str) -> set:
         return {item.path for item in items if item.get_closest_marker(marker)}
 
-    alone, slow = files("alone"), files("slow")
-    items.sort(key=lambda item: 0 if item.path in alone else 1 if item.path in slow else 2)
+    alone, slow, ros = files("alone"), files("slow"), files("ros")
+    rank = {path: 0 if path in alone else 1 if path in slow else 2 if path in ros else 3
+            for path in {item.path for item in items}}
+    items.sort(key=lambda item: (rank[item.path], item.get_closest_marker("alone") is None))
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -159,47 +165,75 @@ _held: tuple[IO[str], IO[str]] | None = None
 
 
 @pytest.fixture(autouse=True)
-def _cpu_to_itself(request: pytest.FixtureRequest,
-                   tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
-    """Under pytest-xdist, a test marked ``alone`` (it times itself by the wall clock: a
-    realtime loop's pace, a heartbeat's gaps) runs while no other worker runs a test, and the
-    others run side by side. A readers-writer lock on a file all workers share: a test takes it
-    shared, an ``alone`` test exclusive; the turnstile, taken briefly by every test and held by
-    an ``alone`` test while it waits, keeps the other worker from taking the lock shared again
-    and again ahead of it. A long test lets a waiting ``alone`` test in between its parts
-    (``let_alone_tests_in``)."""
+def _cpu_to_itself(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """Under pytest-xdist, the part of a test that times itself by the wall clock (a realtime
+    loop's pace, a heartbeat's gaps: ``machine_to_itself``) runs while no other worker runs a
+    test, and everything else side by side. A readers-writer lock on a file all workers share:
+    every test holds it shared, the timed part exclusive; the turnstile, taken briefly by
+    every test and held by a timed part while it waits, keeps the other worker from taking the
+    lock shared again and again ahead of it. A long test lets a waiting timed part in between
+    its parts (``let_alone_tests_in``)."""
     global _held
     if "PYTEST_XDIST_WORKER" not in os.environ:
         yield
         return
     import fcntl
     shared = tmp_path_factory.getbasetemp().parent
-    alone = request.node.get_closest_marker("alone") is not None
     with open(shared / "alone.turnstile", "a") as turnstile, \
             open(shared / "alone.lock", "a") as lock:
-        fcntl.flock(turnstile, fcntl.LOCK_EX)
-        fcntl.flock(lock, fcntl.LOCK_EX if alone else fcntl.LOCK_SH)
-        fcntl.flock(turnstile, fcntl.LOCK_UN)
-        _held = None if alone else (turnstile, lock)
+        _held = (turnstile, lock)
+        _take(fcntl.LOCK_SH)
         try:
             yield
         finally:
             _held = None
 
 
+def _take(mode: int) -> None:
+    """Let go of the lock, then take it again in ``mode`` (shared or exclusive) through the
+    turnstile. Holding nothing while it waits, two tests doing this cannot deadlock."""
+    import fcntl
+    turnstile, lock = _held
+    fcntl.flock(lock, fcntl.LOCK_UN)
+    fcntl.flock(turnstile, fcntl.LOCK_EX)     # held by a timed part until it has the lock
+    fcntl.flock(lock, mode)
+    fcntl.flock(turnstile, fcntl.LOCK_UN)
+
+
+@pytest.fixture
+def machine_to_itself(request: pytest.FixtureRequest
+                      ) -> Callable[[], contextlib.AbstractContextManager[None]]:
+    """For a test marked ``alone``: ``with machine_to_itself(): ...`` runs the block, the part
+    the test times by the wall clock, while no other worker runs a test. Starting its processes
+    beforehand, side by side with the other worker, keeps that part, and the other worker's
+    idle time, short."""
+    if request.node.get_closest_marker("alone") is None:
+        pytest.fail("machine_to_itself is for tests marked `alone` (they run first)",
+                    pytrace=False)
+
+    @contextlib.contextmanager
+    def alone() -> Iterator[None]:
+        if _held is None:          # not under pytest-xdist: nothing else runs anyway
+            yield
+            return
+        import fcntl
+        _take(fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(_held[1], fcntl.LOCK_SH)     # the others may go on
+    return alone
+
+
 @pytest.fixture
 def let_alone_tests_in() -> Callable[[], None]:
-    """For a test of many parts (episodes): called between two, it lets an ``alone`` test
-    waiting on the other worker run first (without it, one waited 26 s for a 43 s test)."""
+    """For a test of many parts (episodes): called between two, it lets a timed part waiting
+    on the other worker run first (without it, one waited 26 s for a 43 s test)."""
     def pause() -> None:
         if _held is None:
             return
         import fcntl
-        turnstile, lock = _held
-        fcntl.flock(lock, fcntl.LOCK_UN)
-        fcntl.flock(turnstile, fcntl.LOCK_EX)     # held by an alone test until it has the lock
-        fcntl.flock(lock, fcntl.LOCK_SH)
-        fcntl.flock(turnstile, fcntl.LOCK_UN)
+        _take(fcntl.LOCK_SH)
     return pause
 
 

@@ -27,7 +27,7 @@ def write_bag(directory: Path) -> None:
 
 @pytest.mark.ros
 @pytest.mark.alone
-def test_replay_at_rate_two_takes_half_the_time(stack, tmp_path: Path) -> None:
+def test_replay_at_rate_two_takes_half_the_time(stack, tmp_path: Path, machine_to_itself) -> None:
     from geometry_msgs.msg import TwistStamped, WrenchStamped
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
@@ -35,7 +35,7 @@ def test_replay_at_rate_two_takes_half_the_time(stack, tmp_path: Path) -> None:
     qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
     arrivals: list[tuple[float, float]] = []
     twists: list[TwistStamped] = []
-    with stack.client("replay_listener") as cli:
+    with stack.client("replay_listener") as cli, machine_to_itself():
         cli.node.create_subscription(WrenchStamped, "/wrench_estimate",
                                      lambda m: arrivals.append((time.monotonic(), m.wrench.force.x)), qos)
         cli.node.create_subscription(TwistStamped, "/ee_twist", twists.append, qos)
