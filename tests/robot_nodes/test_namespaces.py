@@ -13,10 +13,9 @@ def test_two_namespaced_robot_processes_run_side_by_side_without_crosstalk(stack
                   for ns in ("robot1", "robot2")])
     with stack.client() as cli:
         names = set()
-        assert cli.spin_until(lambda: names.update(
-            f"{ns.rstrip('/')}/{n}" for n, ns in cli.node.get_node_names_and_namespaces())
-            or {"/robot1/bridge", "/robot2/bridge", "/robot1/sim", "/robot2/sim"} <= names,
-            30.0), f"{names}\n{stack.logs()}"
+        assert cli.spin_until(lambda: names.update(cli.node_names())
+                              or {"/robot1/bridge", "/robot2/bridge", "/robot1/sim",
+                                  "/robot2/sim"} <= names, 30.0), f"{names}\n{stack.logs()}"
         one, two = RobotClient(cli, "/robot1"), RobotClient(cli, "/robot2")
         assert one.reset(1).success, stack.logs()
         assert two.reset(5).success, stack.logs()

@@ -74,9 +74,8 @@ def _cmd_nodes(args: argparse.Namespace) -> int:
     from qg_learning_node.cli.ros_client import CliNode
     with CliNode() as cli:
         cli.spin_for(args.wait)
-        own = cli.node.get_name()
-        nodes = sorted(f"{ns.rstrip('/')}/{n}" for n, ns in cli.node.get_node_names_and_namespaces()
-                       if n != own)
+        own = cli.node.get_fully_qualified_name()
+        nodes = sorted(name for name in cli.node_names() if name != own)
         print("nodes:")
         for n in nodes:
             print(f"  {n}")

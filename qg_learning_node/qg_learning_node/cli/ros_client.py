@@ -51,6 +51,11 @@ class CliNode:
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
 
+    def node_names(self) -> set[str]:
+        """The full names (``/namespace/name``) of the nodes discovered so far, this one's
+        included."""
+        return {f"{ns.rstrip('/')}/{n}" for n, ns in self.node.get_node_names_and_namespaces()}
+
     def spin_for(self, seconds: float) -> None:
         deadline = time.monotonic() + seconds
         while time.monotonic() < deadline:
