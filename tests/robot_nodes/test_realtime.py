@@ -93,7 +93,8 @@ def test_separate_sim_bridge_and_estimator_processes_complete_a_step(stack, robo
         cli.node.create_subscription(WrenchStamped, "/wrench_estimate", estimates.append, DEEP)
         assert cli.spin_until(lambda: len(estimates) >= 100, 30.0), \
             f"{len(estimates)} /wrench_estimate\n{stack.logs()}"
-        assert {"/sim", "/bridge", "/wrench_estimator"} <= cli.node_names()
+        assert cli.spin_until(lambda: {"/sim", "/bridge", "/wrench_estimator"}
+                              <= cli.node_names(), 30.0), cli.node_names()
         assert all(np.all(np.isfinite(wrench(e.wrench))) for e in estimates)
         robot = RobotClient(cli)
         reply = robot.reset(1, timeout=30.0)
