@@ -128,6 +128,9 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
     _current_test = item
     if "ros" in item.keywords and not ROS_READY:
         pytest.fail(f"needs the stack environment: {_NO_STACK_ENV}", pytrace=False)
+    if item.get_closest_marker("alone") and "machine_to_itself" not in item.fixturenames:
+        pytest.fail("marked `alone` but never takes the machine: time it inside "
+                    "`with machine_to_itself():`", pytrace=False)
 
 
 class Stack:
