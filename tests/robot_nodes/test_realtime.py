@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import signal
 import time
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
+from conftest import Stack
 from qg_common import conversions
 from robot_client import DEEP, RobotClient, wrench
 
@@ -40,6 +42,14 @@ def test_composed_realtime_is_paced_by_the_wall_clock_and_completes_steps(stack,
         robot = RobotClient(cli)
         assert robot.reset(2).success
         with machine_to_itself():     # the robot is up: the timed part
+            # The loop reports its own timing once a second (counts and a histogram of
+            # periods), read at the end: the last two of three reports taken from here bracket
+            # a second of the timed part.
+            from diagnostic_msgs.msg import DiagnosticArray
+            from robot_bridge_node.loop_diagnostics import snapshot_from_status
+            reports: list = []
+            cli.node.create_subscription(DiagnosticArray, "/diagnostics",
+                                         lambda m: reports.append((time.monotonic(), m)), DEEP)
             # The executor repeats the running setpoint every few ms to feed the 10 ms watchdog.
             event = robot.step(1, (0.0, 0.0, -8.0, 0.3, 0.0, 0.0), timeout=10.0, resend=0.004)
             assert event is not None, stack.logs()
@@ -61,12 +71,6 @@ def test_composed_realtime_is_paced_by_the_wall_clock_and_completes_steps(stack,
             # running ahead of the wall clock would give thousands.
             assert n <= 1003, f"{n} /joint_states stamped within 1 s: faster than real time"
             assert 200 <= wall_rate <= 1050, f"{wall_rate:.0f} /joint_states per wall second"
-            # The loop reports its own timing once a second: counts and a histogram of periods.
-            from diagnostic_msgs.msg import DiagnosticArray
-            from robot_bridge_node.loop_diagnostics import snapshot_from_status
-            reports: list = []
-            cli.node.create_subscription(DiagnosticArray, "/diagnostics",
-                                         lambda m: reports.append((time.monotonic(), m)), DEEP)
             assert cli.spin_until(lambda: len(reports) >= 3, 10.0), f"{len(reports)} /diagnostics"
             (t1, first), (t2, second) = reports[-2:]
             (status,) = second.status
@@ -129,15 +133,29 @@ def test_separate_sim_bridge_and_estimator_processes_complete_a_step(stack, robo
     assert time.monotonic() - t0 < 5.0      # SIGINT ends each within the grace
 
 
-def test_a_position_robot_runs_as_separate_sim_and_bridge_processes(stack):
+NEXTAGE = ("--ros-args", "-p", "robot:=sim_nextage")
+
+
+@pytest.fixture(scope="module")
+def nextage(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
+    """The Nextage's sim and bridge, started once for the two tests below: the first resets
+    it right after start-up, the second then restarts its bridge."""
+    stack = Stack(tmp_path_factory.mktemp("nextage"))
+    try:
+        stack.start(("sim", "sim_robot_node", "sim", NEXTAGE),
+                    ("bridge", "robot_bridge_node", "bridge", NEXTAGE))
+        yield stack
+    finally:
+        stack.stop(grace=3.0)
+
+
+def test_a_position_robot_runs_as_separate_sim_and_bridge_processes(nextage: Stack):
     """The Nextage (interface kind ``position``): the sim applies ``joint_commands.position``
     and publishes its wrist sensor on ``wrench_estimate``; no estimator process is needed."""
     from geometry_msgs.msg import WrenchStamped
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Header
-    args = ("--ros-args", "-p", "robot:=sim_nextage")
-    stack.start(("sim", "sim_robot_node", "sim", args),
-                ("bridge", "robot_bridge_node", "bridge", args))
+    stack = nextage
     with stack.client() as cli:
         sensed: list[WrenchStamped] = []
         cli.node.create_subscription(WrenchStamped, "/wrench_estimate", sensed.append, DEEP)
@@ -176,23 +194,21 @@ def test_a_position_robot_runs_as_separate_sim_and_bridge_processes(stack):
         drift = np.linalg.norm([end.x - start.x, end.y - start.y, end.z - start.z])
         print(f"position robot: drift over one held step {drift * 1e3:.3f} mm")
         assert drift < 1e-4, stack.logs()
-    assert stack.stop(grace=5.0) == {"sim": 0, "bridge": 0}, stack.logs()
+    assert stack.launcher.poll() == [], stack.logs()
 
 
-def test_a_bridge_started_after_a_reset_takes_control_of_the_separate_sim(stack):
+def test_a_bridge_started_after_a_reset_takes_control_of_the_separate_sim(nextage: Stack):
     """The sim applies only commands that follow its latest restart, so a bridge that comes up
     (or is discovered) after a reset must still learn of it: ``sim/restarted`` is latched.
     Volatile, a restarted bridge's commands were ignored and the sim warned after 1 s of them."""
-    args = ("--ros-args", "-p", "robot:=sim_nextage")
-    stack.start(("sim", "sim_robot_node", "sim", args),
-                ("bridge", "robot_bridge_node", "bridge", args))
+    stack = nextage
     with stack.client() as cli:
         robot = RobotClient(cli)
         assert robot.reset(3, timeout=30.0).success, stack.logs()
         bridge = next(r for r in stack.launcher.running if r.spec.name == "bridge").popen
         bridge.send_signal(signal.SIGINT)
         assert bridge.wait(timeout=10.0) == 0, stack.logs()
-        stack.start(("bridge2", "robot_bridge_node", "bridge", args))
+        stack.start(("bridge2", "robot_bridge_node", "bridge", NEXTAGE))
         log = stack.log_dir / "bridge2.log"
         assert cli.spin_until(lambda: log.exists() and "the sim restarted" in log.read_text(),
                               30.0), stack.logs()
@@ -200,3 +216,5 @@ def test_a_bridge_started_after_a_reset_takes_control_of_the_separate_sim(stack)
         assert event is not None, stack.logs()
         cli.spin_for(1.5)                       # past the sim's 1 s before it warns
     assert "follow an earlier restart" not in stack.logs(), stack.logs()
+    codes = stack.stop(grace=5.0)
+    assert (codes.get("sim"), codes.get("bridge2")) == (0, 0), (codes, stack.logs())
