@@ -270,11 +270,18 @@ def test_learner_killed_mid_episode_degrades_then_resumes(stack, tmp_path, let_a
     """The executor runs degraded without the learner and is back to normal as soon as a
     restarted learner speaks; the restarted learner resumes from the checkpoint and does not
     checkpoint again the episode that ended while it was down (its latched status)."""
+    from param_client import integer, set_value
+
     from qg_learning_node.learner_node import CHECKPOINT_GRACE
     checkpoints = tmp_path / "checkpoints"
-    # An RL step takes ~40 ms of wall time here: 80 steps outlast the executor's 1.5 s
-    # learner_timeout after the kill at step 2 (25 steps ended before the learner was missed).
-    stack.start(ROBOT, learner_spec(checkpoints), executor_spec(max_steps=80))
+
+    def cap_steps(steps: int) -> None:
+        """The executor's step cap from its next episode on."""
+        result = set_value(cli, "/executor", "task.train_max_steps", integer(steps))
+        assert result.successful, result.reason
+
+    # The first and the last episode need only a few steps (a checkpoint; the resumed actor).
+    stack.start(ROBOT, learner_spec(checkpoints), executor_spec(max_steps=20))
     with stack.client() as cli:
         episodes = Episodes(cli)
         episodes.wait_for_learner()
@@ -284,6 +291,10 @@ def test_learner_killed_mid_episode_degrades_then_resumes(stack, tmp_path, let_a
         assert wait_for_file(checkpoints / "learner.pt").exists(), stack.logs()
 
         let_alone_tests_in()   # between two episodes
+        # An RL step takes ~40 ms of wall time here: 80 steps outlast the executor's 1.5 s
+        # learner_timeout after the kill at step 2 (25 steps ended before the learner was
+        # missed).
+        cap_steps(80)
         second = episodes.start(mode="train", initial_pose=1)
         assert second.success, second.message
         assert cli.spin_until(lambda: any(s.episode_id == second.episode_id and s.step >= 2
@@ -304,6 +315,7 @@ def test_learner_killed_mid_episode_degrades_then_resumes(stack, tmp_path, let_a
         # Back before any new episode: the executor's idle status heartbeat says so.
         assert cli.spin_until(lambda: not episodes.statuses[-1].degraded, 3.0), stack.logs()
         assert episodes.statuses[-1].episode_id == second.episode_id
+        cap_steps(20)
         third = episodes.start(mode="train", initial_pose=2)
         assert third.success, third.message
         final3 = episodes.final(third.episode_id, timeout=240.0)
