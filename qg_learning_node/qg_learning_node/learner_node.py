@@ -16,7 +16,8 @@ every episode it checkpoints networks, optimizers, Q-Graph and replay memory; wi
 running are checkpointed: the latched final status of an episode that ended before it started
 is not news. Its heartbeat has a callback group of its own, so a long training cycle never
 silences it (the executor would run degraded). ``ros2 param set`` changes the training settings
-of ``learner_core.RUNTIME_FIELDS`` from the next cycle on.
+of ``learner_config.RUNTIME_FIELDS`` from the next cycle on. PyTorch is loaded only to build
+the networks, so a learner whose parameters are refused says so within a second.
 """
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ import time
 from collections.abc import Callable
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from qg_common import topics
 from qg_common.node_parameters import declare_parameters, on_parameter_change
@@ -39,14 +40,25 @@ from rclpy.node import Node
 
 from qg_learning_node.conversions import actor_to_msg
 from qg_learning_node.executor.episode import TransitionRecord
-from qg_learning_node.learner.learner_core import LearnerCore, with_runtime_settings
+from qg_learning_node.learner.learner_config import with_runtime_settings
 from qg_learning_node.learner.learner_params import LEARNER_SECTIONS, learner_config_from_params
+
+if TYPE_CHECKING:     # torch is loaded only to build the networks: see _core_class
+    from qg_learning_node.learner.learner_core import LearnerCore
 
 CHECKPOINT_NAME = "learner.pt"
 #: [s] how long to wait for the last transitions of an ended episode before checkpointing.
 CHECKPOINT_GRACE = 3.0
 #: [s] at most one warning this often about transitions the learner cannot use.
 WARN_PERIOD = 5.0
+
+
+def _core_class() -> type[LearnerCore]:
+    """``LearnerCore``, imported when the networks are built: with it comes PyTorch (1.5 s of
+    CPU), so a learner whose parameters are refused, or that never gets a task, never loads
+    it."""
+    from qg_learning_node.learner.learner_core import LearnerCore
+    return LearnerCore
 
 
 class LearnerNode(Node):
@@ -59,7 +71,7 @@ class LearnerNode(Node):
         self.checkpoint = Path(p["checkpoint_dir"] or runs_dir() / "checkpoints") / CHECKPOINT_NAME
         self.core: LearnerCore | None = None      # built for the executor's task_spec
         if p["resume"] and self.checkpoint.is_file():
-            self.core = LearnerCore.load(self.checkpoint)
+            self.core = _core_class().load(self.checkpoint)
             self.get_logger().info(f"resumed from {self.checkpoint}: {self.core.steps} "
                                    f"transitions, actor v{self.core.actor_version}")
         self.lock = threading.Lock()
@@ -105,7 +117,7 @@ class LearnerNode(Node):
         with self.lock:
             built = self.core is None
             if built:
-                self.core = LearnerCore(self.config, *dims)
+                self.core = _core_class()(self.config, *dims)
             have = (self.core.state_dim, self.core.action_dim)
             if have != dims:
                 self.refused[robot] = (f"{who} runs the {msg.kind} task ({msg.observation}) with "

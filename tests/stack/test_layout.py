@@ -235,11 +235,13 @@ def test_bridge_learning_and_experiments_import_without_the_simulator():
 
 
 @pytest.mark.ros
-def test_the_executor_and_the_robot_process_start_without_torch_or_scipy():
-    """Only the learner needs PyTorch: the executor runs the published actor in numpy.
-    Importing torch and SciPy made every executor start 1.5 s slower (1.71 s against 0.22 s
-    to import the node)."""
-    code = _REFUSE + "import qg_learning_node.executor_node, robot_bridge_node.robot_process\n"
+def test_the_nodes_and_qgl_start_without_torch_or_scipy():
+    """Only the learner's networks need PyTorch: the executor runs the published actor in
+    numpy, and the learner node loads torch when it builds its networks (its settings are
+    checked without it, ``learner_config``). Importing torch and SciPy made every executor
+    start 1.5 s slower (1.71 s against 0.22 s to import the node)."""
+    code = _REFUSE + ("import qg_learning_node.executor_node, robot_bridge_node.robot_process, "
+                      "qg_learning_node.learner_node, qg_learning_node.cli.main\n")
     out = subprocess.run([sys.executable, "-c", code, "torch,scipy"], capture_output=True,
                          text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-3000:]

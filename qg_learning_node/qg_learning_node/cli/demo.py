@@ -30,6 +30,7 @@ from qg_learning_node.cli.episode_schedule import (EpisodeJob, EpisodeOutcome, r
 from qg_learning_node.cli.fleet import fleet_specs, robot_namespace
 from qg_learning_node.cli.launcher import Launcher, ProcessSpec, load_stack_config
 from qg_learning_node.cli.ros_env import install_dir, stack_env
+from qg_learning_node.learner.learner_config import SCHEDULES
 from qg_learning_node.learner.training_log import TrainingLog
 
 __all__ = ["add_parser", "DemoSettings", "EpisodeOutcome", "StepMonitor", "demo_schedule",
@@ -387,8 +388,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                       help="critic learning rate (actor: one tenth)")
     demo.add_argument("--iterations", type=int, default=DemoSettings.iterations,
                       help="training iterations per 20-step cycle (schedule cycle)")
-    # (learner_core.SCHEDULES; not imported: it would load torch for every `qgl` command)
-    demo.add_argument("--schedule", choices=("cycle", "async"), default=DemoSettings.schedule,
+    demo.add_argument("--schedule", choices=SCHEDULES, default=DemoSettings.schedule,
                       help="cycle: train after every 20 steps (the thesis); async: the learner "
                            "trains while the robot moves")
     demo.add_argument("--updates-per-step", type=float, default=DemoSettings.updates_per_step,

@@ -19,112 +19,26 @@ be switched on with a soft update rate ``tau``.
 from __future__ import annotations
 
 import copy
-import dataclasses
 import math
-from dataclasses import dataclass
 
 import numpy as np
 import torch
 from torch import nn
 
+from qg_learning_node.learner.learner_config import (ACTOR_ACTIVATION_NAMES, BOUND_MODES,
+                                                     DDPGConfig, realisable_range)
 from qg_learning_node.learner.replay import Batch, NStepContext
 
 __all__ = ['BOUND_MODES', 'DDPG', 'DDPGConfig', 'build_mlp', 'realisable_range']
 
-BOUND_MODES = ('none', 'apriori', 'empirical', 'qgraph', 'qgraph+apriori', 'he2017')
-#: Weight inits: the thesis's two, and PyTorch's own ``nn.Linear`` init (SB3's networks).
-INITS = ('glorot_uniform', 'he_uniform', 'torch_default')
-#: Hidden activations of the actor: the thesis's tanh, or SB3's ReLU.
-ACTOR_ACTIVATIONS = {'tanh': nn.Tanh, 'relu': nn.ReLU}
+#: The modules of the actor's hidden activations (``learner_config.ACTOR_ACTIVATION_NAMES``).
+ACTOR_ACTIVATIONS = dict(zip(ACTOR_ACTIVATION_NAMES, (nn.Tanh, nn.ReLU), strict=True))
 DIAGNOSTIC_KEYS = ('critic_loss', 'actor_loss', 'mean_q', 'frac_raised_lower',
                    'frac_lowered_upper', 'frac_outside_range')
 
 
 def _tensor(x: np.ndarray) -> torch.Tensor:
     return torch.as_tensor(np.asarray(x), dtype=torch.float32)
-
-
-def realisable_range(r_min: float, r_max: float, gamma: float) -> tuple[float, float]:
-    """Smallest and largest possible Q-value for rewards in ``[r_min, r_max]`` (SPEC §3)."""
-    return min(r_min, r_min / (1.0 - gamma)), max(r_max, r_max / (1.0 - gamma))
-
-
-@dataclass(frozen=True)
-class DDPGConfig:
-    """Hyperparameters; the defaults are ``config/learner.yaml``'s where it sets them (a test
-    keeps the two equal), else SPEC §2 (thesis ch. 9.5).
-
-    :param gamma: discount factor (the thesis does not state it; ``config/learner.yaml``'s is
-        tuned on the Panda task, docs/learning.md section 4).
-    :param actor_hidden: hidden layer sizes of the actor (tanh everywhere, tanh output in [-1, 1]).
-    :param critic_hidden: hidden layer sizes of the critic (ReLU, linear scalar output).
-    :param actor_activation: hidden activation of the actor, one of ``ACTOR_ACTIVATIONS``
-        (its output is always tanh; the executor's torch-free ``ActorMLP`` runs tanh only).
-    :param actor_init: weight init of the actor, one of ``INITS``.
-    :param critic_init: weight init of the critic, one of ``INITS``.
-    :param critic_lr: Adam learning rate of the critic.
-    :param actor_lr: Adam learning rate of the actor; ``None`` = ``critic_lr / 10``.
-    :param bounds: one of ``BOUND_MODES``.
-    :param r_min: smallest possible reward (a-priori bounds, realisable-range diagnostic).
-    :param r_max: largest possible reward.
-    :param target_networks: use soft-updated target networks for the TD target.
-    :param tau: soft update rate of the target networks.
-    :param he_horizon: steps ahead/behind for the ``he2017`` bounds.
-    :param he_lambda: penalty weight of the ``he2017`` bounds.
-    :param seed: seed of the network initialisation.
-    """
-
-    gamma: float = 0.9
-    actor_hidden: tuple[int, ...] = (100, 100)
-    critic_hidden: tuple[int, ...] = (100, 100)
-    actor_activation: str = 'tanh'
-    actor_init: str = 'glorot_uniform'
-    critic_init: str = 'he_uniform'
-    critic_lr: float = 1e-3
-    actor_lr: float | None = None
-    bounds: str = 'qgraph+apriori'
-    r_min: float = -1.0
-    r_max: float = 0.0
-    target_networks: bool = False
-    tau: float = 0.005
-    he_horizon: int = 8
-    he_lambda: float = 0.01
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, 'actor_hidden', tuple(int(h) for h in self.actor_hidden))
-        object.__setattr__(self, 'critic_hidden', tuple(int(h) for h in self.critic_hidden))
-        if not 0.0 <= self.gamma < 1.0:
-            raise ValueError(f'gamma must lie in [0, 1), got {self.gamma}')
-        if self.bounds not in BOUND_MODES:
-            raise ValueError(f'bounds must be one of {BOUND_MODES}, got {self.bounds!r}')
-        for name in ('actor_init', 'critic_init'):
-            if getattr(self, name) not in INITS:
-                raise ValueError(f'{name} must be one of {INITS}, got {getattr(self, name)!r}')
-        if self.actor_activation not in ACTOR_ACTIVATIONS:
-            raise ValueError(f'actor_activation must be one of {sorted(ACTOR_ACTIVATIONS)}, '
-                             f'got {self.actor_activation!r}')
-        if any(h < 1 for h in self.actor_hidden + self.critic_hidden):
-            raise ValueError('hidden layer sizes must be >= 1')
-        if self.critic_lr <= 0 or (self.actor_lr is not None and self.actor_lr <= 0):
-            raise ValueError('learning rates must be > 0')
-        if self.r_min > self.r_max:
-            raise ValueError(f'r_min ({self.r_min}) must not exceed r_max ({self.r_max})')
-        if not 0.0 < self.tau <= 1.0:
-            raise ValueError(f'tau must lie in (0, 1], got {self.tau}')
-        if self.he_horizon < 1 or self.he_lambda < 0:
-            raise ValueError('he_horizon must be >= 1 and he_lambda >= 0')
-
-    @property
-    def effective_actor_lr(self) -> float:
-        return self.critic_lr / 10.0 if self.actor_lr is None else self.actor_lr
-
-    @classmethod
-    def from_dict(cls, values: dict) -> 'DDPGConfig':
-        unknown = set(values) - {f.name for f in dataclasses.fields(cls)}
-        if unknown:
-            raise ValueError(f'unknown DDPG config keys: {sorted(unknown)}')
-        return cls(**values)
 
 
 def build_mlp(sizes: list[int], hidden_act: type[nn.Module], out_act: type[nn.Module] | None,

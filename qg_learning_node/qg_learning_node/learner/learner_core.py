@@ -27,88 +27,19 @@ from __future__ import annotations
 
 import dataclasses
 import pathlib
-from dataclasses import dataclass, field
 
 import numpy as np
 import torch
 
-from qg_learning_node.learner.ddpg import DDPG, DIAGNOSTIC_KEYS, DDPGConfig
+from qg_learning_node.learner.ddpg import DDPG, DIAGNOSTIC_KEYS
+from qg_learning_node.learner.learner_config import (RUNTIME_FIELDS, SCHEDULES,
+                                                     LearnerConfig, differences,
+                                                     with_runtime_settings)
 from qg_learning_node.learner.qgraph import TRANSITION_KINDS, QGraph
 from qg_learning_node.learner.replay import ReplayMemory
 
 __all__ = ['LearnerConfig', 'LearnerCore', 'RUNTIME_FIELDS', 'SCHEDULES',
            'with_runtime_settings']
-
-_GRAPH_BOUNDS = ('qgraph', 'qgraph+apriori')
-SCHEDULES = ('cycle', 'async')
-#: Settings a running learner can take between two training cycles (``LearnerCore.reconfigure``):
-#: how much and how fast it trains, not what its networks, graph or replay memory are.
-RUNTIME_FIELDS = frozenset({'iterations_per_cycle', 'cycle_steps', 'batch_size', 'census_every',
-                            'ddpg.critic_lr', 'ddpg.actor_lr'})
-
-
-@dataclass(frozen=True)
-class LearnerConfig:
-    """Learner settings; the defaults are ``config/learner.yaml``'s where it sets them (a test
-    keeps the two equal).
-
-    :param ddpg: network and bound settings.
-    :param replay_capacity: replay slots, ``None`` = unbounded (SPEC: also 300 in one study).
-    :param use_qgraph: maintain the Q-Graph (required by the ``qgraph*`` bound modes; without them
-        it only feeds the census diagnostics).
-    :param zero_action: action that leaves the state unchanged, or ``None`` (the default is the
-        Panda residual's: zero torques about x and y).
-    :param iterations_per_cycle: train steps after every cycle (SPEC: 10 or 50).
-    :param cycle_steps: RL steps per training cycle.
-    :param batch_size: minibatch size.
-    :param census_every: recompute the graph census every this many cycles (it walks the whole
-        graph, ~0.1 s per 80k transitions); the last census is reported in between.
-    :param seed: seed of minibatch sampling (the networks use ``ddpg.seed``).
-    :param graph_resolution: Q-Graph state-merging grid in scaled state units (0: exact states,
-        the thesis; see ``qgraph``).
-    :param schedule: ``cycle`` | ``async`` (see the module docstring).
-    :param updates_per_step: ``async``: train steps per received transition.
-    :param publish_every: ``async``: train steps between two published actors.
-    """
-
-    ddpg: DDPGConfig = field(default_factory=DDPGConfig)
-    replay_capacity: int | None = None
-    use_qgraph: bool = True
-    zero_action: tuple[float, ...] | None = (0.0, 0.0)
-    iterations_per_cycle: int = 10
-    cycle_steps: int = 20
-    batch_size: int = 64
-    census_every: int = 5
-    seed: int = 0
-    graph_resolution: float = 0.0
-    schedule: str = 'cycle'
-    updates_per_step: float = 10.0
-    publish_every: int = 20
-
-    def __post_init__(self) -> None:
-        if self.schedule not in SCHEDULES:
-            raise ValueError(f'schedule must be one of {SCHEDULES}, got {self.schedule!r}')
-        if not self.updates_per_step > 0 or self.publish_every < 1:
-            raise ValueError('updates_per_step must be > 0 and publish_every >= 1')
-        if self.zero_action is not None:
-            object.__setattr__(self, 'zero_action', tuple(float(x) for x in self.zero_action))
-        if self.replay_capacity is not None and self.replay_capacity < 1:
-            raise ValueError(f'replay_capacity must be >= 1 or None, got {self.replay_capacity}')
-        if self.ddpg.bounds in _GRAPH_BOUNDS and not self.use_qgraph:
-            raise ValueError(f'bounds={self.ddpg.bounds!r} needs use_qgraph=True')
-        for name in ('iterations_per_cycle', 'cycle_steps', 'batch_size', 'census_every'):
-            if getattr(self, name) < 1:
-                raise ValueError(f'{name} must be >= 1, got {getattr(self, name)}')
-
-    @classmethod
-    def from_dict(cls, values: dict) -> 'LearnerConfig':
-        unknown = set(values) - {f.name for f in dataclasses.fields(cls)}
-        if unknown:
-            raise ValueError(f'unknown learner config keys: {sorted(unknown)}')
-        values = dict(values)
-        if isinstance(values.get('ddpg'), dict):
-            values['ddpg'] = DDPGConfig.from_dict(values['ddpg'])
-        return cls(**values)
 
 
 class LearnerCore:
@@ -172,7 +103,7 @@ class LearnerCore:
         :returns: dotted name -> (old, new) of what changed.
         :raises ValueError: if a setting outside ``RUNTIME_FIELDS`` differs.
         """
-        changed = {name: pair for name, pair in _differences(self.config, config)}
+        changed = {name: pair for name, pair in differences(self.config, config)}
         fixed = sorted(set(changed) - RUNTIME_FIELDS)
         if fixed:
             raise ValueError(f'{fixed} cannot change while the learner runs (its networks, '
@@ -244,23 +175,3 @@ class LearnerCore:
         core._census = state['census']
         core._owed_offset = state.get('owed_offset', 0)
         return core
-
-
-def with_runtime_settings(base: LearnerConfig, source: LearnerConfig) -> LearnerConfig:
-    """``base`` with the ``RUNTIME_FIELDS`` of ``source`` (a learner resumed from a checkpoint
-    keeps the checkpoint's other settings when its parameters change)."""
-    ddpg = dataclasses.replace(base.ddpg, critic_lr=source.ddpg.critic_lr,
-                               actor_lr=source.ddpg.actor_lr)
-    top = {name: getattr(source, name) for name in RUNTIME_FIELDS if '.' not in name}
-    return dataclasses.replace(base, ddpg=ddpg, **top)
-
-
-def _differences(old, new, prefix: str = ''):
-    """(dotted name, (old, new)) of every field in which two configs differ, nested configs
-    (``ddpg``) field by field."""
-    for f in dataclasses.fields(old):
-        a, b = getattr(old, f.name), getattr(new, f.name)
-        if dataclasses.is_dataclass(a):
-            yield from _differences(a, b, f'{prefix}{f.name}.')
-        elif a != b:
-            yield f'{prefix}{f.name}', (a, b)

@@ -12,7 +12,7 @@ from typing import Any
 
 from qg_common.params import POSITIVE, ParameterSection, check_section
 
-from qg_learning_node.learner.learner_core import RUNTIME_FIELDS, LearnerConfig
+from qg_learning_node.learner.learner_config import RUNTIME_FIELDS, LearnerConfig
 
 __all__ = ["LearnerNodeConfig", "LEARNER_SECTION", "LEARNER_SECTIONS",
            "learner_config_from_params"]
