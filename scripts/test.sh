@@ -14,4 +14,5 @@ eval "$(.venv/bin/python -m qg_learning_node.cli.ros_env)"
 # stream live failed in five runs.) QG_TEST_WORKERS=0 runs in this one process (for -s output
 # or a debugger). Files go out in the order tests/conftest.py sorts them, not by their number
 # of tests.
-exec .venv/bin/python -m pytest -n "${QG_TEST_WORKERS:-2}" --dist loadfile --no-loadscope-reorder "$@"
+exec .venv/bin/python -m pytest -n "${QG_TEST_WORKERS:-2}" --dist loadfile --no-loadscope-reorder \
+    "$@"

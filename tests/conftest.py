@@ -163,12 +163,12 @@ class Stack:
         return self.launcher.stop(grace)
 
 
-#: The running test's hold on the shared lock (see ``_cpu_to_itself``): (turnstile, lock).
+#: The running test's hold on the shared lock (see ``_machine_lock``): (turnstile, lock).
 _held: tuple[IO[str], IO[str]] | None = None
 
 
 @pytest.fixture(autouse=True)
-def _cpu_to_itself(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+def _machine_lock(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
     """Under pytest-xdist, the part of a test that times itself by the wall clock (a realtime
     loop's pace, a heartbeat's gaps: ``machine_to_itself``) runs while no other worker runs a
     test, and everything else side by side. A readers-writer lock on a file all workers share:
