@@ -101,6 +101,8 @@ class ExecutorNode(Node):
                                  callback_group=callbacks)
         self.reset_client = self.create_client(ResetSim, topics.SIM_RESET, callback_group=callbacks)
         services = MutuallyExclusiveCallbackGroup()
+        # The last StartEpisode request_id and its reply (a retry gets the reply again).
+        self._last_start: tuple[str, StartEpisode.Response] = ("", StartEpisode.Response())
         self.create_service(StartEpisode, topics.START_EPISODE, self._on_start,
                             callback_group=services)
         self.create_service(StopEpisode, topics.STOP_EPISODE, self._on_stop,
@@ -208,6 +210,19 @@ class ExecutorNode(Node):
     # --- services -------------------------------------------------------------------------
     def _on_start(self, request: StartEpisode.Request,
                   response: StartEpisode.Response) -> StartEpisode.Response:
+        """Start an episode, or refuse. A reply can be lost (a client the server has not
+        matched yet, ``cli/ros_client.py``), so a client retries with the same ``request_id``:
+        the retry gets the first reply back, and no second episode starts."""
+        if request.request_id and request.request_id == self._last_start[0]:
+            self.get_logger().info(f"start {request.request_id} asked again: its reply again")
+            return self._last_start[1]
+        self._start(request, response)
+        if request.request_id:
+            self._last_start = (request.request_id, response)
+        return response
+
+    def _start(self, request: StartEpisode.Request,
+               response: StartEpisode.Response) -> StartEpisode.Response:
         try:
             req = EpisodeRequest(request.mode, request.initial_pose, request.seed, request.reward)
         except ValueError as exc:

@@ -65,12 +65,16 @@ class Episodes:
         self.cli.node.destroy_client(client)
 
     def start(self, **fields):
+        """StartEpisode, asked again with its request id if the reply is lost."""
+        import uuid
+
         from qg_interfaces.srv import StartEpisode
 
         from qg_learning_node.cli.ros_client import call_service
         from qg_common.topics import robot_topic
+        fields.setdefault("request_id", uuid.uuid4().hex)
         return call_service(self.cli, StartEpisode, robot_topic(self.robot, "executor/start_episode"),
-                            StartEpisode.Request(**fields), timeout=60.0)
+                            StartEpisode.Request(**fields), timeout=60.0, resend_after=5.0)
 
     def final(self, episode_id: str, timeout: float):
         def ended():
@@ -349,8 +353,10 @@ def test_bad_requests_are_refused_and_the_stack_stays_up(stack):
             response = episodes.start(**fields)
             assert not response.success and word in response.message, (fields, response.message)
         episodes.wait_for_robot()
-        running = episodes.start(mode="train", initial_pose=0)
+        running = episodes.start(mode="train", initial_pose=0, request_id="first")
         assert running.success, running.message
+        again = episodes.start(mode="train", initial_pose=0, request_id="first")  # a retry
+        assert (again.success, again.episode_id) == (True, running.episode_id), again
         busy = episodes.start(mode="test")
         assert not busy.success and "still running" in busy.message
         from qg_interfaces.srv import StopEpisode

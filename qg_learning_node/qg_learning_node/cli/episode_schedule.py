@@ -9,6 +9,7 @@ the single robot of ``qgl up``: its episodes run exactly as a loop of service ca
 from __future__ import annotations
 
 import time
+import uuid
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -79,7 +80,9 @@ class _Lane:
         from qg_common.topics import EPISODE_STATUS, LATCHED, START_EPISODE
 
         from qg_learning_node.cli.episode_wait import FINAL_STATES
+        from qg_learning_node.cli.ros_client import RESEND_AFTER
         self.cli, self.robot, self.observer, self.timeout = cli, robot, observer, timeout
+        self.resend_after = RESEND_AFTER   # [s] unanswered this long, a start is asked again
         self.request_type = StartEpisode.Request
         self.service = robot_name(robot, START_EPISODE)
         self.client = cli.client(StartEpisode, self.service)
@@ -87,6 +90,7 @@ class _Lane:
         self.job: EpisodeJob | None = None
         self.requested = False
         self.future, self.episode_id = None, ""
+        self.request_id, self.sent = "", 0.0      # the job's StartEpisode id, last sent at
         self.t0, self.started = 0.0, 0.0
         # Keyed by id: the final status may arrive while the service call is still being answered.
         self.final: dict[str, Any] = {}
@@ -118,16 +122,19 @@ class _Lane:
         waited = time.monotonic() - self.t0
         if not self.requested:
             if self.client.service_is_ready():
-                self.requested = True
-                self.future = self.client.call_async(self.request_type(
-                    mode=self.job.mode, initial_pose=self.job.pose, seed=self.job.seed))
+                self.requested, self.request_id = True, uuid.uuid4().hex
+                self._send()
             elif waited > SERVICE_TIMEOUT:
                 raise TimeoutError(f"service {self.service} is not available (is the stack up? "
                                    "`qgl up`)")
             return None
-        if self.future is not None and not self.future.done() and waited > SERVICE_TIMEOUT:
-            raise TimeoutError(f"service {self.service} did not answer within "
-                               f"{SERVICE_TIMEOUT:.0f} s")
+        if self.future is not None and not self.future.done():
+            if waited > SERVICE_TIMEOUT:
+                raise TimeoutError(f"service {self.service} did not answer within "
+                                   f"{SERVICE_TIMEOUT:.0f} s")
+            if time.monotonic() - self.sent > self.resend_after:   # the reply may be lost
+                self.client.remove_pending_request(self.future)
+                self._send()
         if self.future is not None and self.future.done():
             response = self.future.result()
             self.future = None
@@ -145,6 +152,13 @@ class _Lane:
                                f"{' of ' + self.robot if self.robot else ''} did not end within "
                                f"{self.timeout:.0f} s")
         return None
+
+    def _send(self) -> None:
+        """Ask for the job's episode; the same ``request_id`` again gets the first reply."""
+        self.future = self.client.call_async(self.request_type(
+            mode=self.job.mode, initial_pose=self.job.pose, seed=self.job.seed,
+            request_id=self.request_id))
+        self.sent = time.monotonic()
 
     def _outcome(self, msg: Any) -> EpisodeOutcome:
         job = self.job

@@ -52,14 +52,18 @@ def _cmd_episode(args: argparse.Namespace) -> int:
 
     from qg_common import topics
 
+    import uuid
+
     from qg_learning_node.cli.episode_wait import wait_for_episode
-    from qg_learning_node.cli.ros_client import CliNode, call_service
+    from qg_learning_node.cli.ros_client import RESEND_AFTER, CliNode, call_service
     with CliNode() as cli:
         if args.action == "start":
             req = StartEpisode.Request(mode=args.mode, initial_pose=args.initial_pose,
-                                       seed=args.seed, reward=args.reward)
+                                       seed=args.seed, reward=args.reward,
+                                       request_id=uuid.uuid4().hex)
             service = topics.robot_topic(args.robot, topics.START_EPISODE)
-            resp = call_service(cli, StartEpisode, service, req, args.timeout)
+            resp = call_service(cli, StartEpisode, service, req, args.timeout,
+                                resend_after=RESEND_AFTER)
         else:
             service = topics.robot_topic(args.robot, topics.STOP_EPISODE)
             resp = call_service(cli, StopEpisode, service, StopEpisode.Request(reason=args.reason),

@@ -17,7 +17,11 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
-__all__ = ["CliNode", "call_service"]
+__all__ = ["CliNode", "RESEND_AFTER", "call_service"]
+
+#: [s] how long a request that is safe to repeat (``call_service``'s ``resend_after``) waits for
+#: its reply before it is sent again: a lost reply is not answered later.
+RESEND_AFTER = 5.0
 
 
 class CliNode:
@@ -76,7 +80,7 @@ def call_service(cli: CliNode, srv_type: Any, name: str, request: Any,
 
     :param resend_after: [s] send the request again when it is unanswered this long; only for
         requests that are safe to repeat (queries, refused requests, parameter sets, a
-        ``sim/reset`` with a ``request_id``).
+        ``sim/reset`` or ``start_episode`` with a ``request_id``), e.g. ``RESEND_AFTER``.
     :raises TimeoutError: naming the service, when it is not available or does not answer.
     """
     client = cli.client(srv_type, name)
