@@ -9,6 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 
 TIMED = '''
@@ -49,6 +51,8 @@ def span(name):
 '''
 
 
+@pytest.mark.ros      # full tier only: two pytest-xdist workers of its own (5 s), for a lock
+                      # that only the full tier's `alone` tests take
 def test_only_the_timed_part_of_an_alone_test_has_the_machine_to_itself(tmp_path: Path) -> None:
     shutil.copy(ROOT / "tests" / "conftest.py", tmp_path / "conftest.py")
     shutil.copy(ROOT / "pytest.ini", tmp_path / "pytest.ini")
