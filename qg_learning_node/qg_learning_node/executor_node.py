@@ -22,6 +22,7 @@ from qg_common import topics
 from qg_common.node_parameters import declare_parameters, on_parameter_change
 from qg_common.node_runtime import run_nodes
 from qg_common.params import ParameterSection
+from qg_common.retried_requests import answered_once
 from qg_common.conversions import setpoint_msg
 from qg_common.topics import LATCHED, RELIABLE_DEEP
 from qg_common.types import WrenchSetpoint as Setpoint
@@ -101,9 +102,8 @@ class ExecutorNode(Node):
                                  callback_group=callbacks)
         self.reset_client = self.create_client(ResetSim, topics.SIM_RESET, callback_group=callbacks)
         services = MutuallyExclusiveCallbackGroup()
-        # The last StartEpisode request_id and its reply (a retry gets the reply again).
-        self._last_start: tuple[str, StartEpisode.Response] = ("", StartEpisode.Response())
-        self.create_service(StartEpisode, topics.START_EPISODE, self._on_start,
+        self.create_service(StartEpisode, topics.START_EPISODE,
+                            answered_once(self._on_start, "start", self.get_logger().info),
                             callback_group=services)
         self.create_service(StopEpisode, topics.STOP_EPISODE, self._on_stop,
                             callback_group=services)
@@ -210,19 +210,8 @@ class ExecutorNode(Node):
     # --- services -------------------------------------------------------------------------
     def _on_start(self, request: StartEpisode.Request,
                   response: StartEpisode.Response) -> StartEpisode.Response:
-        """Start an episode, or refuse. A reply can be lost (a client the server has not
-        matched yet, ``cli/ros_client.py``), so a client retries with the same ``request_id``:
-        the retry gets the first reply back, and no second episode starts."""
-        if request.request_id and request.request_id == self._last_start[0]:
-            self.get_logger().info(f"start {request.request_id} asked again: its reply again")
-            return self._last_start[1]
-        self._start(request, response)
-        if request.request_id:
-            self._last_start = (request.request_id, response)
-        return response
-
-    def _start(self, request: StartEpisode.Request,
-               response: StartEpisode.Response) -> StartEpisode.Response:
+        """Start an episode, or refuse. A retry with the same ``request_id`` (its reply was
+        lost) gets the first reply back, and no second episode starts (``answered_once``)."""
         try:
             req = EpisodeRequest(request.mode, request.initial_pose, request.seed, request.reward)
         except ValueError as exc:

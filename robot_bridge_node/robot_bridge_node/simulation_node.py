@@ -18,6 +18,7 @@ from qg_common import topics
 from qg_common.conversions import ground_truth_msg, joint_state_msg, wrench_stamped
 from qg_common.node_parameters import declare_parameters
 from qg_common.params import POSITIVE, ParameterSection, config_from_dict
+from qg_common.retried_requests import answered_once
 from qg_common.types import N_START_POSES, GroundTruth, JointState
 from qg_interfaces.msg import AtRest
 from qg_interfaces.msg import GroundTruth as GroundTruthMsg
@@ -163,20 +164,8 @@ def serve_reset(node: Node, resetter: Resetter) -> None:
     and the node's other callbacks keep running meanwhile. A reply can be lost (a client the
     server has not matched yet, ``cli/ros_client.py``), so a client retries with the same
     ``request_id``; that retry is answered with the first reply, and the robot, which may have
-    moved on since, is not reset twice.
+    moved on since, is not reset twice (``qg_common.retried_requests``).
     """
-    answered: dict[str, ResetSim.Response] = {}      # the last request_id and its reply
-
-    def on_reset(request: ResetSim.Request, response: ResetSim.Response) -> ResetSim.Response:
-        if request.request_id and request.request_id in answered:
-            node.get_logger().info(f"reset {request.request_id} asked again: its reply again")
-            return answered[request.request_id]
-        answer(request, response)
-        if request.request_id:
-            answered.clear()
-            answered[request.request_id] = response
-        return response
-
     def answer(request: ResetSim.Request, response: ResetSim.Response) -> ResetSim.Response:
         response.success = False
         if not 0 <= request.initial_pose < N_START_POSES:
@@ -198,5 +187,6 @@ def serve_reset(node: Node, resetter: Resetter) -> None:
                             f"yaw {request.housing_yaw:.3f} rad")
         return response
 
-    node.create_service(ResetSim, topics.SIM_RESET, on_reset,
+    node.create_service(ResetSim, topics.SIM_RESET,
+                        answered_once(answer, "reset", node.get_logger().info),
                         callback_group=MutuallyExclusiveCallbackGroup())

@@ -70,11 +70,11 @@ class Episodes:
 
         from qg_interfaces.srv import StartEpisode
 
-        from qg_learning_node.cli.ros_client import call_service
+        from qg_learning_node.cli.ros_client import RESEND_AFTER, call_service
         from qg_common.topics import robot_topic
         fields.setdefault("request_id", uuid.uuid4().hex)
         return call_service(self.cli, StartEpisode, robot_topic(self.robot, "executor/start_episode"),
-                            StartEpisode.Request(**fields), timeout=60.0, resend_after=5.0)
+                            StartEpisode.Request(**fields), timeout=60.0, resend_after=RESEND_AFTER)
 
     def final(self, episode_id: str, timeout: float):
         def ended():
