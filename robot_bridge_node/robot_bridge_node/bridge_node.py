@@ -131,10 +131,13 @@ class RemoteRobot:
     settles from the new pose.
 
     A command's stamp names the restart it follows: the ``sim/restarted`` stamp the loop last
-    reset from (0 before any). Until the loop has taken a restart, its commands still aim at
-    the pose before it, and the sim, which applies only commands of its latest restart, holds
-    the new pose instead (before this, the first reset after start-up dragged a Nextage 69 deg
-    of a joint back toward its old pose for 90 ms, and the reply's pose was 0.02-8.6 mm off).
+    reset from. Until the loop has taken a restart, its commands still aim at the pose before
+    it, and the sim, which applies only commands of its latest restart, holds the new pose
+    instead (before this, the first reset after start-up dragged a Nextage 69 deg of a joint
+    back toward its old pose for 90 ms, and the reply's pose was 0.02-8.6 mm off). The sim
+    announces its start as a restart too, so a loop that has taken none sends nothing: a bridge
+    started beside a running sim waits for the latched ``sim/restarted`` (on a loaded host it
+    once came 1.1 s after the first state, and the sim warned of stale commands meanwhile).
     """
 
     def __init__(self, node: Node, n_joints: int, command_field: str,
@@ -205,9 +208,10 @@ class RemoteRobot:
         return self._read_stamp
 
     def write(self, command: np.ndarray) -> None:
-        msg = JointStateMsg(**{self.command_field: np.asarray(command, float).tolist()})
-        msg.header.stamp = time_msg(self._epoch_ns)
-        self.commands.publish(msg)
+        if self._epoch_ns:              # else no restart taken yet: the sim holds the arm
+            msg = JointStateMsg(**{self.command_field: np.asarray(command, float).tolist()})
+            msg.header.stamp = time_msg(self._epoch_ns)
+            self.commands.publish(msg)
         with self._fresh:
             if self._received == self._used:
                 self._fresh.wait(self.timeout)

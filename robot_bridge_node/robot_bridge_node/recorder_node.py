@@ -88,6 +88,7 @@ class RecorderNode(Node):
         on_parameter_change(self, self._reconfigure)
         self.recorder = EpisodeRecorder(Path(self.config.episodes_dir or runs_dir() / "episodes"))
         self.lock = threading.Lock()
+        self._opened = threading.Condition(self.lock)    # a bag opened
         self.episode_id = ""
         self.opened_ns = 0                  # the loop's clock when the open bag began
         self.transitions = 0
@@ -117,6 +118,21 @@ class RecorderNode(Node):
             if len(records):
                 record_ticks(self.recorder, records, joint_names)
 
+    def wait_for_episode(self, episode_id: str, timeout: float) -> bool:
+        """Wait until the bag of ``episode_id`` is open; False after ``timeout`` s.
+
+        The robot process calls it before a reset, whose settled start is the bag's first
+        tick. The executor publishes the episode's ``resetting`` status before it asks for the
+        reset, but the two arrive on different threads, and under load the status came after
+        the settled tick, which no bag then took. Without recording, an episode id or an
+        executor (nothing publishes ``/episode_status``) there is nothing to wait for.
+        """
+        if not (self.config.record and episode_id
+                and self.count_publishers(topics.EPISODE_STATUS)):
+            return True
+        with self._opened:
+            return self._opened.wait_for(lambda: self.episode_id == episode_id, timeout)
+
     # --- RL-rate topics -------------------------------------------------------------------
     def _subscribe(self, msg_type: type, topic: str, handler: Callable[[int, bytes, Any], None],
                    qos: Any, group: MutuallyExclusiveCallbackGroup) -> None:
@@ -138,6 +154,7 @@ class RecorderNode(Node):
                                                      "reward": msg.reward_type})
                 self.opened_ns = t_ns
                 self.episode_id, self.transitions, self.final_steps = msg.episode_id, 0, None
+                self._opened.notify_all()
         if msg.episode_id == self.episode_id:
             self.recorder.record_raw("/episode_status", t_ns, data)
             if msg.state in _FINAL and self.final_steps is None:

@@ -52,6 +52,9 @@ from robot_bridge_node.simulation_node import SimConfig, SimulationNode, serve_r
 
 __all__ = ["RobotProcess", "loop_spec", "shipped_loop_spec", "main"]
 
+#: [s] A reset waits at most this long for its episode's bag to open (``wait_for_episode``).
+EPISODE_STATUS_WAIT = 1.0
+
 
 class RobotProcess:
     """The nodes of one robot and the link to its loop process (``LoopListener``).
@@ -127,6 +130,11 @@ class RobotProcess:
         with self._lock:
             self._session = session
             self.foreign_setpoints = 0
+        if self.recorder is not None \
+                and not self.recorder.wait_for_episode(session, EPISODE_STATUS_WAIT):
+            self.bridge.get_logger().warning(
+                f"no /episode_status of episode '{session}' within {EPISODE_STATUS_WAIT} s: "
+                f"its bag, if any, begins after the reset's settled start")
         return self._at_rest_msg(self.link.reset(initial_pose, housing_yaw, timeout))
 
     # --- the loop's output (the link's reader thread) ------------------------------------------

@@ -56,13 +56,16 @@ class SeparateSim:
     processes).
 
     Every tick applies the latest command if it is fresh (younger than ``command_timeout``) and
-    follows the last reset (its stamp is that reset's ``sim/restarted`` stamp: the bridge has
+    follows the last restart (its stamp is that restart's ``sim/restarted`` stamp: the bridge has
     restarted from the new pose), else the interface kind's hold; then it steps (the hardware's
-    ``write``) and publishes the new state and the ground truth. A reset teleports the arm and
-    announces it on ``sim/restarted`` (stamped with the reset time), so the bridge and the
-    estimator restart from the new state; the bridge settles under its controller and reports
-    the settled state (``ee_at_rest`` with ``seq`` 0), and no earlier than ``reset_wait`` after
-    the reset the service answers with that observation.
+    ``write``) and publishes the new state and the ground truth. The start and every reset are
+    restarts: the sim announces each on ``sim/restarted`` (stamped with its time, latched), so
+    the bridge and the estimator restart from the new state, and a bridge sends no command
+    before it has taken one. After a reset (which teleports the arm) the bridge settles under
+    its controller and reports the settled state (``ee_at_rest`` with ``seq`` 0); no earlier
+    than ``reset_wait`` after the reset the service answers with the first such report stamped
+    after the restart. (A report of the bridge's previous settling, still on its way when the
+    reset was taken, once answered a reset with the pose before it: 168 mm off.)
 
     :param robot: from the plugin; it needs a simulation (``reset``, ``ground_truth``).
     :param kind: its interface kind (``robot_bridge_node.interfaces``).
@@ -80,7 +83,7 @@ class SeparateSim:
         self.hold = kind.hold(robot.description, self.config.hold_damping)
         self.pacer = RealtimePacer(robot.description.dt)
         self._command: tuple[float, int, np.ndarray] | None = None  # (arrival, stamp, command)
-        self._settled: AtRest | None = None     # the bridge's observation after the last reset
+        self._settled: AtRest | None = None     # the bridge's latest settled report
         self._jobs: queue.Queue[_ResetJob] = queue.Queue()
         self._job: _ResetJob | None = None
         self._restart_ns = 0                    # the stamp of the last sim/restarted
@@ -93,6 +96,7 @@ class SeparateSim:
         node.create_subscription(AtRest, topics.EE_AT_REST, self._on_at_rest, topics.COMMAND_QOS)
         serve_reset(node, self)
         self.hold.reset(robot.hardware.read())
+        self._announce_restart()
 
     def _on_command(self, msg: JointStateMsg) -> None:
         command = np.asarray(getattr(msg, self.kind.command_field), float)
@@ -105,7 +109,7 @@ class SeparateSim:
 
     def _on_at_rest(self, msg: AtRest) -> None:
         if msg.seq == 0:
-            self._settled = msg
+            self._settled = msg     # the loop thread checks that it follows the last restart
 
     def reset(self, initial_pose: int, housing_yaw: float = 0.0, timeout: float = 5.0,
               session: str = "") -> AtRest:
@@ -154,8 +158,10 @@ class SeparateSim:
                 if self.wrench is not None:
                     self.wrench.publish(wrench_stamped(self.robot.wrist_sensor.read_wrench(),
                                                        stamp))
-            if self._job is not None and now >= self._job.due and self._settled is not None:
-                self._job.observation = self._settled
+            settled = self._settled
+            if self._job is not None and now >= self._job.due and settled is not None \
+                    and time_ns(settled.header.stamp) >= self._restart_ns:
+                self._job.observation = settled
                 self._job.done.set()
                 self._job = None
 
@@ -178,11 +184,14 @@ class SeparateSim:
             return
         self.simulation.reset(job.initial_pose, job.housing_yaw)
         self.hold.reset(self.robot.hardware.read())
-        self._settled = None
-        stamp = self.node.get_clock().now()
-        self._restart_ns = stamp.nanoseconds
+        self._announce_restart()
         job.due = now + self.config.reset_wait
         self._job = job
+
+    def _announce_restart(self) -> None:
+        """Commands and settled reports stamped before now belong to an earlier restart."""
+        stamp = self.node.get_clock().now()
+        self._restart_ns = stamp.nanoseconds
         self.restarted.publish(Header(stamp=stamp.to_msg()))
 
 
