@@ -106,8 +106,8 @@ def pytest_report_header(config: pytest.Config) -> str:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Files in the order two workers that take whole files finish together: those holding an
-    ``alone`` test first (its alone part waits only for the other worker's first test, not for
+    """Files in the order workers that take whole files finish together: those holding an
+    ``alone`` test first (its alone part waits only for the other workers' first tests, not for
     a minute-long one in full swing), then those holding a ``slow`` test, then the other ``ros``
     files, then the in-process ones, small enough to even out the end. Within a file its
     ``alone`` tests come first; the order is otherwise kept. (``scripts/test.sh`` passes
@@ -173,7 +173,7 @@ def _machine_lock(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
     loop's pace, a heartbeat's gaps: ``machine_to_itself``) runs while no other worker runs a
     test, and everything else side by side. A readers-writer lock on a file all workers share:
     every test holds it shared, the timed part exclusive; the turnstile, taken briefly by
-    every test and held by a timed part while it waits, keeps the other worker from taking the
+    every test and held by a timed part while it waits, keeps the other workers from taking the
     lock shared again and again ahead of it. A long test lets a waiting timed part in between
     its parts (``let_alone_tests_in``)."""
     global _held
@@ -208,8 +208,8 @@ def machine_to_itself(request: pytest.FixtureRequest
                       ) -> Callable[[], contextlib.AbstractContextManager[None]]:
     """For a test marked ``alone``: ``with machine_to_itself(): ...`` runs the block, the part
     the test times by the wall clock, while no other worker runs a test. Starting its processes
-    beforehand, side by side with the other worker, keeps that part, and the other worker's
-    idle time, short."""
+    beforehand, side by side with the other workers, keeps that part, and their idle time,
+    short."""
     if request.node.get_closest_marker("alone") is None:
         pytest.fail("machine_to_itself is for tests marked `alone` (they run first)",
                     pytrace=False)
@@ -231,7 +231,7 @@ def machine_to_itself(request: pytest.FixtureRequest
 @pytest.fixture
 def let_alone_tests_in() -> Callable[[], None]:
     """For a test of many parts (episodes): called between two, it lets a timed part waiting
-    on the other worker run first (without it, one waited 26 s for a 43 s test)."""
+    on another worker run first (without it, one waited 26 s for a 43 s test)."""
     def pause() -> None:
         if _held is None:
             return

@@ -140,7 +140,7 @@ def _ours(spec: PeerSpec, env: gymnasium.Env) -> QGDDPG:
 def run_peer(spec: PeerSpec) -> dict[str, Any]:
     """Train ``spec``'s agent for its episodes, then test it on the poses; the run's record."""
     from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
-    from stable_baselines3.common.logger import configure
+    from stable_baselines3.common.logger import Logger, configure
     torch.set_num_threads(1)
     start = time.perf_counter()
     env = EpisodeLog(InsertionEnv(spec.observation, spec.reward, spec.train_max_steps, spec.arm,
@@ -153,8 +153,9 @@ def run_peer(spec: PeerSpec) -> dict[str, Any]:
         agent.learn(budget, max_episodes=spec.train_episodes, tensorboard_log=folder)
     else:
         agent = _sb3_model(spec, env)
-        if folder is not None:
-            agent.set_logger(configure(str(folder), ["tensorboard", "csv"]))
+        # Without a logger of its own, SB3 makes an empty /tmp/SB3-<time> folder every run.
+        agent.set_logger(Logger(None, []) if folder is None
+                         else configure(str(folder), ["tensorboard", "csv"]))
         agent.learn(budget, callback=StopTrainingOnMaxEpisodes(spec.train_episodes))
     train_steps = sum(e["steps"] for e in env.episodes)
     env.mode = "test"

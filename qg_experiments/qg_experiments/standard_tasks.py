@@ -104,6 +104,7 @@ def _episode_recorder(episodes: list[dict[str, float]]) -> Any:
 
 def _sb3(spec: StandardSpec, env: gymnasium.Env) -> Any:
     from stable_baselines3 import DDPG, TD3
+    from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
     kind, sigma, theta = TASKS[spec.task]["noise"]
     dim = env.action_space.shape[0]
@@ -111,8 +112,10 @@ def _sb3(spec: StandardSpec, env: gymnasium.Env) -> Any:
              OrnsteinUhlenbeckActionNoise(np.zeros(dim), sigma * np.ones(dim), theta=theta,
                                           dt=OU_DT))
     cls = {"sb3_ddpg": DDPG, "sb3_td3": TD3}[spec.algorithm]
-    return cls("MlpPolicy", env, action_noise=noise, seed=spec.seed, device="cpu",
-               policy_kwargs={"net_arch": list(HIDDEN)})
+    model = cls("MlpPolicy", env, action_noise=noise, seed=spec.seed, device="cpu",
+                policy_kwargs={"net_arch": list(HIDDEN)})
+    model.set_logger(Logger(None, []))   # SB3's own would be an empty /tmp/SB3-<time> folder
+    return model
 
 
 def _ours(spec: StandardSpec, env: gymnasium.Env) -> QGDDPG:

@@ -136,8 +136,9 @@ def test_the_ideal_arm_and_the_arm_seed_are_options() -> None:
     assert not np.array_equal(start(), ideal)
 
 
-def test_stable_baselines3_trains_on_the_environment_in_three_lines() -> None:
+def test_stable_baselines3_trains_on_the_environment_in_three_lines(monkeypatch, tmp_path) -> None:
     from stable_baselines3 import SAC
+    monkeypatch.setenv("SB3_LOGDIR", str(tmp_path))   # SB3's empty log folder, else in /tmp
     env = gymnasium.make("qg_experiments:QGInsertion-v0", max_steps=3)
     model = SAC("MlpPolicy", env, learning_starts=2, batch_size=4, seed=0, device="cpu")
     model.learn(total_timesteps=6)
