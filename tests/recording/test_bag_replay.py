@@ -35,21 +35,25 @@ def test_replay_at_rate_two_takes_half_the_time(stack, tmp_path: Path, machine_t
     qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
     arrivals: list[tuple[float, float]] = []
     twists: list[TwistStamped] = []
-    with stack.client("replay_listener") as cli, machine_to_itself():
-        cli.node.create_subscription(WrenchStamped, "/wrench_estimate",
-                                     lambda m: arrivals.append((time.monotonic(), m.wrench.force.x)), qos)
-        cli.node.create_subscription(TwistStamped, "/ee_twist", twists.append, qos)
-        player = subprocess.Popen(
-            [sys.executable, "-m", "qg_learning_node.cli.main", "replay", str(tmp_path / "bag"),
-             "--rate", "2", "--topics", "/wrench_estimate", "--wait-for-subscribers", "20",
-             "--start-delay", "1.0"],
-            env=stack.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        try:
-            cli.spin_until(lambda: len(arrivals) >= N, timeout=45.0)
-            cli.spin_for(0.3)  # a filtered-out topic would have arrived by now
+    # The player starts beside the other workers and waits for its subscribers, which come
+    # only with the machine to this test: the timed part is the replay, not a process start.
+    player = subprocess.Popen(
+        [sys.executable, "-m", "qg_learning_node.cli.main", "replay", str(tmp_path / "bag"),
+         "--rate", "2", "--topics", "/wrench_estimate", "--wait-for-subscribers", "120",
+         "--start-delay", "1.0"],
+        env=stack.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        with stack.client("replay_listener") as cli:
+            with machine_to_itself():
+                cli.node.create_subscription(
+                    WrenchStamped, "/wrench_estimate",
+                    lambda m: arrivals.append((time.monotonic(), m.wrench.force.x)), qos)
+                cli.node.create_subscription(TwistStamped, "/ee_twist", twists.append, qos)
+                cli.spin_until(lambda: len(arrivals) >= N, timeout=45.0)
+                cli.spin_for(0.3)  # a filtered-out topic would have arrived by now
             out, err = player.communicate(timeout=30)
-        finally:
-            player.kill()
+    finally:
+        player.kill()
     assert player.returncode == 0, err
     assert [x for _, x in arrivals] == [float(i) for i in range(N)]  # all, in order
     assert twists == []  # --topics left /ee_twist out
