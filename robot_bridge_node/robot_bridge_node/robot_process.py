@@ -38,7 +38,7 @@ from rclpy.node import Node
 
 from robot_bridge_node.bridge_node import BridgeNode, log_at
 from robot_bridge_node.core.hardware_interface import robot_defaults, robot_plugin
-from robot_bridge_node.core.loop_link import LoopLink
+from robot_bridge_node.core.loop_link import ForkedLoopProcess, LoopLink
 from robot_bridge_node.core.loop_process import LoopSpec
 from robot_bridge_node.core.loop_runner import SetpointCommand, StepEvent
 from robot_bridge_node.core.robot_loop import LoopConfig
@@ -69,10 +69,14 @@ class RobotProcess:
     episode), and from then on a setpoint of any other session is dropped before it reaches the
     loop, logged and counted (``foreign_setpoints`` in every ``AtRest``). A reset with the empty
     session serves any sender (manual use).
+
+    :param forked: the loop process, forked before ROS started (``ForkedLoopProcess``: ``main``
+        does so); None starts a new interpreter for it.
     """
 
     def __init__(self, sim: SimulationNode, bridge: BridgeNode, estimator: WrenchEstimatorNode,
-                 recorder: RecorderNode | None = None) -> None:
+                 recorder: RecorderNode | None = None,
+                 forked: ForkedLoopProcess | None = None) -> None:
         self.sim = sim
         self.bridge = bridge
         self.estimator = estimator
@@ -82,7 +86,7 @@ class RobotProcess:
         self.lockstep = not config.realtime
         spec = loop_spec(str(sim.get_parameter("robot").value), sim.params, bridge.params,
                          estimator.params)
-        self.link = LoopLink(spec, len(self.joint_names), self)
+        self.link = LoopLink(spec, len(self.joint_names), self, forked=forked)
         self._lock = threading.Lock()
         self._session = ""                  # the served session ("" = any sender)
         self.foreign_setpoints = 0          # setpoints of other sessions since the last reset
@@ -197,23 +201,24 @@ def shipped_loop_spec(robot: str) -> LoopSpec:
         package_defaults("wrench_estimator", (("robot_bridge_node", "wrench_estimator.yaml"),)))
 
 
-def _start(nodes: list[Node]) -> Callable[[], None]:
-    sim, bridge, estimator, recorder = nodes
-    assert isinstance(sim, SimulationNode) and isinstance(bridge, BridgeNode) \
-        and isinstance(estimator, WrenchEstimatorNode) and isinstance(recorder, RecorderNode)
-    return RobotProcess(sim, bridge, estimator, recorder).start()
-
-
 def main(args: list[str] | None = None) -> int:
+    # The loop process is forked first, while this process has no threads (ROS starts some).
+    forked = ForkedLoopProcess()
     sim: list[SimulationNode] = []   # the sim node loads the plugin its `robot` names
 
     def make_sim() -> SimulationNode:
         sim.append(SimulationNode())
         return sim[0]
 
+    def start(nodes: list[Node]) -> Callable[[], None]:
+        sim_node, bridge, estimator, recorder = nodes
+        assert isinstance(sim_node, SimulationNode) and isinstance(bridge, BridgeNode) \
+            and isinstance(estimator, WrenchEstimatorNode) and isinstance(recorder, RecorderNode)
+        return RobotProcess(sim_node, bridge, estimator, recorder, forked).start()
+
     return run_nodes([make_sim, lambda: BridgeNode(sim[0].plugin),
                       lambda: WrenchEstimatorNode(sim[0].plugin), RecorderNode], args,
-                     background=_start)
+                     background=start)
 
 
 if __name__ == "__main__":

@@ -126,14 +126,16 @@ def test_a_killed_loop_process_is_reported_and_stop_raises() -> None:
         link.stop()
 
 
-def test_the_loop_process_ends_with_the_process_that_started_it() -> None:
+@pytest.mark.parametrize("forked", [False, True])
+def test_the_loop_process_ends_with_the_process_that_started_it(forked: bool) -> None:
     parent = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
         import sys, time
+        from robot_bridge_node.core.loop_link import ForkedLoopProcess, LoopLink
+        forked = ForkedLoopProcess() if {forked} else None
         sys.path.insert(0, {os.path.dirname(__file__)!r})
         from test_loop_process import ROBOT, Listener
         from robot_bridge_node.robot_process import shipped_loop_spec
-        from robot_bridge_node.core.loop_link import LoopLink
-        link = LoopLink(shipped_loop_spec(ROBOT), 7, Listener())
+        link = LoopLink(shipped_loop_spec(ROBOT), 7, Listener(), forked=forked)
         link.start()
         print(link.process.pid, flush=True)
         time.sleep(60)
@@ -145,6 +147,32 @@ def test_the_loop_process_ends_with_the_process_that_started_it() -> None:
     while os.path.exists(f"/proc/{child}") and "Z" not in _state(child):
         assert time.monotonic() < deadline, "the loop process outlived its parent"
         time.sleep(0.05)
+
+
+def test_a_forked_loop_process_steps_and_ends_cleanly_and_an_unused_one_ends_with_its_socket(
+        ) -> None:
+    """The robot process forks its loop process before ROS starts (no threads to fork with):
+    in a process of its own here, as a pytest worker has threads."""
+    result = subprocess.run([sys.executable, "-c", textwrap.dedent(f"""
+        import sys
+        from robot_bridge_node.core.loop_link import ForkedLoopProcess, LoopLink
+        unused, used = ForkedLoopProcess(), ForkedLoopProcess()
+        sys.path.insert(0, {os.path.dirname(__file__)!r})
+        from test_loop_process import ROBOT, SETPOINT, Listener
+        from robot_bridge_node.core.loop_runner import SetpointCommand
+        from robot_bridge_node.robot_process import shipped_loop_spec
+        listener = Listener()
+        link = LoopLink(shipped_loop_spec(ROBOT), 7, listener, forked=used)
+        link.start()
+        link.reset(2)
+        link.send_setpoint(SetpointCommand(1, SETPOINT))
+        event = listener.wait_for_event(1)
+        link.stop()
+        unused.socket.close()        # its robot process stopped before starting a loop
+        print(used.returncode, unused.wait(10.0), event.seq, len(listener.failures),
+              sum(len(r) for r in listener.records) > 20)
+        """)], capture_output=True, text=True, timeout=120)
+    assert result.stdout.split() == ["0", "0", "1", "0", "True"], result.stderr
 
 
 def _state(pid: int) -> str:

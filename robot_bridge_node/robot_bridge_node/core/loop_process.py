@@ -11,9 +11,10 @@ lines) for the one other thread, which sends them back on the socket (``RingOutl
 other end, in the robot process.
 
 Started by ``LoopLink`` as ``python -m robot_bridge_node.core.loop_process --socket FD --ring
-FD``; the first message on the socket is the ``LoopSpec``. It ignores SIGINT (the robot process
-stops it, after its nodes' shutdown work) and ends when told to, when the socket closes, or
-with the process that started it (``qg_common.process_guard``).
+FD``, or forked from the robot process before it starts ROS (``serve_forked``, the ring's
+descriptor then comes on the socket); the first message on the socket is the ``LoopSpec``. It
+ignores SIGINT (the robot process stops it, after its nodes' shutdown work) and ends when told
+to, when the socket closes, or with the process that started it (``qg_common.process_guard``).
 """
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ import gc
 import os
 import queue
 import signal
+import socket
 import sys
 import threading
 import time
@@ -264,6 +266,21 @@ def run(conn: Connection, ring: SampleRing) -> int:
     finally:
         events.close()
     return 0
+
+
+def serve_forked(sock: socket.socket) -> int:
+    """The loop process forked from the robot process (``loop_link.ForkedLoopProcess``): wait
+    for the sample ring's descriptor on ``sock``, then ``run`` as ``main`` does. An end of
+    ``sock`` first (the robot process stopped before it started its loop) ends it at once."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _, fds, _, _ = socket.recv_fds(sock, 1, 1)
+    if not fds:
+        return 0
+    conn = Connection(os.dup(sock.fileno()))
+    try:
+        return run(conn, SampleRing.attach(fds[0]))
+    finally:
+        conn.close()
 
 
 def main(argv: list[str] | None = None) -> int:
