@@ -70,8 +70,8 @@ class ForkedLoopProcess:
     0.07 s of CPU against 0.37 s for a new interpreter (``python -m ...loop_process``), which
     every robot start paid. Fork it while this process has no threads yet, before
     ``rclpy.init``: a lock held by another thread at the fork would stay taken in the child.
-    ``LoopLink(..., forked=...)`` hands it the ring and the spec. Its ``wait``, ``kill`` and
-    ``pid`` are ``subprocess.Popen``'s, which the link uses.
+    ``LoopLink(..., forked=...)`` hands it the ring and the spec. Its ``poll``, ``wait``,
+    ``kill`` and ``pid`` are ``subprocess.Popen``'s, which the link uses.
     """
 
     def __init__(self) -> None:
@@ -92,6 +92,16 @@ class ForkedLoopProcess:
                 os._exit(code)
         theirs.close()
         self.returncode: int | None = None
+        self._reaping = threading.Lock()     # the link's reader thread and stop() may both wait
+
+    def poll(self) -> int | None:
+        """The exit code if it has ended, else None."""
+        with self._reaping:
+            if self.returncode is None:
+                pid, status = os.waitpid(self.pid, os.WNOHANG)
+                if pid:
+                    self.returncode = os.waitstatus_to_exitcode(status)
+            return self.returncode
 
     def wait(self, timeout: float | None = None) -> int:
         """The exit code, once it has ended.
@@ -99,18 +109,14 @@ class ForkedLoopProcess:
         :raises subprocess.TimeoutExpired: if it is still running after ``timeout`` s.
         """
         deadline = None if timeout is None else time.monotonic() + timeout
-        while self.returncode is None:
-            pid, status = os.waitpid(self.pid, 0 if deadline is None else os.WNOHANG)
-            if pid:
-                self.returncode = os.waitstatus_to_exitcode(status)
-            elif time.monotonic() >= deadline:
+        while self.poll() is None:
+            if deadline is not None and time.monotonic() >= deadline:
                 raise subprocess.TimeoutExpired(f"loop process {self.pid}", timeout)
-            else:
-                time.sleep(0.01)
+            time.sleep(0.01)
         return self.returncode
 
     def kill(self) -> None:
-        if self.returncode is None:
+        if self.poll() is None:
             os.kill(self.pid, signal.SIGKILL)
 
 
