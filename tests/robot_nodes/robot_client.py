@@ -8,7 +8,7 @@ import numpy as np
 import rclpy.qos
 from qg_interfaces.msg import AtRest, WrenchSetpoint
 from qg_interfaces.srv import ResetSim
-from qg_learning_node.cli.ros_client import CliNode, call_service
+from qg_learning_node.cli.ros_client import RESEND_AFTER, CliNode, call_service
 from qg_common import conversions, types
 from qg_common.conversions import time_msg
 
@@ -33,13 +33,14 @@ class RobotClient:
     def reset(self, pose: int, timeout: float = 60.0, session: str = "") -> ResetSim.Response:
         """Reset to ``pose``; the bridge then serves only ``session``'s setpoints ("" = any).
 
-        Asked again after 5 s without a reply (a reply to a client the server has not matched
-        yet is lost), with the same request id: the robot answers that without resetting twice.
+        Asked again after ``RESEND_AFTER`` s without a reply (a reply to a client the server has
+        not matched yet is lost), with the same request id: the robot answers that without
+        resetting twice.
         """
         request = ResetSim.Request(initial_pose=pose, session=session,
                                    request_id=uuid.uuid4().hex)
         return call_service(self.cli, ResetSim, f"{self.namespace}/sim/reset", request, timeout,
-                            resend_after=5.0)
+                            resend_after=RESEND_AFTER)
 
     def send(self, seq: int, wrench: tuple[float, ...], session: str = "") -> None:
         assert self.cli.spin_until(lambda: self.setpoints.get_subscription_count() > 0, 30.0), \

@@ -6,17 +6,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from param_client import listed
 from test_episodes import Episodes, wait_for_bag
 
 STEPS = 8
-
-
-def declared(cli, node: str) -> set[str]:
-    from rcl_interfaces.srv import ListParameters
-
-    from qg_learning_node.cli.ros_client import call_service
-    return set(call_service(cli, ListParameters, f"{node}/list_parameters",
-                            ListParameters.Request(), timeout=30.0, resend_after=5.0).result.names)
 
 
 def test_the_peg_task_and_the_nextage_scene_agree_on_the_geometry():
@@ -93,7 +86,7 @@ def test_a_nextage_peg_episode_runs_through_the_ros_stack_and_is_recorded(stack)
         episodes = Episodes(cli)
         episodes.wait_for_learner()
         # The position robot's nodes declare the Nextage's parameters, not the Panda's.
-        bridge, sim = declared(cli, "/bridge"), declared(cli, "/sim")
+        bridge, sim = listed(cli, "/bridge"), listed(cli, "/sim")
         assert "position_control.damping" in bridge and "rest.max_time" in bridge
         assert not any(n.startswith(("impedance.", "safety.")) for n in bridge)
         assert {"robot", "scene.geometry.peg_radius"} <= sim and "panda_scene.shaft_mass" not in sim

@@ -48,12 +48,12 @@ def test_every_executable_starts_and_is_discovered(every_executable):
 def test_start_episode_crosses_processes_and_rejects_bad_fields(every_executable):
     from qg_interfaces.srv import StartEpisode
 
-    from qg_learning_node.cli.ros_client import call_service
+    from qg_learning_node.cli.ros_client import RESEND_AFTER, call_service
     stack = every_executable
     with stack.client() as cli:
         bad = call_service(cli, StartEpisode, "/executor/start_episode",
                            StartEpisode.Request(mode="fly", initial_pose=8, reward="lots"), 30.0,
-                           resend_after=5.0)  # refused, so safe to send twice
+                           resend_after=RESEND_AFTER)  # refused: safe to send twice
         assert not bad.success
         for word in ("mode", "initial_pose", "reward"):
             assert word in bad.message

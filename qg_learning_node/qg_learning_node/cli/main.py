@@ -48,11 +48,11 @@ def _cmd_up(args: argparse.Namespace) -> int:
 
 
 def _cmd_episode(args: argparse.Namespace) -> int:
+    import uuid
+
     from qg_interfaces.srv import StartEpisode, StopEpisode
 
     from qg_common import topics
-
-    import uuid
 
     from qg_learning_node.cli.episode_wait import wait_for_episode
     from qg_learning_node.cli.ros_client import RESEND_AFTER, CliNode, call_service
