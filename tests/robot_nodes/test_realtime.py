@@ -31,62 +31,68 @@ def stamps_for(cli, topic: str, msg_type, seconds: float) -> list[int]:
 def test_composed_realtime_is_paced_by_the_wall_clock_and_completes_steps(stack,
                                                                           machine_to_itself):
     from sensor_msgs.msg import JointState
-    stack.start(("robot", "robot_bridge_node", "robot",
-                 ("--ros-args", "-p", "sim.clock_mode:=realtime")))
-    with stack.client() as cli:
+    # The robot starts with the machine to this test: a realtime loop ticks at 1 kHz from its
+    # start, and it spent 3-9 s of a core here waiting for the other alone tests' timed parts
+    # (3.2 s of CPU for the whole test when it runs by itself).
+    with machine_to_itself(), stack.client() as cli:
+        stack.start(("robot", "robot_bridge_node", "robot",
+                     ("--ros-args", "-p", "sim.clock_mode:=realtime")))
         robot = RobotClient(cli)
         assert robot.reset(2).success
-        with machine_to_itself():     # the robot is up: the timed part
-            # The loop reports its own timing once a second (counts and a histogram of
-            # periods), read at the end: two reports published after this subscription bracket
-            # a second of the timed part. The states after the step are taken meanwhile.
-            from diagnostic_msgs.msg import DiagnosticArray
-            from robot_bridge_node.loop_diagnostics import snapshot_from_status
-            reports: list = []
-            cli.node.create_subscription(DiagnosticArray, "/diagnostics",
-                                         lambda m: reports.append((time.monotonic(), m)), DEEP)
-            states: list[tuple[float, int]] = []           # (arrival, stamp [ns])
-            cli.node.create_subscription(
-                JointState, "/joint_states",
-                lambda m: states.append((time.monotonic(), conversions.time_ns(m.header.stamp))),
-                DEEP)
-            # The executor repeats the running setpoint every few ms to feed the 10 ms watchdog.
-            event = robot.step(1, (0.0, 0.0, -8.0, 0.3, 0.0, 0.0), timeout=10.0, resend=0.004)
-            assert event is not None, stack.logs()
-            stepped = time.monotonic()
-            # At least the rest detector's 20 ms; a sum of 1 ms periods, 20 of them came to
-            # 0.019999999999999574 once.
-            assert 0.02 - 1e-9 <= event.duration <= 0.6
-            assert np.all(np.isfinite(wrench(event.wrench_estimate)))
+        # The loop reports its own timing once a second (counts and a histogram of
+        # periods), read at the end: two reports published after this subscription bracket
+        # a second of the timed part. The states after the step are taken meanwhile.
+        from diagnostic_msgs.msg import DiagnosticArray
+        from robot_bridge_node.loop_diagnostics import snapshot_from_status
+        reports: list = []
+        cli.node.create_subscription(DiagnosticArray, "/diagnostics",
+                                     lambda m: reports.append((time.monotonic(), m)), DEEP)
+        states: list[tuple[float, int]] = []           # (arrival, stamp [ns])
+        cli.node.create_subscription(
+            JointState, "/joint_states",
+            lambda m: states.append((time.monotonic(), conversions.time_ns(m.header.stamp))),
+            DEEP)
+        # The executor repeats the running setpoint every few ms to feed the 10 ms watchdog.
+        event = robot.step(1, (0.0, 0.0, -8.0, 0.3, 0.0, 0.0), timeout=10.0, resend=0.004)
+        assert event is not None, stack.logs()
+        stepped = time.monotonic()
+        # At least the rest detector's 20 ms; a sum of 1 ms periods, 20 of them came to
+        # 0.019999999999999574 once.
+        assert 0.02 - 1e-9 <= event.duration <= 0.6
+        assert np.all(np.isfinite(wrench(event.wrench_estimate)))
 
-            def after_step() -> list[tuple[float, int]]:
-                return [s for s in states if s[0] >= stepped]
+        def after_step() -> list[tuple[float, int]]:
+            return [s for s in states if s[0] >= stepped]
 
-            def window_taken() -> bool:
-                taken = after_step()
-                return len(reports) >= 2 and len(taken) >= 2 and \
-                    taken[-1][0] - taken[0][0] >= 1.0 and taken[-1][1] - taken[0][1] > 1.2e9
-            assert cli.spin_until(window_taken, 10.0), \
-                f"{len(reports)} /diagnostics, {len(after_step())} /joint_states after the step"
-            # Pacing, not speed: the loop never runs ahead of the wall clock, and it keeps
-            # ticking. Whether it holds 1 kHz is machine-dependent: benchmarks/realtime_bench.py
-            # measures it.
+        def window_taken() -> bool:
             taken = after_step()
-            n = sum(stamp - taken[0][1] < 1e9 for _, stamp in taken)
-            wall_rate = sum(arrival - taken[0][0] < 1.0 for arrival, _ in taken) / 1.0
-            # A tick's stamp is taken after its work, so stamps jitter by a tick or two and a
-            # window that opens on a late one holds a little more than 1000 (1002 seen once);
-            # running ahead of the wall clock would give thousands.
-            assert n <= 1003, f"{n} /joint_states stamped within 1 s: faster than real time"
-            assert 200 <= wall_rate <= 1050, f"{wall_rate:.0f} /joint_states per wall second"
-            (t1, first), (t2, second) = reports[-2:]
-            (status,) = second.status
-            assert (status.name, status.hardware_id) == ("robot loop timing", "sim_panda")
-            earlier, later = snapshot_from_status(first.status[0]), snapshot_from_status(status)
-            window = later.since(earlier)
-            due = window.ticks + window.missed        # every millisecond of the second in between
-            assert abs(due - 1000 * (t2 - t1)) < 100, (due, t2 - t1)
-            assert window.histogram.sum() == window.ticks and window.late <= window.ticks
+            return len(reports) >= 2 and len(taken) >= 2 and \
+                taken[-1][0] - taken[0][0] >= 1.0 and taken[-1][1] - taken[0][1] > 1.2e9
+        assert cli.spin_until(window_taken, 10.0), \
+            f"{len(reports)} /diagnostics, {len(after_step())} /joint_states after the step"
+        # Pacing, not speed: the loop never runs ahead of the wall clock, and it keeps
+        # ticking. Whether it holds 1 kHz is machine-dependent: benchmarks/realtime_bench.py
+        # measures it.
+        taken = after_step()
+        n = sum(stamp - taken[0][1] < 1e9 for _, stamp in taken)
+        wall_rate = sum(arrival - taken[0][0] < 1.0 for arrival, _ in taken) / 1.0
+        # The stamps are the loop's wall clock (realtime mode). A tick's stamp is taken
+        # after its work, so stamps jitter by a tick or two and a window that opens on a
+        # late one holds a little more than 1000 (1002 seen once); running ahead of the
+        # wall clock would give thousands.
+        assert n <= 1003, f"{n} /joint_states stamped within 1 s: faster than real time"
+        # Arrivals say only that the loop keeps ticking. They come in bursts, so they
+        # cannot bound the pace from above: a second of arrivals that opened on a late
+        # state held its backlog too (1053 once, while its stamps gave <= 1003).
+        assert wall_rate >= 200, f"{wall_rate:.0f} /joint_states per wall second"
+        (t1, first), (t2, second) = reports[-2:]
+        (status,) = second.status
+        assert (status.name, status.hardware_id) == ("robot loop timing", "sim_panda")
+        earlier, later = snapshot_from_status(first.status[0]), snapshot_from_status(status)
+        window = later.since(earlier)
+        due = window.ticks + window.missed        # every millisecond of the second in between
+        assert abs(due - 1000 * (t2 - t1)) < 100, (due, t2 - t1)
+        assert window.histogram.sum() == window.ticks and window.late <= window.ticks
     assert stack.launcher.poll() == []
 
 
@@ -130,11 +136,14 @@ def test_separate_sim_bridge_and_estimator_processes_complete_a_step(stack, robo
         # ticks once per state, so lockstep's 100 Hz would make every step ten times as long.
         # A reader on a busy host misses many of 1000 states a second (45 of 2 s seen in a CI
         # rehearsal, right after start), so the test reads the period from the stamps it gets,
-        # once the stack is warm: a tick's states are 1 ms apart, lockstep's 10 ms.
-        stamps = stamps_for(cli, "/joint_states", JointState, 1.0)
-        gaps = np.diff(stamps)
-        assert len(stamps) <= 1001 and gaps.size >= 10, f"{len(stamps)} states in 1 s"
-        assert gaps[gaps > 0].min() < 2e6, f"closest states {gaps[gaps > 0].min() / 1e6} ms apart"
+        # once the stack is warm: a tick's states are 1 ms apart, lockstep's 10 ms. The sim
+        # node's clock is the same for every robot: read once (1.4 s of three 1 kHz processes).
+        if robot == "sim_panda":
+            stamps = stamps_for(cli, "/joint_states", JointState, 1.0)
+            gaps = np.diff(stamps)
+            assert len(stamps) <= 1001 and gaps.size >= 10, f"{len(stamps)} states in 1 s"
+            assert gaps[gaps > 0].min() < 2e6, \
+                f"closest states {gaps[gaps > 0].min() / 1e6} ms apart"
     t0 = time.monotonic()
     codes = stack.stop(grace=5.0)
     assert codes == {"sim": 0, "bridge": 0, "wrench_estimator": 0}, stack.logs()
