@@ -358,8 +358,11 @@ def _cmd_demo(args: argparse.Namespace) -> int:
                                   check_processes)
             done = [o for o in outcomes if o.mode == "test"]
             log.evaluation([o.steps for o in done], [o.success for o in done], monitor.steps)
-            # the learner's heartbeat (every 0.5 s) catches up with the last transitions
-            cli.spin_until(lambda: monitor.learner_transitions >= monitor.steps, 5.0)
+            # The learner's heartbeat (every 0.5 s) catches up with the last transitions: one
+            # per step the episodes report. (Not the steps this monitor has seen: its own
+            # subscription may still be a transition behind, as the learner was once.)
+            sent = sum(o.steps for o in outcomes)
+            cli.spin_until(lambda: monitor.learner_transitions >= sent, 5.0)
             learner_transitions = monitor.learner_transitions
     finally:
         codes = launcher.stop()
