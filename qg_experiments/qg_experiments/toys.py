@@ -21,7 +21,10 @@ import pathlib
 import numpy as np
 import torch
 
+from qg_learning_node.learner.adam import Adam
 from qg_learning_node.learner.qgraph import QGraph
+
+from qg_experiments.figures import pyplot
 
 __all__ = ['ToyTransition', 'baird_star', 'chain_std', 'chain_transitions', 'main', 'plot_chain',
            'plot_transition_types', 'three_state_subsets', 'train_critics', 'transition_type_std']
@@ -84,7 +87,7 @@ def train_critics(datasets: list[list[ToyTransition]], options: dict, seeds: int
     x, r, cont, mask, valid = expand(x), expand(r), expand(cont), expand(mask), expand(valid)
     x_next = expand(x_next).reshape(batch, n * width, 4)
     params = _xavier_critics(seeds, len(datasets), [4, 4, 4, 1])
-    opt = torch.optim.Adam(params, lr=lr)
+    opt = Adam(params, lr=lr)
     for _ in range(steps):
         with torch.no_grad():
             q_next = _forward(params, x_next).reshape(batch, n, width)
@@ -184,7 +187,7 @@ def baird_star(bounded: bool, steps: int = 5000, gamma: float = 0.9, alpha: floa
 
 def plot_transition_types(pooled: dict[str, list[float]], path: pathlib.Path) -> None:
     """Box plot of the std across seeds per transition kind (thesis Fig. 7.3)."""
-    plt = _pyplot()
+    plt = pyplot()
     order = [k for k in ('directly_connected', 'connected', 'loose_end', 'disconnected')
              if k in pooled]
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -199,7 +202,7 @@ def plot_transition_types(pooled: dict[str, list[float]], path: pathlib.Path) ->
 
 def plot_chain(dist: np.ndarray, std: np.ndarray, path: pathlib.Path, bin_width: int = 10) -> None:
     """Box plots of the std across seeds, binned by distance to the terminal (thesis Fig. 7.4)."""
-    plt = _pyplot()
+    plt = pyplot()
     starts = range(0, int(dist.max()) + 1, bin_width)
     fig, ax = plt.subplots(figsize=(7, 4))
     ax.boxplot([std[(dist >= lo) & (dist < lo + bin_width)] for lo in starts],
@@ -210,13 +213,6 @@ def plot_chain(dist: np.ndarray, std: np.ndarray, path: pathlib.Path, bin_width:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
-
-
-def _pyplot():
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-    return plt
 
 
 def main(out_dir: pathlib.Path | None = None) -> None:

@@ -25,6 +25,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from qg_learning_node.learner.adam import Adam
 from qg_learning_node.learner.learner_config import (ACTOR_ACTIVATION_NAMES, BOUND_MODES,
                                                      DDPGConfig, realisable_range)
 from qg_learning_node.learner.replay import Batch, NStepContext
@@ -97,8 +98,8 @@ class DDPG:
                                        nn.ReLU, None, config.critic_init, generator))
         self.actor_target = copy.deepcopy(self.actor) if config.target_networks else self.actor
         self.critic_target = copy.deepcopy(self.critic) if config.target_networks else self.critic
-        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=config.effective_actor_lr)
-        self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=config.critic_lr)
+        self.actor_opt = Adam(self.actor.parameters(), lr=config.effective_actor_lr)
+        self.critic_opt = Adam(self.critic.parameters(), lr=config.critic_lr)
         self.range = realisable_range(config.r_min, config.r_max, config.gamma)
         self.train_steps = 0
 
