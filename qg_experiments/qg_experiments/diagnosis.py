@@ -25,6 +25,7 @@ import numpy as np
 
 from qg_learning_node.executor.episode import Episode
 from qg_learning_node.executor.residual_task import ACTION_DIM
+from qg_experiments.figures import pyplot
 from qg_experiments.runner import ARMS, PandaTask, StackSettings, run_episode
 
 __all__ = ["pose_states", "random_walk", "scripted_policy_steps", "diagnose", "main"]
@@ -98,9 +99,7 @@ def scripted_policy_steps(env: PandaTask, policy: str, cap: int) -> list[int]:
 
 
 def _figures(poses: list[dict[str, Any]], walk: dict[str, Any], out: Path) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(9, 4))
     colours = plt.cm.hsv(np.linspace(0, 1, 9)[:8])
     for row, colour in zip(poses, colours):

@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from qg_experiments.figures import pyplot
 from qg_experiments.grid import grid_specs, test_steps
 from qg_experiments.profile import load_profile
 from qg_experiments.runner import RunSpec
@@ -154,9 +155,7 @@ def _solved_at(result: dict[str, Any]) -> float | None:
 
 
 def _mc_figure(results: list[dict[str, Any]], path: Path) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
     groups: dict[str, list[dict[str, Any]]] = {}
     for r in results:

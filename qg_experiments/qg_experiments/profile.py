@@ -12,8 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-from qg_common.params import config_file
+from qg_common.params import config_file, load_yaml
 
 from qg_learning_node.executor.residual_task import state_dim
 from qg_experiments.runner import ALGORITHMS, ARMS, ESTIMATORS
@@ -166,7 +165,7 @@ class Profile:
 
 def load_profile(name: str, path: Path | None = None, estimator: str | None = None) -> Profile:
     """Profile ``name`` of ``config/experiments.yaml`` (or ``path``)."""
-    data = yaml.safe_load((Path(path) if path else config_file("experiments.yaml")).read_text())
+    data = load_yaml((Path(path) if path else config_file("experiments.yaml")).read_text())
     profiles = data["profiles"]
     if name not in profiles:
         raise ValueError(f"unknown profile {name!r}; known: {sorted(profiles)}")

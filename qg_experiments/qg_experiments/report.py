@@ -14,19 +14,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from qg_experiments import grid, peg, stats  # noqa: E402
-from qg_experiments.profile import PegBudget, Profile  # noqa: E402
-from qg_experiments.random_baselines import (random_bar,  # noqa: E402
-                                             summarize_baselines)
-from qg_experiments.runner import StackSettings  # noqa: E402
-from qg_experiments.tasks import load_results  # noqa: E402
-from qg_experiments.tensorboard_log import export_runs  # noqa: E402
+from qg_experiments import grid, peg, stats
+from qg_experiments.figures import pyplot
+from qg_experiments.profile import PegBudget, Profile
+from qg_experiments.random_baselines import random_bar, summarize_baselines
+from qg_experiments.runner import StackSettings
+from qg_experiments.tasks import load_results
+from qg_experiments.tensorboard_log import export_runs
 
 __all__ = ["write_report", "THESIS"]
 
@@ -107,6 +103,7 @@ def _random_section(rows: list[dict[str, Any]], results: list[dict[str, Any]], c
                     bar: Bar | None, figures: Path) -> list[str]:
     if not rows:
         return ["## 1. Random baselines", "", "Not run in this profile.", ""]
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 3.5))
     ax.boxplot([np.minimum(r["steps"], cap) for r in rows], showmeans=True)
     ax.set_xticks(range(1, len(rows) + 1), [r["label"] for r in rows], rotation=15)
@@ -213,6 +210,7 @@ def _learning_curves(results: list[dict[str, Any]], rows: list[dict[str, Any]],
     if not rows:
         return []
     chosen = _q_runs(results, rows)
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True)
     for ax, tag in zip(axes, ("best", "worst")):
         for label, (a, run_tag, runs) in chosen.items():
@@ -250,6 +248,7 @@ def _q_section(results: list[dict[str, Any]], rows: list[dict[str, Any]], figure
     if not rows:
         return []
     chosen = _q_runs(results, rows)
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 4))
     for label, (a, tag, runs) in chosen.items():
         for i, run in enumerate(runs):
@@ -432,6 +431,7 @@ def _peg_section(results: list[dict[str, Any]], figures: Path,
     spec = results[0]["spec"]
     lrs = sorted({k[1] for k in curves}, reverse=True)
     window = 5 if spec["episodes"] >= 20 else 1
+    plt = pyplot()
     fig, axes = plt.subplots(1, len(lrs), figsize=(4 * len(lrs), 3.4), sharey=True, squeeze=False)
     for ax, lr in zip(axes[0], lrs):
         for (a, l), c in curves.items():

