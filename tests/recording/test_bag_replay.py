@@ -40,7 +40,7 @@ def test_replay_at_rate_two_takes_half_the_time(stack, tmp_path: Path, machine_t
     player = subprocess.Popen(
         [sys.executable, "-m", "qg_learning_node.cli.main", "replay", str(tmp_path / "bag"),
          "--rate", "2", "--topics", "/wrench_estimate", "--wait-for-subscribers", "120",
-         "--start-delay", "1.0"],
+         "--start-delay", "0.5"],
         env=stack.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         with stack.client("replay_listener") as cli:

@@ -69,7 +69,7 @@ def test_zero_residual_jams_from_most_starts(loop: RobotLoop, ideal_loop: RobotL
     assert 0.0 < depth < 0.005  # wedged at the bore entrance
 
 
-@pytest.mark.ros     # full tier only: 8 episodes of up to 100 steps; 16 s alone, 22 s in the suite
+@pytest.mark.ros     # full tier only: 7 of the 8 episodes (up to 100 steps) decide: 17 s of CPU
 @pytest.mark.slow
 def test_uniform_random_residuals_insert_from_at_least_six_of_eight_starts(
         loop: RobotLoop, let_alone_tests_in) -> None:
@@ -79,11 +79,15 @@ def test_uniform_random_residuals_insert_from_at_least_six_of_eight_starts(
     and half the test's time."""
     rng = np.random.default_rng(0)
     outcomes = []
-    for k in range(8):
+    for k in range(8):       # the starts in order, until the bar is met or missed
         let_alone_tests_in()
         outcomes.append(run_episode(loop, k, 100, rng))
+        failed = sum(not success for success, _, _ in outcomes)
+        if failed > 2 or len(outcomes) - failed >= 6:
+            break
     inserted = [steps for success, steps, _ in outcomes if success]
-    print(f"random residual: {len(inserted)}/8 inserted, mean {np.mean(inserted):.1f} steps")
+    print(f"random residual: {len(inserted)} of the first {len(outcomes)} starts inserted, "
+          f"mean {np.mean(inserted):.1f} steps")
     assert len(inserted) >= 6, outcomes
 
 

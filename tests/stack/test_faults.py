@@ -124,4 +124,4 @@ def test_learner_heartbeat_goes_on_while_it_trains(stack, tmp_path, machine_to_i
 
 
 #: [s] how much of the endless training cycle the heartbeat test watches.
-WATCH = 3.0
+WATCH = 2.0
