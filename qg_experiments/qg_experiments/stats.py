@@ -26,6 +26,7 @@ import numpy as np
 __all__ = ["CONFIDENCE", "Interval", "mean_interval", "beats", "PairedComparison",
            "paired_comparison", "PairedEvents", "paired_events", "format_interval"]
 
+
 def _scipy_stats():
     """``scipy.stats``, imported when a statistic is computed: it takes 0.65 s of CPU to load,
     and every worker that only runs a learning run imports this module with the run's spec."""
@@ -69,8 +70,8 @@ def mean_interval(values: Sequence[float], seed: int = 0) -> Interval:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")   # BCa's degenerate-sample warning: handled below
             result = _scipy_stats().bootstrap((data,), np.mean, confidence_level=CONFIDENCE,
-                                     n_resamples=RESAMPLES, method=method,
-                                     random_state=np.random.default_rng(seed))
+                                              n_resamples=RESAMPLES, method=method,
+                                              random_state=np.random.default_rng(seed))
         low, high = float(result.confidence_interval.low), float(result.confidence_interval.high)
         if math.isfinite(low) and math.isfinite(high):
             return Interval(mean, min(low, mean), max(high, mean), int(data.size))
