@@ -6,7 +6,7 @@ package_name = 'sim_robot_node'
 # The repository's config/ is the one source of the numbers; this package installs its
 # nodes' files from there to share/sim_robot_node/config (symlinked by --symlink-install).
 config_files = [os.path.join('..', 'config', name) for name in (
-    'panda_scene.yaml', 'panda_ideal.yaml', 'xarm_scene.yaml', 'nextage.yaml', 'peg_env.yaml')]
+    'panda_scene.yaml', 'panda_ideal.yaml', 'panda_mujoco.yaml', 'panda_pybullet.yaml', 'xarm_scene.yaml', 'nextage.yaml', 'peg_env.yaml')]
 
 setup(
     name=package_name,
@@ -31,6 +31,8 @@ setup(
         # The robots this package simulates, loaded by name by robot_bridge_node's robot process.
         'robot_bridge_node.robots': [
             'sim_panda = sim_robot_node.plugins:SIM_PANDA',
+            'sim_panda_mujoco = sim_robot_node.plugins:SIM_PANDA_MUJOCO',
+            'sim_panda_pybullet = sim_robot_node.plugins:SIM_PANDA_PYBULLET',
             'sim_xarm7 = sim_robot_node.plugins:SIM_XARM7',
             'sim_nextage = sim_robot_node.plugins:SIM_NEXTAGE',
         ],

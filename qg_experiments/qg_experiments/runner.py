@@ -26,17 +26,19 @@ import numpy as np
 import torch
 from qg_common.params import (check_section, config_file, load_ros_params, merge_params,
                               section_values)
-from qg_common.rotations import housing_rotation
-from qg_common.types import N_START_POSES, WrenchSetpoint
-from robot_bridge_node.core.hardware_interface import load_robot, robot_plugin
-from robot_bridge_node.core.torque_kind import EKF_SECTION, TORQUE
+from qg_common.shaft_task import ShaftTaskGeometry
+from qg_common.types import N_START_POSES, StepResult, WrenchSetpoint
+from robot_bridge_node.core.hardware_interface import (RobotPlugin, load_robot, robot_defaults,
+                                                       robot_plugin)
+from robot_bridge_node.core.rest_detector import RestConfig
 from robot_bridge_node.core.robot_loop import MeasuredWrench, RobotLoop, build_loop
+from robot_bridge_node.core.torque_kind import EKF_SECTION, TORQUE
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
 
 from qg_learning_node.executor.episode import Actor, Episode, TransitionRecord
 from qg_learning_node.learner.learner_params import learner_config_from_params
 from qg_learning_node.executor.noise import ActionNoise, NoiseConfig
-from qg_learning_node.executor.parameters import load_noise, load_task
+from qg_learning_node.executor.parameters import load_geometry, load_noise, load_task
 from qg_learning_node.executor.observation import observation_from_step
 from qg_learning_node.executor.residual_task import (ACTION_DIM, Observation,
                                                      ResidualTask, TaskConfig)
@@ -44,10 +46,11 @@ from qg_learning_node.learner.actor_mlp import ActorMLP
 from qg_learning_node.learner.ddpg import DDPG
 from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore
 
-__all__ = ["ALGORITHMS", "ARMS", "ESTIMATORS", "StackSettings", "PandaTask", "LivePolicy",
+__all__ = ["ALGORITHMS", "ARMS", "ESTIMATORS", "DEFAULT_ROBOT", "StackSettings", "InsertionRobot",
+           "LivePolicy",
            "RunSpec", "MonteCarloCheck",
            "algorithm_config", "run_episode", "run_training", "episode_noise_seed", "zero_policy",
-           "config_digest", "STACK_CONFIG_FILES", "tilted_housing"]
+           "config_digest", "STACK_CONFIG_FILES"]
 
 #: Learner variants compared by the experiments. Vanilla DDPG as in the thesis: no bounds and no
 #: zero-action loops (its replay holds executed steps only); QG-DDPG: graph + a-priori bounds with
@@ -67,18 +70,21 @@ def algorithm_config(base: LearnerConfig, algorithm: str, action_dim: int) -> Le
     raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
 
 
-#: The files of ``config/`` whose numbers the runs use (the Panda's, the free peg's and the
-#: Nextage peg's), each with the sections the runs read (``None``: all of it). Node-only
-#: settings (timeouts, checkpoint folders) are not the runs' numbers.
+#: The files of ``config/`` whose numbers the runs use (the Panda's, the cell's, the free
+#: peg's and the Nextage peg's), each with the sections the runs read (``None``: all of it).
+#: Node-only settings (timeouts, checkpoint folders) are not the runs' numbers.
 STACK_CONFIG_FILES: dict[str, tuple[str, ...] | None] = {
-    "panda_scene.yaml": None, "panda_ideal.yaml": None, "bridge.yaml": None,
-    "wrench_estimator.yaml": None, "executor.yaml": ("task", "noise"),
-    "learner.yaml": ("learner",), "peg_env.yaml": None, "nextage.yaml": None,
-    "executor_nextage.yaml": ("task", "peg", "noise")}
+    "shaft_task.yaml": None, "panda_scene.yaml": None, "panda_ideal.yaml": None,
+    "bridge.yaml": None, "wrench_estimator.yaml": None, "executor.yaml": ("task", "noise"),
+    "learner.yaml": ("learner",), "peg_env.yaml": None, "peg_task.yaml": None,
+    "nextage.yaml": None, "executor_nextage.yaml": ("task", "peg", "noise")}
 
-#: The simulated arm: ``realistic`` (``panda_scene.yaml``'s imperfections, the default) or
-#: ``ideal`` (``panda_ideal.yaml`` on top: the arm exactly as the bridge models it).
+#: The simulated arm: ``realistic`` (the robot's config file's imperfections, the default) or
+#: ``ideal`` (``panda_ideal.yaml`` on top: the Panda exactly as the bridge models it).
 ARMS = ("realistic", "ideal")
+#: The robot the runs drive unless a spec names another (a plugin of ``robot_bridge_node.robots``
+#: with the shaft task: ``sim_panda``, ``sim_panda_mujoco``, ``sim_xarm7``, ...).
+DEFAULT_ROBOT = "sim_panda"
 
 
 def config_digest(directory: str | Path | None = None) -> str:
@@ -98,14 +104,27 @@ def episode_noise_seed(run_seed: int, index: int) -> int:
     return 1_000_003 * run_seed + 1000 + index
 
 
+def _imperfect_section(plugin: RobotPlugin) -> str:
+    """The prefix of the robot's scene section, the one with its ``imperfections`` (whose
+    ``seed`` picks the robot)."""
+    for section in plugin.parameters:
+        if "imperfections" in {f.name for f in dataclasses.fields(section.config)}:
+            return section.prefix
+    raise ValueError("the robot has no imperfections to seed (not a simulated shaft arm)")
+
+
 @dataclass(frozen=True)
 class StackSettings:
     """What the ROS nodes read from ``config/``, read once: one source of numbers for both paths.
 
-    :param robot: ``ros__parameters`` of ``panda_scene.yaml`` (the ``sim_panda`` robot plugin's);
-    :param bridge: ``ros__parameters`` of ``bridge.yaml``; :param ekf: the ``ekf`` section of
-        ``wrench_estimator.yaml``; the rest are the executor's and learner's parsed sections.
+    :param robot_name: the robot plugin the runs drive.
+    :param robot: that robot's parameters as its node declares them (its config files: the
+        cell's ``shaft_task`` and its scene's section);
+    :param bridge: ``ros__parameters`` of ``bridge.yaml`` under the robot's own gains; :param ekf:
+        the ``ekf`` section of ``wrench_estimator.yaml``; the rest are the executor's and
+        learner's parsed sections.
     """
+    robot_name: str
     robot: dict[str, Any]
     bridge: dict[str, Any]
     ekf: dict[str, Any]
@@ -114,23 +133,35 @@ class StackSettings:
     learner: LearnerConfig
 
     @classmethod
-    def load(cls, directory: Path | None = None, arm: str = "realistic") -> StackSettings:
+    def load(cls, directory: Path | None = None, arm: str = "realistic",
+             robot: str = DEFAULT_ROBOT) -> StackSettings:
         """The config files of ``directory`` (default: the installed ones), with ``arm``."""
         if arm not in ARMS:
             raise ValueError(f"arm must be one of {ARMS}, got {arm!r}")
-        robot = load_ros_params(config_file("panda_scene.yaml", directory))
+        plugin = robot_plugin(robot)
+        if directory is None:
+            params = robot_defaults(plugin)
+        else:
+            params = {}
+            for _, name in plugin.config_files:
+                params = merge_params(params, load_ros_params(config_file(name, directory)))
         if arm == "ideal":
-            robot = merge_params(robot, load_ros_params(config_file("panda_ideal.yaml", directory)))
+            params = merge_params(params, load_ros_params(config_file("panda_ideal.yaml",
+                                                                      directory)))
         executor = load_ros_params(config_file("executor.yaml", directory))
         bridge = load_ros_params(config_file("bridge.yaml", directory))
+        for _, name in plugin.config_files:   # a robot's own gains (the xArm's damping)
+            own = load_ros_params(config_file(name, directory))
+            bridge = merge_params(bridge, {k: v for k, v in own.items()
+                                           if k in {s.prefix for s in TORQUE.controller_sections}})
         estimator = load_ros_params(config_file("wrench_estimator.yaml", directory))
         # Each file through the sections its node declares: what a node would refuse (a value
         # out of range, a misspelt key), the experiments refuse too.
-        for section in robot_plugin("sim_panda").parameters:
-            check_section(section, section_values(section, robot), "panda_scene.yaml")
+        for section in plugin.parameters:
+            check_section(section, section_values(section, params), f"{robot}'s config")
         for section in TORQUE.controller_sections:
             check_section(section, section_values(section, bridge), "bridge.yaml")
-        return cls(robot=robot, bridge=bridge,
+        return cls(robot_name=robot, robot=params, bridge=bridge,
                    ekf=check_section(EKF_SECTION, estimator["ekf"], "wrench_estimator.yaml"),
                    task=load_task(executor, "executor.yaml"),
                    noise=load_noise(executor, "executor.yaml"),
@@ -138,43 +169,72 @@ class StackSettings:
                        load_ros_params(config_file("learner.yaml", directory))["learner"],
                        "learner.yaml"))
 
+    @property
+    def geometry(self) -> ShaftTaskGeometry:
+        """The cell both sides use: the robot's scene and the task's target and starts."""
+        return load_geometry(self.robot, "shaft_task.yaml")
+
+    @property
+    def engine(self) -> str:
+        """The physics engine of the robot's scene."""
+        return str(self.robot[_imperfect_section(robot_plugin(self.robot_name))].get(
+            "engine", "pybullet"))
+
+    @property
+    def step_limit(self) -> float:
+        """[s] the RL step's time limit (``rest.max_time``): a step not at rest by then ends."""
+        return float(self.bridge.get("rest", {}).get("max_time", RestConfig().max_time))
+
     def with_arm_seed(self, seed: int) -> StackSettings:
         """The same settings on robot ``seed``: the arm's biases, housing error and noise
-        streams (``panda_scene.imperfections.seed``). A run's seed picks its arm, so DDPG and
+        streams (``<scene>.imperfections.seed``). A run's seed picks its arm, so DDPG and
         QG-DDPG of one seed, and the random baseline of that seed, meet the same robot."""
+        section = _imperfect_section(robot_plugin(self.robot_name))
         return dataclasses.replace(self, robot=merge_params(
-            self.robot, {"panda_scene": {"imperfections": {"seed": int(seed)}}}))
+            self.robot, {section: {"imperfections": {"seed": int(seed)}}}))
+
+    def with_cell(self, **changes: Any) -> StackSettings:
+        """The same settings in a cell whose ``shaft_task`` numbers differ by ``changes`` (the
+        housing turned or tilted: both the simulated scene and the task see it, as in a cell
+        whose fixture was measured)."""
+        cell = {**self.robot.get("shaft_task", {}), **changes}
+        load_geometry({"shaft_task": cell}, "with_cell")          # refused as a node would
+        return dataclasses.replace(self, robot={**self.robot, "shaft_task": cell})
 
 
-class PandaTask:
-    """The robot side of the stack in-process: simulator, bridge loop and wrench estimator.
+class InsertionRobot:
+    """The robot side of the stack in-process: the robot plugin, the bridge loop and the wrench
+    estimator, on the shaft task.
 
-    It answers what the executor asks over DDS: a reset to a start pose, and one wrench executed
-    until rest, each as an :class:`Observation`.
+    It answers what the executor asks over DDS: the move to a start, and one wrench executed
+    until rest, each as an :class:`Observation` (the tool pose of the measured joints).
     :param estimator: ``ekf`` (what the ROS stack runs) or ``ground_truth`` (a perfect sensor).
-    ``housing_yaw`` [rad] rotates the housing, and with it the start tilts, about the vertical
-    at every reset (the generalisation test trains at one yaw and tests at another).
     """
 
     def __init__(self, settings: StackSettings, estimator: str = "ekf") -> None:
         if estimator not in ESTIMATORS:
             raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
         ekf = WrenchEKFConfig.from_dict(settings.ekf)
+        self.settings = settings
         self.loop: RobotLoop = build_loop(
-            load_robot("sim_panda", settings.robot), settings.bridge,
+            load_robot(settings.robot_name, settings.robot), settings.bridge,
             (lambda robot, model: WrenchEKF(ekf, model)) if estimator == "ekf"
             else (lambda robot, model: MeasuredWrench(robot.simulation.contact_wrench)))
-        self.residual = ResidualTask(settings.task)
+        self.loop.begin()
+        self.residual = ResidualTask(settings.task, settings.geometry)
         self.sim_time = 0.0
         self.steps = 0
         self.step_timeouts = 0
-        self.housing_yaw = 0.0
+
+    def _observe(self, result: StepResult) -> Observation:
+        tool = self.loop.controller.tool
+        return observation_from_step(result, tool.position, tool.rotation)
 
     def reset(self, initial_pose: int) -> Observation:
-        """Start pose ``initial_pose`` settled, observed like the end of a step."""
-        self.loop.reset(initial_pose, self.housing_yaw)
-        return observation_from_step(self.loop.result(self.loop.time),
-                                     self.loop.controller.tool.rotation)
+        """The task's start ``initial_pose`` reached and settled, observed like the end of a
+        step."""
+        self.loop.reset(self.residual.start_pose(initial_pose))
+        return self._observe(self.loop.result(self.loop.time))
 
     def step(self, action: np.ndarray) -> Observation:
         """Execute the residual ``action`` (actor units) until the tool is at rest."""
@@ -182,10 +242,10 @@ class PandaTask:
         self.sim_time += result.duration
         self.steps += 1
         self.step_timeouts += int(result.timed_out)
-        return observation_from_step(result, self.loop.controller.tool.rotation)
+        return self._observe(result)
 
     def close(self) -> None:
-        """Release the simulation (the robot plugin's pybullet client) where it offers that;
+        """Release the simulation (the robot plugin's physics world) where it offers that;
         a process that builds many tasks, like a seeded Gymnasium environment, needs it."""
         close = getattr(self.loop.simulation, "close", None)
         if close is not None:
@@ -211,7 +271,7 @@ def zero_policy(state: np.ndarray) -> np.ndarray:
     return np.zeros(ACTION_DIM)
 
 
-def run_episode(env: PandaTask, episode: Episode, actor: Actor,
+def run_episode(env: InsertionRobot, episode: Episode, actor: Actor,
                 on_transition: Callable[[TransitionRecord], None] | None = None
                 ) -> dict[str, Any]:
     """Drive ``episode`` to its end on ``env``; ``on_transition(record)`` after every step."""
@@ -223,7 +283,7 @@ def run_episode(env: PandaTask, episode: Episode, actor: Actor,
             on_transition(record)
     return {"episode": episode.episode_id, "mode": episode.mode, "pose": episode.initial_pose,
             "steps": episode.step, "success": episode.success, "end_reason": episode.end_reason,
-            "return": episode.episode_return}
+            "return": episode.episode_return, "truly_inserted": episode.truly_inserted}
 
 
 @dataclass(frozen=True)
@@ -239,8 +299,8 @@ class RunSpec:
     :param test_housing_yaw: [rad] housing rotation about the vertical in the test episodes
         (training always runs at 0): the generalisation test.
     :param test_housing_tilt: [rad] the housing's fixture tilt in the test episodes (about its x
-        axis, after the yaw); the test then observes the tilt against the tilted bore axis,
-        ``task.push_axis`` as a real cell would set it from its fixture.
+        axis, after the yaw); the test then measures the tilt against the tilted bore axis, as
+        a real cell would from its fixture (``shaft_task.housing_tilt``).
     :param graph_resolution: Q-Graph state merging (``LearnerConfig.graph_resolution``).
     :param schedule: the learner's schedule, ``cycle`` | ``async`` (``learner_core``); with
         ``async``, ``updates_per_step`` and ``publish_every`` apply.
@@ -249,6 +309,7 @@ class RunSpec:
         evaluation that solves them all; the final test phase is then left out.
     :param arm: ``realistic`` | ``ideal`` (:data:`ARMS`); the arm's seed is ``seed``.
     :param gamma: the discount; ``None`` keeps ``learner.yaml``'s.
+    :param robot: the robot plugin (:data:`DEFAULT_ROBOT`; ``sim_panda_mujoco``, ...).
     """
     algorithm: str
     critic_lr: float
@@ -274,6 +335,7 @@ class RunSpec:
     eval_every: int = 0
     arm: str = "realistic"
     gamma: float | None = None
+    robot: str = DEFAULT_ROBOT
 
     def __post_init__(self) -> None:
         if self.arm not in ARMS:
@@ -302,6 +364,7 @@ class RunSpec:
         extra += f"_eval{self.eval_every}" if self.eval_every else ""
         extra += f"_g{self.gamma:g}" if self.gamma is not None else ""
         extra += "_ideal" if self.arm == "ideal" else ""
+        extra += f"_{self.robot}" if self.robot != DEFAULT_ROBOT else ""
         return f"{self.algorithm}_lr{self.critic_lr:g}_it{self.iterations}{extra}_s{self.seed}"
 
     def learner_config(self, base: LearnerConfig) -> LearnerConfig:
@@ -366,11 +429,12 @@ def run_training(spec: RunSpec) -> dict[str, Any]:
     """
     torch.set_num_threads(1)
     start = time.perf_counter()
-    settings = StackSettings.load(spec.config_dir, spec.arm).with_arm_seed(spec.seed)
+    settings = StackSettings.load(spec.config_dir, spec.arm, spec.robot).with_arm_seed(spec.seed)
     task_config = dataclasses.replace(settings.task, train_max_steps=spec.train_max_steps,
                                       test_max_steps=spec.test_max_steps,
                                       observation=spec.observation or settings.task.observation)
-    env = PandaTask(dataclasses.replace(settings, task=task_config), spec.estimator)
+    settings = dataclasses.replace(settings, task=task_config)
+    env = InsertionRobot(settings, spec.estimator)
     learner = LearnerCore(spec.learner_config(settings.learner), env.residual.state_dim,
                           ACTION_DIM)
     policy = LivePolicy(learner.agent)
@@ -387,7 +451,7 @@ def run_training(spec: RunSpec) -> dict[str, Any]:
             cycles.append({k: float(v) for k, v in diagnostics.items()})
             policy.update(learner.agent)
 
-    def test_phase(tag: str, on: PandaTask) -> list[dict[str, Any]]:
+    def test_phase(tag: str, on: InsertionRobot) -> list[dict[str, Any]]:
         return [run_episode(on, Episode(f"{tag}{index:03d}", "test", index % N_START_POSES,
                                         spec.reward, on.residual), policy)
                 for index in range(spec.test_episodes)]
@@ -406,26 +470,20 @@ def run_training(spec: RunSpec) -> dict[str, Any]:
                                 "mean_steps": float(np.mean([e["steps"] for e in tests]))})
             if evaluations[-1]["successes"] == spec.test_episodes:
                 break
-    test_env = env if not spec.test_housing_tilt else PandaTask(
-        tilted_housing(settings, task_config, spec.test_housing_yaw, spec.test_housing_tilt),
-        spec.estimator)
-    test_env.housing_yaw = spec.test_housing_yaw
+    moved = spec.test_housing_yaw or spec.test_housing_tilt
+    test_env = env if not moved else InsertionRobot(
+        settings.with_cell(housing_yaw=spec.test_housing_yaw,
+                           housing_tilt=spec.test_housing_tilt), spec.estimator)
     if not spec.eval_every:
         episodes += test_phase("test", test_env)
     envs = (env,) if test_env is env else (env, test_env)
     return {"experiment": spec.experiment, "name": spec.name, "spec": dataclasses.asdict(spec),
-            "config_digest": config_digest(spec.config_dir), "episodes": episodes,
+            "config_digest": config_digest(spec.config_dir), "engine": settings.engine,
+            "step_limit": settings.step_limit, "episodes": episodes,
             "evaluations": evaluations, "cycles": cycles,
             "rl_steps": sum(e.steps for e in envs),
             "step_timeouts": sum(e.step_timeouts for e in envs),
             "sim_time": sum(e.sim_time for e in envs), "wall_time": time.perf_counter() - start}
 
 
-def tilted_housing(settings: StackSettings, task: TaskConfig, yaw: float,
-                   tilt: float) -> StackSettings:
-    """``settings`` with the housing's fixture tilted by ``tilt`` [rad] (after turning it by
-    ``yaw``) and the task's push axis on the tilted bore axis, tip first."""
-    scene = {**settings.robot.get("panda_scene", {}), "housing_tilt": tilt}
-    bore_axis = -housing_rotation(yaw, tilt)[:, 2]
-    return dataclasses.replace(settings, robot={**settings.robot, "panda_scene": scene},
-                               task=dataclasses.replace(task, push_axis=tuple(bore_axis.tolist())))
+

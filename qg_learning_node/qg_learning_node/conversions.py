@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 from qg_interfaces.msg import ActorParameters, AtRest, Transition
+from qg_common.conversions import ground_truth_from_msg
 from qg_common.rotations import matrix_from_quaternion
 
 from qg_learning_node.executor.episode import TransitionRecord
@@ -13,15 +14,15 @@ __all__ = ["observation_from_msg", "transition_to_msg",
 
 
 def observation_from_msg(msg: AtRest) -> Observation:
-    w, gt, q, p = (msg.wrench_estimate, msg.ground_truth, msg.ee_pose.orientation,
-                   msg.ee_pose.position)
+    """What the robot measured at rest: the wrench estimate and the tool pose of its joints; the
+    ground truth rides along for evaluation (all zeros from a real arm: then ``None``)."""
+    w, q, p = msg.wrench_estimate, msg.ee_pose.orientation, msg.ee_pose.position
+    truth = ground_truth_from_msg(msg.ground_truth)
     return Observation(
         wrench=np.array([w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y, w.torque.z]),
-        success=bool(gt.success), position_error=float(gt.position_error),
-        orientation_error=float(np.linalg.norm(np.asarray(gt.orientation_error, float))),
-        lateral_offset=float(gt.lateral_offset),
+        tool_position=np.array([p.x, p.y, p.z]),
         tool_rotation=matrix_from_quaternion(q.x, q.y, q.z, q.w),
-        tool_position=np.array([p.x, p.y, p.z]))
+        truth=truth if truth.measured else None)
 
 
 def transition_to_msg(t: TransitionRecord) -> Transition:

@@ -23,12 +23,14 @@ from qg_common.node_parameters import declare_parameters, on_parameter_change
 from qg_common.node_runtime import run_nodes
 from qg_common.params import ParameterSection
 from qg_common.retried_requests import answered_once
-from qg_common.conversions import setpoint_msg
+from qg_common.conversions import setpoint_msg, start_pose_request
+from qg_common.peg_task import PegCell
+from qg_common.shaft_task import ShaftTaskGeometry
 from qg_common.topics import LATCHED, RELIABLE_DEEP
 from qg_common.types import WrenchSetpoint as Setpoint
 from qg_interfaces.msg import (ActorParameters, AtRest, EpisodeStatus, LearnerDiagnostics,
                                TaskSpec, Transition, WrenchSetpoint)
-from qg_interfaces.srv import ResetSim, StartEpisode, StopEpisode
+from qg_interfaces.srv import MoveToStart, StartEpisode, StopEpisode
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.duration import Duration
 from rclpy.node import Node
@@ -39,8 +41,9 @@ from qg_learning_node.executor.episode import Episode
 from qg_learning_node.executor.episode_id import episode_id as make_episode_id
 from qg_learning_node.executor.episode_request import N_POSES, EpisodeRequest
 from qg_learning_node.executor.noise import ActionNoise, NoiseConfig
-from qg_learning_node.executor.parameters import (EXECUTOR_SECTIONS, TASK_CHOICE_SECTION,
-                                                  TASK_SECTIONS, ExecutorConfig)
+from qg_learning_node.executor.parameters import (CELL_SECTIONS, EXECUTOR_SECTIONS,
+                                                  TASK_CHOICE_SECTION, TASK_SECTIONS,
+                                                  ExecutorConfig)
 from qg_learning_node.executor.peg_task import PegTask, PegTaskConfig
 from qg_learning_node.executor.residual_task import ResidualTask, TaskConfig
 from qg_learning_node.learner.actor_mlp import ActorMLP
@@ -58,13 +61,16 @@ class EpisodeAborted(Exception):
 
 
 #: Each task kind's parameter section (``executor/parameters.py``), how its task is built from
-#: the section's values, and the ``observation`` it tells the learner (``TaskSpec``).
-TASKS: dict[str, tuple[ParameterSection, Callable[[dict[str, Any]], Any],
+#: the section's values and its cell's, and the ``observation`` it tells the learner
+#: (``TaskSpec``).
+TASKS: dict[str, tuple[ParameterSection, Callable[[dict[str, Any], dict[str, Any]], Any],
                        Callable[[Any], str]]] = {
     "residual": (TASK_SECTIONS["residual"],
-                 lambda values: ResidualTask(TaskConfig.from_dict(values)),
+                 lambda values, cell: ResidualTask(TaskConfig.from_dict(values),
+                                                   ShaftTaskGeometry.from_dict(cell)),
                  lambda task: task.config.observation),
-    "peg": (TASK_SECTIONS["peg"], lambda values: PegTask(PegTaskConfig.from_dict(values)),
+    "peg": (TASK_SECTIONS["peg"],
+            lambda values, cell: PegTask(PegTaskConfig.from_dict(values), PegCell.from_dict(cell)),
             lambda task: "peg"),
 }
 
@@ -78,8 +84,10 @@ class ExecutorNode(Node):
         if self.task_kind not in TASKS:
             raise ValueError(f"task.kind must be one of {sorted(TASKS)}, got {self.task_kind!r}")
         self.task_section, self.make_task, observation = TASKS[self.task_kind]
-        self._configure(declare_parameters(self, [*EXECUTOR_SECTIONS, self.task_section],
-                                           (("qg_learning_node", "executor.yaml"),)))
+        self.cell_section, cell_file = CELL_SECTIONS[self.task_kind]
+        self._configure(declare_parameters(
+            self, [*EXECUTOR_SECTIONS, self.task_section, self.cell_section],
+            (("qg_learning_node", "executor.yaml"), cell_file)))
         on_parameter_change(self, self._configure, "from the next episode (timeouts: next step)")
 
         # The learner builds its networks from this: the state is set here, and only here.
@@ -100,7 +108,8 @@ class ExecutorNode(Node):
                                  10, callback_group=callbacks)
         self.create_subscription(AtRest, topics.EE_AT_REST, self._on_at_rest, 10,
                                  callback_group=callbacks)
-        self.reset_client = self.create_client(ResetSim, topics.SIM_RESET, callback_group=callbacks)
+        self.start_client = self.create_client(MoveToStart, topics.MOVE_TO_START,
+                                               callback_group=callbacks)
         services = MutuallyExclusiveCallbackGroup()
         self.create_service(StartEpisode, topics.START_EPISODE,
                             answered_once(self._on_start, "start", self.get_logger().info),
@@ -130,7 +139,7 @@ class ExecutorNode(Node):
         applied); at start and on ``ros2 param set``. A running episode keeps its task."""
         values = dict(params[self.task_section.prefix])
         values.pop("kind", None)          # task.kind chose the section (residual: the same)
-        task = self.make_task(values)
+        task = self.make_task(values, params[self.cell_section.prefix])
         noise = NoiseConfig.from_dict(params["noise"])
         config = ExecutorConfig.from_dict(params)
         self.task, self.noise_config, self.config = task, noise, config
@@ -223,9 +232,9 @@ class ExecutorNode(Node):
                                "is still running: stop it first (/executor/stop_episode)"
             return response
         # A robot process that has just come up may not be discovered yet: give it a moment.
-        if not self.reset_client.wait_for_service(timeout_sec=self.config.robot_grace):
+        if not self.start_client.wait_for_service(timeout_sec=self.config.robot_grace):
             response.success = False
-            response.message = "the robot side is not up (/sim/reset unavailable): start " \
+            response.message = "the robot side is not up (/move_to_start unavailable): start " \
                                "`robot_bridge_node robot`"
             return response
         index = self.episodes_started
@@ -238,7 +247,7 @@ class ExecutorNode(Node):
         self.episode = Episode(episode_id, req.mode, pose, reward, self.task,
                                ActionNoise(self.noise_config, self.task.action_dim, seed))
         self.stop_requested.clear()
-        self._set_state("resetting", f"reset to pose {pose}")
+        self._set_state("resetting", f"moving to start {pose}")
         self.worker = threading.Thread(target=self._run_episode, args=(self.episode,),
                                        name="episode", daemon=True)
         self.worker.start()
@@ -316,26 +325,26 @@ class ExecutorNode(Node):
             self._set_state("aborted", f"error: {exc}")
 
     def _reset(self, episode: Episode) -> AtRest:
-        """Reset the robot to the episode's start; a reply lost on the way is asked for again
-        every ``RESET_RETRY`` seconds with the same request id, which the robot answers
-        without a second reset (``serve_reset``)."""
+        """Move the robot to the episode's start (the task's start of its pose); a reply lost on
+        the way is asked for again every ``RESET_RETRY`` seconds with the same request id,
+        which the robot answers without moving twice (``serve_move_to_start``)."""
         # The episode id is the session: from now on the bridge executes only its setpoints.
-        request = ResetSim.Request(initial_pose=episode.initial_pose, housing_yaw=0.0,
-                                   session=episode.episode_id, request_id=uuid.uuid4().hex)
+        request = start_pose_request(episode.task.start_pose(episode.initial_pose),
+                                     session=episode.episode_id, request_id=uuid.uuid4().hex)
         deadline = time.monotonic() + self.config.reset_timeout
         while True:
-            future = self.reset_client.call_async(request)
+            future = self.start_client.call_async(request)
             wait = max(min(RESET_RETRY, deadline - time.monotonic()), 0.0)
             if self._wait_until(future.done, wait, poll=0.002):
                 break
-            self.reset_client.remove_pending_request(future)
+            self.start_client.remove_pending_request(future)
             if self.stop_requested.is_set():
                 raise EpisodeAborted(f"{self.stop_reason} during reset")
             if time.monotonic() >= deadline:
                 raise EpisodeAborted(
-                    f"/sim/reset did not answer within {self.config.reset_timeout} s")
-            self.get_logger().warning(f"/sim/reset unanswered for {RESET_RETRY:.0f} s: asking "
-                                      f"again (request {request.request_id})")
+                    f"/move_to_start did not answer within {self.config.reset_timeout} s")
+            self.get_logger().warning(f"/move_to_start unanswered for {RESET_RETRY:.0f} s: "
+                                      f"asking again (request {request.request_id})")
         result = future.result()
         if result is None or not result.success:
             raise EpisodeAborted(f"reset refused: {getattr(result, 'message', 'no answer')}")

@@ -25,7 +25,7 @@ from qg_common.conversions import (at_rest_msg, ground_truth_from_msg, joint_sta
                                    twist_stamped, wrench_from_msg)
 from qg_common.node_parameters import declare_parameters, package_defaults
 from qg_common.node_runtime import LoopThread, favour_loop_thread, run_nodes
-from qg_common.types import NO_GROUND_TRUTH, GroundTruth, JointState
+from qg_common.types import NO_GROUND_TRUTH, GroundTruth, JointState, StartPose
 from qg_interfaces.msg import AtRest, GroundTruth as GroundTruthMsg
 from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
 from rclpy.node import Node
@@ -127,7 +127,7 @@ class RemoteRobot:
     ``effort``, targets in ``position``) and waits (up to ``timeout``) for the next state, so
     the loop ticks once per state it takes, and a tick covers the time since the previous state
     it took, however many it missed. The first state and every ``sim/restarted`` call
-    ``on_restart``; ``reset`` then waits for a state from after the restart, so the loop
+    ``on_restart``; ``take_restart`` then waits for a state from after the restart, so the loop
     settles from the new pose.
 
     A command's stamp names the restart it follows: the ``sim/restarted`` stamp the loop last
@@ -217,18 +217,23 @@ class RemoteRobot:
                 self._fresh.wait(self.timeout)
             self._used = self._received
 
-    # --- simulation interface --------------------------------------------------------------
-    def reset(self, initial_pose: int, housing_yaw: float = 0.0) -> None:
-        """The sim resets itself (``sim/reset``): wait for its first state after that.
+    def take_restart(self) -> None:
+        """The sim teleported the arm (it serves ``move_to_start``): wait for its first state
+        after that, and stamp the commands from then on with that restart.
 
         :raises TimeoutError: if the sim publishes none within a second.
         """
-        del initial_pose, housing_yaw
         with self._fresh:
             restart = self._restart_ns
             if not self._fresh.wait_for(lambda: self._stamp >= restart * 1e-9, timeout=1.0):
                 raise TimeoutError("no joint_states after the sim restarted")
             self._epoch_ns = restart
+
+    # --- simulation interface --------------------------------------------------------------
+    def teleport(self, start: StartPose) -> None:
+        """Not the bridge's to do here: the separate sim serves ``move_to_start`` itself."""
+        raise RuntimeError("in separate-process mode the sim moves the arm to its start "
+                           "(its move_to_start service); the bridge only settles it")
 
     def ground_truth(self) -> GroundTruth:
         return NO_GROUND_TRUTH if self._truth is None else ground_truth_from_msg(self._truth)
@@ -265,7 +270,7 @@ def _start_separate_bridge(nodes: list[Node]) -> Callable[[], None]:
     mailbox = ThreadMailbox()
 
     def restart() -> None:
-        mailbox.post_reset(ResetCommand(0))
+        mailbox.post_reset(ResetCommand(None))
 
     # The robot's own parameters belong to the separate sim process: describe it by its defaults.
     description = bridge.plugin.describe(package_defaults("sim", bridge.plugin.config_files))
@@ -274,7 +279,8 @@ def _start_separate_bridge(nodes: list[Node]) -> Callable[[], None]:
     loop = bridge.kind.build_loop(Robot(remote, remote, description), params, {},
                                   wrench=LatestWrench(bridge),
                                   clock=StateClock(remote, MAX_STATE_GAP))
-    runner = LoopRunner(loop, mailbox, RosOutlet(bridge), lockstep=False, pace=remote.wait_ready)
+    runner = LoopRunner(loop, mailbox, RosOutlet(bridge), lockstep=False, pace=remote.wait_ready,
+                        take_restart=remote.take_restart)
     bridge.setpoint_handler = lambda msg: mailbox.post_setpoint(
         SetpointCommand(int(msg.seq), setpoint_from_msg(msg)))
     favour_loop_thread()

@@ -8,9 +8,11 @@ tick reaches it through a shared-memory ring (``core/sample_ring.py``), read by 
 hands every tick to the recorder, and publishes the at-rest events. Nothing crosses a process
 boundary at 1 kHz as a message.
 
-The reset path, end to end: the executor calls ``sim/reset`` -> ``serve_reset`` validates ->
-``RobotProcess.reset`` opens the session and sends the reset to the loop process -> its
-``LoopRunner`` resets the plugin's simulation and settles -> the settled event is the answer.
+The reset path, end to end: the executor calls ``move_to_start`` (the bridge node serves it)
+-> ``serve_move_to_start`` validates -> ``RobotProcess.move_to_start`` opens the session and sends
+the start to the loop process -> its ``LoopRunner`` has ``RobotLoop.reset`` teleport the plugin's
+simulation there (or move the arm there) and settle -> the settled event is the answer. The
+process moves nothing at start-up: the loop holds the arm where it is.
 Clock modes (``sim.clock_mode``):
 
 - ``lockstep``: the loop ticks as fast as it can while a setpoint executes and pauses once the
@@ -31,6 +33,7 @@ import rclpy
 from qg_common.conversions import at_rest_msg, setpoint_from_msg, time_msg
 from qg_common.node_parameters import package_defaults
 from qg_common.node_runtime import run_nodes
+from qg_common.types import StartPose
 from qg_interfaces.msg import AtRest
 from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
 from qg_recording.cdr import CdrBuffer
@@ -48,7 +51,8 @@ from robot_bridge_node.core.tick_timing import TimingSnapshot
 from robot_bridge_node.estimator_node import WrenchEstimatorNode
 from robot_bridge_node.loop_diagnostics import LoopDiagnostics
 from robot_bridge_node.recorder_node import RecorderNode
-from robot_bridge_node.simulation_node import SimConfig, SimulationNode, serve_reset
+from robot_bridge_node.simulation_node import SimConfig, SimulationNode
+from robot_bridge_node.start_service import serve_move_to_start
 
 __all__ = ["RobotProcess", "loop_spec", "shipped_loop_spec", "main"]
 
@@ -61,9 +65,8 @@ class RobotProcess:
 
     The loop is the robot's interface kind's (``InterfaceKind.build_loop``): a torque robot's
     runs the hybrid force/impedance controller and the EKF; a position robot's the task-space IK
-    and reads the wrist sensor. It is built from the nodes' parameters; the start pose
-    (``sim.initial_pose``) is taken before the first command, so every run has the same history
-    (lockstep runs repeat exactly).
+    and reads the wrist sensor. It is built from the nodes' parameters and holds the arm where it
+    is until the first reset (lockstep runs repeat exactly).
 
     Only the session being served steers the arm: a reset names a session (the executor's
     episode), and from then on a setpoint of any other session is dropped before it reaches the
@@ -102,7 +105,7 @@ class RobotProcess:
             recorder.clock_ns = self.link.now_ns
         if config.realtime:
             LoopDiagnostics(bridge, lambda: self._timing, str(sim.get_parameter("robot").value))
-        serve_reset(sim, self)
+        serve_move_to_start(bridge, self)
 
     def start(self) -> Callable[[], None]:
         """Start the loop process; returns the function that stops it."""
@@ -123,10 +126,10 @@ class RobotProcess:
             f"setpoint {msg.seq} of session '{msg.session}' ignored: serving '{served}'",
             throttle_duration_sec=1.0)
 
-    def reset(self, initial_pose: int, housing_yaw: float = 0.0, timeout: float = 30.0,
-              session: str = "") -> AtRest:
-        """Reset and settle in the loop process; the settled observation (also on
-        ``ee_at_rest``). From then on only setpoints of ``session`` are executed ("" = any).
+    def move_to_start(self, start: StartPose, timeout: float = 30.0, session: str = "") -> AtRest:
+        """Get the robot to ``start`` and settle, in the loop process; the settled observation
+        (also on ``ee_at_rest``). From then on only setpoints of ``session`` are executed ("" =
+        any).
 
         :raises TimeoutError: if the loop does not settle in ``timeout`` seconds.
         :raises RuntimeError: what the reset failed with (e.g. a start out of reach).
@@ -139,7 +142,7 @@ class RobotProcess:
             self.bridge.get_logger().warning(
                 f"no /episode_status of episode '{session}' within {EPISODE_STATUS_WAIT} s: "
                 f"its bag, if any, begins after the reset's settled start")
-        return self._at_rest_msg(self.link.reset(initial_pose, housing_yaw, timeout))
+        return self._at_rest_msg(self.link.reset(start, timeout))
 
     # --- the loop's output (the link's reader thread) ------------------------------------------
     def samples(self, records: np.ndarray) -> None:
@@ -180,19 +183,19 @@ class RobotProcess:
 def loop_spec(robot: str, sim_params: dict[str, Any], bridge_params: dict[str, Any],
               estimator_params: dict[str, Any]) -> LoopSpec:
     """What the robot process sends its loop process, from the nodes' parameters: the clock
-    mode, priority, start pose and rates are the ``sim`` node's, the tick the bridge's."""
+    mode, priority and rates are the ``sim`` node's, the tick the bridge's."""
     config = SimConfig.from_dict(sim_params["sim"])
     dt = LoopConfig.from_dict(bridge_params.get("loop", {})).dt
     return LoopSpec(
         robot=robot, sim_params=sim_params, bridge_params=bridge_params,
         estimator_params=estimator_params, realtime=config.realtime,
-        priority=config.realtime_priority, initial_pose=config.initial_pose,
+        priority=config.realtime_priority,
         publish_every=config.publish_every(dt), truth_every=config.ground_truth_every(dt))
 
 
 def shipped_loop_spec(robot: str) -> LoopSpec:
     """The ``loop_spec`` of ``ros2 run robot_bridge_node robot`` with no overrides: ``robot``'s
-    plugin and the installed config files (the shipped ``sim.yaml``: lockstep, start pose 0).
+    plugin and the installed config files (the shipped ``sim.yaml``: lockstep).
     Tests and benchmarks start a loop process with it."""
     plugin = robot_plugin(robot)
     return loop_spec(

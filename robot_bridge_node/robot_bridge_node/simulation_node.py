@@ -2,15 +2,14 @@
 
 In the composed ``robot`` process the loop thread hands ``SimulationNode`` what it produced each
 published tick: ``joint_states`` (what any robot driver publishes), the simulation's ground truth
-and, in lockstep, ``clock``. ``serve_reset`` gives the node the ``sim/reset`` service, answered
-by whatever resets the robot (the loop runner here, the separate sim's loop in
-``sim_robot_node``). ``SimConfig`` holds the clock mode both read.
+and, in lockstep, ``clock``. ``SimConfig`` holds the clock mode the composed process and the
+separate sim read.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import WrenchStamped
@@ -18,19 +17,15 @@ from qg_common import topics
 from qg_common.conversions import ground_truth_msg, joint_state_msg, wrench_stamped
 from qg_common.node_parameters import declare_parameters
 from qg_common.params import POSITIVE, ParameterSection, config_from_dict
-from qg_common.retried_requests import answered_once
-from qg_common.types import N_START_POSES, GroundTruth, JointState
-from qg_interfaces.msg import AtRest
+from qg_common.types import GroundTruth, JointState
 from qg_interfaces.msg import GroundTruth as GroundTruthMsg
-from qg_interfaces.srv import ResetSim
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState as JointStateMsg
 
 from robot_bridge_node.core.hardware_interface import ROBOT_SECTION, RobotPlugin, robot_plugin
 
-__all__ = ["SimConfig", "SIM_SECTION", "SimulationNode", "Resetter", "serve_reset"]
+__all__ = ["SimConfig", "SIM_SECTION", "SimulationNode"]
 
 
 @dataclass(frozen=True)
@@ -50,7 +45,6 @@ class SimConfig:
         it (no CAP_SYS_NICE), the loop warns and runs unprioritised. With the whole stack up and
         training, 60 s: 98.2 % of ticks on time without it, 99.7 % with it
         (``benchmarks/realtime_bench.py``).
-    :param initial_pose: start pose (0..7) taken when the process starts.
     :param command_timeout: [s] separate sim: a ``/joint_commands`` older than this is stale.
     :param hold_damping: [Nms/rad] separate sim: joint damping added to the gravity hold.
     :param reset_wait: [s] separate sim: wall time the bridge gets to settle after a reset
@@ -60,7 +54,6 @@ class SimConfig:
     publish_rate: float = 0.0
     ground_truth_rate: float = 100.0
     realtime_priority: int = 50
-    initial_pose: int = 0
     command_timeout: float = 0.02
     hold_damping: float = 1.0
     reset_wait: float = 0.2
@@ -77,9 +70,6 @@ class SimConfig:
         if not 0 <= self.realtime_priority <= 99:
             raise ValueError(f"realtime_priority must be in 0..99 (0: normal scheduling), "
                              f"got {self.realtime_priority}")
-        if not 0 <= self.initial_pose < N_START_POSES:
-            raise ValueError(f"initial_pose must be in 0..{N_START_POSES - 1}, "
-                             f"got {self.initial_pose}")
         for name in ("command_timeout", "reset_wait"):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be > 0 s, got {getattr(self, name)}")
@@ -109,7 +99,7 @@ class SimConfig:
 #: The ``sim.*`` parameters (``config/sim.yaml``, installed by this package).
 SIM_SECTION = ParameterSection("sim", SimConfig, ranges={
     "publish_rate": (0.0, 1000.0), "ground_truth_rate": (0.0, 1000.0),
-    "realtime_priority": (0, 99), "initial_pose": (0, N_START_POSES - 1),
+    "realtime_priority": (0, 99),
     "command_timeout": POSITIVE, "hold_damping": POSITIVE, "reset_wait": POSITIVE})
 
 
@@ -148,45 +138,3 @@ class SimulationNode(Node):
 
     def publish_clock(self, stamp: Time) -> None:
         self.clock.publish(Clock(clock=stamp))
-
-
-class Resetter(Protocol):
-    """Resets the robot to a start pose, settles it, and returns the settled observation."""
-
-    def reset(self, initial_pose: int, housing_yaw: float = 0.0, timeout: float = 30.0,
-              session: str = "") -> AtRest: ...
-
-
-def serve_reset(node: Node, resetter: Resetter) -> None:
-    """Serve ``sim/reset`` on ``node``: validate the request, then ``resetter.reset``.
-
-    The call blocks until the robot has settled, so the service has a callback group of its own
-    and the node's other callbacks keep running meanwhile. A reply can be lost (a client the
-    server has not matched yet, ``cli/ros_client.py``), so a client retries with the same
-    ``request_id``; that retry is answered with the first reply, and the robot, which may have
-    moved on since, is not reset twice (``qg_common.retried_requests``).
-    """
-    def answer(request: ResetSim.Request, response: ResetSim.Response) -> ResetSim.Response:
-        response.success = False
-        if not 0 <= request.initial_pose < N_START_POSES:
-            response.message = (f"initial_pose must be 0..{N_START_POSES - 1}, "
-                                f"got {request.initial_pose}")
-            return response
-        if not math.isfinite(request.housing_yaw):
-            response.message = f"housing_yaw must be finite, got {request.housing_yaw}"
-            return response
-        try:
-            response.observation = resetter.reset(request.initial_pose, request.housing_yaw,
-                                                  session=request.session)
-        except (RuntimeError, ValueError, TimeoutError) as exc:
-            node.get_logger().error(f"reset to pose {request.initial_pose} failed: {exc}")
-            response.message = f"reset failed: {exc}"
-            return response
-        response.success = True
-        response.message = (f"reset to pose {request.initial_pose}, "
-                            f"yaw {request.housing_yaw:.3f} rad")
-        return response
-
-    node.create_service(ResetSim, topics.SIM_RESET,
-                        answered_once(answer, "reset", node.get_logger().info),
-                        callback_group=MutuallyExclusiveCallbackGroup())

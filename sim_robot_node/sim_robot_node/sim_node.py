@@ -25,11 +25,13 @@ from qg_common import topics
 from qg_common.conversions import time_ns, wrench_stamped
 from qg_common.node_runtime import LoopThread, favour_loop_thread, run_nodes
 from qg_common.realtime_pacer import RealtimePacer
+from qg_common.types import StartPose
 from qg_interfaces.msg import AtRest
 from rclpy.node import Node
 from robot_bridge_node.core.hardware_interface import Robot
 from robot_bridge_node.core.interface_kinds import InterfaceKind, interface_kind
-from robot_bridge_node.simulation_node import SimulationNode, serve_reset
+from robot_bridge_node.simulation_node import SimulationNode
+from robot_bridge_node.start_service import serve_move_to_start
 from sensor_msgs.msg import JointState as JointStateMsg
 from std_msgs.msg import Header
 
@@ -43,9 +45,8 @@ STALE_COMMANDS_WARNING = 1.0
 
 @dataclass
 class _ResetJob:
-    """A reset handed from the service thread to the loop thread."""
-    initial_pose: int
-    housing_yaw: float
+    """A start handed from the service thread to the loop thread."""
+    start: StartPose
     done: threading.Event
     due: float = math.inf                 # perf_counter time from which to answer
     observation: AtRest | None = None
@@ -58,8 +59,8 @@ class SeparateSim:
     Every tick applies the latest command if it is fresh (younger than ``command_timeout``) and
     follows the last restart (its stamp is that restart's ``sim/restarted`` stamp: the bridge has
     restarted from the new pose), else the interface kind's hold; then it steps (the hardware's
-    ``write``) and publishes the new state and the ground truth. The start and every reset are
-    restarts: the sim announces each on ``sim/restarted`` (stamped with its time, latched), so
+    ``write``) and publishes the new state and the ground truth. It serves ``move_to_start`` by
+    teleporting (its simulation's shortcut). Its start and every such reset are restarts: the sim announces each on ``sim/restarted`` (stamped with its time, latched), so
     the bridge and the estimator restart from the new state, and a bridge sends no command
     before it has taken one. After a reset (which teleports the arm) the bridge settles under
     its controller and reports the settled state (``ee_at_rest`` with ``seq`` 0); no earlier
@@ -67,7 +68,7 @@ class SeparateSim:
     after the restart. (A report of the bridge's previous settling, still on its way when the
     reset was taken, once answered a reset with the pose before it: 168 mm off.)
 
-    :param robot: from the plugin; it needs a simulation (``reset``, ``ground_truth``).
+    :param robot: from the plugin; it needs a simulation (``teleport``, ``ground_truth``).
     :param kind: its interface kind (``robot_bridge_node.interfaces``).
     """
 
@@ -94,7 +95,7 @@ class SeparateSim:
         node.create_subscription(JointStateMsg, topics.JOINT_COMMANDS, self._on_command,
                                  topics.SENSOR_QOS)
         node.create_subscription(AtRest, topics.EE_AT_REST, self._on_at_rest, topics.COMMAND_QOS)
-        serve_reset(node, self)
+        serve_move_to_start(node, self)
         self.hold.reset(robot.hardware.read())
         self._announce_restart()
 
@@ -111,10 +112,9 @@ class SeparateSim:
         if msg.seq == 0:
             self._settled = msg     # the loop thread checks that it follows the last restart
 
-    def reset(self, initial_pose: int, housing_yaw: float = 0.0, timeout: float = 5.0,
-              session: str = "") -> AtRest:
-        """Reset on the loop thread; the bridge's settled observation, ``reset_wait`` at the
-        earliest.
+    def move_to_start(self, start: StartPose, timeout: float = 5.0, session: str = "") -> AtRest:
+        """Teleport to ``start`` on the loop thread; the bridge's settled observation,
+        ``reset_wait`` at the earliest.
 
         ``session`` is not enforced in this separate-process mode: the bridge learns of a reset
         only from the restarted state stream, so it serves any sender (the composed ``robot``
@@ -122,7 +122,7 @@ class SeparateSim:
         :raises TimeoutError: if the bridge reports no settled state within ``timeout`` s more.
         """
         del session
-        job = _ResetJob(initial_pose, housing_yaw, threading.Event())
+        job = _ResetJob(start, threading.Event())
         self._jobs.put(job)
         if not job.done.wait(timeout=self.config.reset_wait + timeout):
             raise TimeoutError("the bridge reported no settled state after the reset")
@@ -182,7 +182,7 @@ class SeparateSim:
             job = self._jobs.get_nowait()
         except queue.Empty:
             return
-        self.simulation.reset(job.initial_pose, job.housing_yaw)
+        self.simulation.teleport(job.start)
         self.hold.reset(self.robot.hardware.read())
         self._announce_restart()
         job.due = now + self.config.reset_wait
@@ -204,7 +204,6 @@ def _start_separate_sim(nodes: list[Node]) -> Callable[[], None]:
         node.get_logger().info("separate sim process: running in realtime (wall-clock 1 kHz)")
         node.config = replace(node.config, clock_mode="realtime")
     robot = node.plugin.create(node.params)
-    robot.simulation.reset(node.config.initial_pose)
     sim = SeparateSim(node, robot, interface_kind(node.plugin.interface))
     favour_loop_thread()
     return LoopThread("sim", sim.run, node, node.config.realtime_priority).start().stop

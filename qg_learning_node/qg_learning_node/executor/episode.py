@@ -64,6 +64,9 @@ class Episode:
         self.success = False
         self.end_reason = ""
         self.state: np.ndarray | None = None
+        #: A simulation's truth of the last observation, for evaluation only (``None`` on a
+        #: real arm): whether the shaft was really inserted there.
+        self.truly_inserted: bool | None = None
 
     @property
     def done(self) -> bool:
@@ -72,9 +75,14 @@ class Episode:
     def begin(self, obs: Observation) -> np.ndarray:
         """The settled start: the first state."""
         self.state = self.task.state(obs)
-        if obs.success:          # already inserted: nothing to learn from this start
+        self._evaluate(obs)
+        if self.task.succeeded(obs):   # already inserted: nothing to learn from this start
             self.success, self.end_reason = True, "goal"
         return self.state
+
+    def _evaluate(self, obs: Observation) -> None:
+        if obs.truth is not None:
+            self.truly_inserted = bool(obs.truth.success)
 
     def choose_action(self, actor: Actor | None) -> np.ndarray:
         """Actor output (+ noise in training); the zero residual when there is no actor.
@@ -95,7 +103,8 @@ class Episode:
         assert self.state is not None and not self.done, "episode not running"
         next_state = self.task.state(obs)
         reward = float(self.task.reward(obs, self.reward_kind))
-        terminal = bool(obs.success)
+        terminal = bool(self.task.succeeded(obs))
+        self._evaluate(obs)
         self.step += 1
         self.episode_return += reward
         if terminal:

@@ -11,13 +11,16 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 from qg_common.params import POSITIVE, ParameterSection, check_section, config_from_dict
+from qg_common.peg_task import PEG_TASK_FILE, PEG_TASK_SECTION
+from qg_common.shaft_task import SHAFT_TASK_FILE, SHAFT_TASK_SECTION, ShaftTaskGeometry
 
 from qg_learning_node.executor.noise import NoiseConfig
 from qg_learning_node.executor.peg_task import PegTaskConfig
 from qg_learning_node.executor.residual_task import TaskConfig
 
 __all__ = ["ExecutorConfig", "TaskChoice", "EXECUTOR_SECTIONS", "NOISE_SECTION", "TASK_SECTIONS",
-           "TASK_CHOICE_SECTION", "TIMING_SECTION", "load_noise", "load_task"]
+           "CELL_SECTIONS", "TASK_CHOICE_SECTION", "TIMING_SECTION", "load_noise", "load_task",
+           "load_geometry"]
 
 
 @dataclass(frozen=True)
@@ -25,11 +28,11 @@ class ExecutorConfig:
     """How long the executor waits for the other nodes (``config/executor.yaml``, top level).
 
     :param step_timeout: [s] wall time to wait for the at-rest event of one step.
-    :param reset_timeout: [s] wall time to wait for ``sim/reset``.
+    :param reset_timeout: [s] wall time to wait for ``move_to_start`` (a motion takes seconds).
     :param keepalive_period: [s] re-send the running setpoint this often; 0 = never (a lockstep
         robot). A realtime robot needs 0.005: its watchdog holds the pose after 10 ms.
     :param learner_timeout: [s] no word from the learner this long -> degraded (zero residual).
-    :param robot_grace: [s] an episode start waits this long for a robot (``sim/reset``) not
+    :param robot_grace: [s] an episode start waits this long for a robot (``move_to_start``) not
         discovered yet before it refuses.
     :param learner_grace: [s] an episode's first step waits this long for a learner never heard
         from (it may not be discovered yet) before it runs degraded with the zero residual.
@@ -89,22 +92,27 @@ NOISE_SECTION = ParameterSection("noise", NoiseConfig, ranges={
 EXECUTOR_SECTIONS = (TIMING_SECTION, NOISE_SECTION)
 
 #: Each task kind's section. The default reward and the step caps may change between episodes
-#: (a running episode keeps its own); everything else defines the learner's MDP.
+#: (a running episode keeps its own); everything else defines the learner's MDP. Each kind's
+#: cell (``CELL_SECTIONS``) is a section and a file of its own, which the robot side reads too.
 TASK_SECTIONS = {
     "residual": ParameterSection("task", TaskConfig, ranges={
         "max_residual_torque": (0.0, 3.0), "force_range": POSITIVE, "torque_range": POSITIVE,
         "sigma_position": POSITIVE, "sigma_orientation": POSITIVE,
-        "max_lateral_offset": POSITIVE, "train_max_steps": (1, 1000000),
+        "train_max_steps": (1, 1000000),
         "test_max_steps": (1, 1000000), "tilt_range": POSITIVE},
         runtime=frozenset({"reward", "train_max_steps", "test_max_steps"}),
         applies="from the next episode", fixed=_TASK_FIXED),
     "peg": ParameterSection("peg", PegTaskConfig, ranges={
-        "action_scale": (0.0, 0.1), "reward_length": POSITIVE, "workspace_side": POSITIVE,
-        "tool_to_tip": POSITIVE, "train_max_steps": (1, 1000000),
+        "action_scale": (0.0, 0.1), "reward_length": POSITIVE, "train_max_steps": (1, 1000000),
         "test_max_steps": (1, 1000000)},
         runtime=frozenset({"reward", "train_max_steps", "test_max_steps"}),
         applies="from the next episode", fixed=_TASK_FIXED),
 }
+
+
+#: Each task kind's cell: its parameter section and the file of its defaults (``qg_common``).
+CELL_SECTIONS = {"residual": (SHAFT_TASK_SECTION, SHAFT_TASK_FILE),
+                 "peg": (PEG_TASK_SECTION, PEG_TASK_FILE)}
 
 
 def load_task(params: dict[str, Any], source: str = "") -> TaskConfig:
@@ -118,3 +126,9 @@ def load_task(params: dict[str, Any], source: str = "") -> TaskConfig:
 def load_noise(params: dict[str, Any], source: str = "") -> NoiseConfig:
     """The exploration noise of the executor's parameters, checked as the node checks it."""
     return NoiseConfig.from_dict(check_section(NOISE_SECTION, params.get("noise") or {}, source))
+
+
+def load_geometry(params: dict[str, Any], source: str = "") -> ShaftTaskGeometry:
+    """The shaft task's cell (``config/shaft_task.yaml`` parsed), checked as a node checks it."""
+    return ShaftTaskGeometry.from_dict(check_section(SHAFT_TASK_SECTION,
+                                                     params.get("shaft_task") or {}, source))

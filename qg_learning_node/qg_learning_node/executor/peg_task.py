@@ -5,13 +5,16 @@ the in-process experiments (``sim_robot_node/core/peg_env.py``):
 
 - state: the peg tip in the workspace, scaled linearly from the cube of side ``workspace_side``
   to [-1, 1]^3. The tip is computed from the tool pose the bridge measures (forward kinematics
-  of the joints, as on a real arm): ``tool_to_tip`` below the tool frame along its z axis;
+  of the joints, as on a real arm): the peg's length below the tool frame along its z axis;
 - action: a position offset in [-1, 1]^3 scaled to at most ``action_scale`` per axis; the
   command is a pose reference for the bridge's task-space position controller (the tool's
   orientation is kept), the target clipped to the workspace;
-- reward: dense ``exp(-d / reward_length) - 1`` of the tip's distance ``d`` to the hole bottom
-  (from the simulation's ground truth, like the Panda's rewards), or sparse -1 / 0;
-- the episode ends at the goal (terminal: the peg is inserted) or at its step cap.
+- reward: dense ``exp(-d / reward_length) - 1`` of the measured tip's distance ``d`` to the hole
+  bottom, or sparse -1 / 0;
+- the episode ends at the goal (terminal: the measured tip within ``goal_tolerance`` of the hole
+  bottom) or at its step cap; it starts at the cell's seeded free start ``k``.
+
+The cell (where the block is, the sizes, the workspace) is ``qg_common.peg_task``'s.
 """
 from __future__ import annotations
 
@@ -20,7 +23,8 @@ from typing import Any
 
 import numpy as np
 from qg_common.params import config_from_dict
-from qg_common.types import PoseReference, WrenchSetpoint
+from qg_common.peg_task import PegCell
+from qg_common.types import PoseReference, StartPose, WrenchSetpoint
 
 from qg_learning_node.executor.residual_task import Observation
 
@@ -36,19 +40,12 @@ class PegTaskConfig:
 
     :param action_scale: [m] tip offset of a unit action per axis (thesis: 1 cm).
     :param reward_length: [m] length scale of the dense reward ``exp(-d/reward_length) - 1``.
-    :param workspace_origin: [m] the workspace frame's origin (hole axis at the block's base)
-        in the robot's base frame.
-    :param workspace_side: [m] side of the cubic workspace standing on the block's base.
-    :param tool_to_tip: [m] the peg tip below the tool frame origin, along the tool's z axis.
     :param train_max_steps: step cap of training episodes.
     :param test_max_steps: step cap of test episodes.
     :param reward: default reward when a request leaves it empty: sparse | dense.
     """
     action_scale: float = 0.01
     reward_length: float = 0.03
-    workspace_origin: tuple[float, float, float] = (0.4, -0.15, -0.15)
-    workspace_side: float = 0.2
-    tool_to_tip: float = 0.08
     train_max_steps: int = 200
     test_max_steps: int = 200
     reward: str = "dense"
@@ -56,10 +53,7 @@ class PegTaskConfig:
     def __post_init__(self) -> None:
         if self.reward not in ("sparse", "dense"):
             raise ValueError(f"reward must be sparse or dense, got {self.reward!r}")
-        if len(self.workspace_origin) != 3 or not np.all(np.isfinite(self.workspace_origin)):
-            raise ValueError(f"workspace_origin needs 3 finite entries, got "
-                             f"{self.workspace_origin!r}")
-        for name in ("action_scale", "reward_length", "workspace_side", "tool_to_tip"):
+        for name in ("action_scale", "reward_length"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.train_max_steps < 1 or self.test_max_steps < 1:
@@ -79,22 +73,27 @@ class PegTask:
     state_dim = PEG_STATE_DIM
     action_dim = PEG_ACTION_DIM
 
-    def __init__(self, config: PegTaskConfig) -> None:
+    def __init__(self, config: PegTaskConfig, cell: PegCell) -> None:
         self.config = config
-        self._origin = np.asarray(config.workspace_origin, float)
-        half = config.workspace_side / 2
-        self._low = np.array([-half, -half, 0.0])
-        self._high = np.array([half, half, config.workspace_side])
+        self.cell = cell
+        self._low = cell.geometry.workspace_low
+        self._high = cell.geometry.workspace_high
 
     def tip(self, obs: Observation) -> np.ndarray:
-        """The peg tip in the workspace frame [m], from the measured tool pose.
+        """The peg tip in the workspace frame [m], from the measured tool pose."""
+        return self.cell.tip(obs.tool_position, obs.tool_rotation)
 
-        :raises ValueError: without the tool pose (the bridge always sends it).
-        """
-        if obs.tool_position is None or obs.tool_rotation is None:
-            raise ValueError("the peg task needs the tool pose")
-        tip = obs.tool_position + obs.tool_rotation[:, 2] * self.config.tool_to_tip
-        return tip - self._origin
+    def start_pose(self, index: int) -> StartPose:
+        """The cell's start ``index``: a seeded free tip position, the tool pointing down."""
+        return self.cell.start_pose(index)
+
+    def distance(self, obs: Observation) -> float:
+        """[m] the measured tip's distance to the centre of the hole bottom."""
+        return float(np.linalg.norm(self.tip(obs) - self.cell.geometry.goal))
+
+    def succeeded(self, obs: Observation) -> bool:
+        """The goal: the measured tip within ``goal_tolerance`` of the hole bottom."""
+        return self.distance(obs) < self.cell.geometry.goal_tolerance
 
     def state(self, obs: Observation) -> np.ndarray:
         """The tip scaled from the workspace cube to [-1, 1]^3 (clipped)."""
@@ -113,7 +112,7 @@ class PegTask:
         target = np.clip(self.tip(obs) + np.clip(a, -1.0, 1.0) * self.config.action_scale,
                          self._low, self._high)
         rotation = np.asarray(obs.tool_rotation)
-        position = self._origin + target - rotation[:, 2] * self.config.tool_to_tip
+        position = self.cell.origin + target - rotation[:, 2] * self.cell.geometry.peg_length
         return WrenchSetpoint(np.zeros(6), PoseReference(position, rotation))
 
     def hold(self) -> WrenchSetpoint:
@@ -123,9 +122,9 @@ class PegTask:
     def reward(self, obs: Observation, kind: str) -> float:
         """Dense: ``exp(-d / reward_length) - 1``; sparse: -1 per step, 0 at the goal."""
         if kind == "sparse":
-            return 0.0 if obs.success else -1.0
+            return 0.0 if self.succeeded(obs) else -1.0
         if kind == "dense":
-            return float(np.exp(-obs.position_error / self.config.reward_length) - 1.0)
+            return float(np.exp(-self.distance(obs) / self.config.reward_length) - 1.0)
         raise ValueError(f"reward must be sparse or dense, got {kind!r}")
 
     def left_bore(self, obs: Observation) -> bool:

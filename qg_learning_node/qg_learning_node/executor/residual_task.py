@@ -16,6 +16,11 @@ One definition for the ROS executor and the fast in-process runner, so both run 
   of the constant base push Fz = -15 N: the feed-forward wrench [0, 0, Fz, tx, ty, 0];
 - reward: sparse (-1 per step, 0 at the goal) or dense (pose error to the inserted pose);
 - the episode ends at the goal (terminal), at its step cap, or when the shaft leaves the bore.
+
+Reward, the goal and "left the bore" are measured on the tool pose the robot reports (forward
+kinematics of its measured joints) against the cell's fixture (``qg_common.shaft_task``, the
+task's ``shaft_task.*`` parameters), as a real cell measures them; a simulation's truth rides
+along in the observation for evaluation only. The starts an episode begins from are the cell's.
 """
 from __future__ import annotations
 
@@ -23,7 +28,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from qg_common.types import WrenchSetpoint
+from qg_common.shaft_task import ShaftTaskGeometry, TaskMeasure
+from qg_common.types import GroundTruth, StartPose, WrenchSetpoint
 
 __all__ = ["TaskConfig", "Observation", "ResidualTask", "OBSERVATIONS", "OBSERVATION_COMPONENTS",
            "ACTION_DIM", "state_dim", "tilt_from_push_axis"]
@@ -71,14 +77,11 @@ class TaskConfig:
     :param max_residual_torque: actor output 1.0 maps to this torque [Nm].
     :param force_range: |F| that maps to state 1.0 [N]; :param torque_range: same for torque [Nm].
     :param sigma_position: dense reward's position scale [m]; :param sigma_orientation: [rad].
-    :param max_lateral_offset: the episode ends (not terminal) past this tip offset [m].
     :param train_max_steps: step cap of training episodes; :param test_max_steps: of test ones.
     :param reward: default reward type, sparse | dense.
     :param observation: the state, one of :data:`OBSERVATIONS` (``thesis``: 4-D wrench;
         ``tilt_only``: the tilt alone). The executor owns it and tells the learner.
     :param tilt_range: tilt [rad] that maps to state 1.0 (``tilt`` observation).
-    :param push_axis: base-frame direction the shaft should point along (the bore axis, tip
-        first); the ``tilt`` observation measures the tool's tilt away from it.
     """
     base_force: float = -15.0
     max_residual_torque: float = 3.0
@@ -86,24 +89,18 @@ class TaskConfig:
     torque_range: float = 3.0
     sigma_position: float = 0.015
     sigma_orientation: float = 0.7
-    max_lateral_offset: float = 0.015
     train_max_steps: int = 1000
     test_max_steps: int = 200
     reward: str = "dense"
     observation: str = "tilt_only"
     tilt_range: float = 0.5
-    push_axis: tuple[float, float, float] = (0.0, 0.0, -1.0)
 
     def __post_init__(self) -> None:
         if self.reward not in ("sparse", "dense"):
             raise ValueError(f"reward must be sparse or dense, got {self.reward!r}")
         state_dim(self.observation)
-        axis = np.asarray(self.push_axis, dtype=np.float64)
-        if axis.shape != (3,) or not np.isfinite(axis).all() or np.linalg.norm(axis) < 1e-9:
-            raise ValueError(f"push_axis must be a non-zero 3-vector, got {self.push_axis!r}")
-        object.__setattr__(self, "push_axis", tuple(float(x) for x in axis / np.linalg.norm(axis)))
         for name in ("max_residual_torque", "force_range", "torque_range", "sigma_position",
-                     "sigma_orientation", "max_lateral_offset", "tilt_range"):
+                     "sigma_orientation", "tilt_range"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.train_max_steps < 1 or self.test_max_steps < 1:
@@ -122,23 +119,31 @@ class TaskConfig:
 
 @dataclass(frozen=True)
 class Observation:
-    """What the executor sees when a step comes to rest (simulator truth only for rewards)."""
-    wrench: np.ndarray            # (6,) estimated contact wrench, tool frame
-    success: bool                 # ground truth: fully inserted
-    position_error: float         # [m] to the inserted pose
-    orientation_error: float      # [rad] norm of the x/y angle-axis error
-    lateral_offset: float         # [m] tip from the hole axis
-    tool_rotation: np.ndarray | None = None  # (3, 3) tool orientation, base frame, from measured joints
-    tool_position: np.ndarray | None = None  # (3,) tool position, base frame, from measured joints
+    """What the executor sees when a step comes to rest: what the robot measured.
+
+    :param wrench: (6,) the estimated (or sensed) contact wrench, tool frame.
+    :param tool_position: (3,) the tool position, base frame, from the measured joints.
+    :param tool_rotation: (3, 3) the tool orientation, the same way.
+    :param truth: a simulation's ground truth at that instant, for evaluation only (``None`` on
+        a real arm): nothing of the MDP is computed from it.
+    """
+    wrench: np.ndarray
+    tool_position: np.ndarray
+    tool_rotation: np.ndarray
+    truth: GroundTruth | None = None
 
 
 class ResidualTask:
-    """Maps observations to states and rewards, and actions to feed-forward wrenches."""
+    """Maps observations to states and rewards, and actions to feed-forward wrenches.
+
+    :param geometry: the cell: the fixture the goal is measured against, and the starts.
+    """
 
     action_dim = ACTION_DIM
 
-    def __init__(self, config: TaskConfig) -> None:
+    def __init__(self, config: TaskConfig, geometry: ShaftTaskGeometry) -> None:
         self.config = config
+        self.geometry = geometry
         c = config
         self.state_dim = state_dim(c.observation)
         parts = OBSERVATION_COMPONENTS[c.observation]
@@ -147,19 +152,14 @@ class ResidualTask:
         self._state_scale = np.array([scales[part] for part in parts])
         self._wrench_index = [_WRENCH_INDEX[part] for part in parts if part in _WRENCH_INDEX]
         self._uses_tilt = "ex" in parts
-        self._push_axis = np.asarray(c.push_axis)
+        self._push_axis = geometry.bore_axis()
 
     def state(self, obs: Observation) -> np.ndarray:
-        """The observation's components (:data:`OBSERVATION_COMPONENTS`) scaled to [-1, 1] (clipped).
-
-        :raises ValueError: for a tilt observation without the tool orientation.
-        """
+        """The observation's components (:data:`OBSERVATION_COMPONENTS`) scaled to [-1, 1]
+        (clipped); the tilt is measured from the bore axis of the cell's fixture."""
         w = np.asarray(obs.wrench, dtype=np.float64)
         raw = [w[i] for i in self._wrench_index]
         if self._uses_tilt:
-            if obs.tool_rotation is None:
-                raise ValueError(f"the {self.config.observation} observation needs the tool "
-                                 "orientation")
             raw.extend(tilt_from_push_axis(obs.tool_rotation, self._push_axis))
         return np.clip(np.array(raw) / self._state_scale, -1.0, 1.0)
 
@@ -183,19 +183,32 @@ class ResidualTask:
         """The zero residual: the base push only, from where the tool is (the safe command)."""
         return WrenchSetpoint.residual(self.config.base_force, 0.0, 0.0)
 
+    def start_pose(self, index: int) -> StartPose:
+        """The cell's start ``index`` (0..7), where an episode of that pose begins."""
+        return self.geometry.start_pose(index)
+
+    def measure(self, obs: Observation) -> TaskMeasure:
+        """How far the measured tool pose is from the inserted pose, against the fixture."""
+        return self.geometry.measure(obs.tool_position, obs.tool_rotation)
+
+    def succeeded(self, obs: Observation) -> bool:
+        """The goal: the shaft fully inserted, measured."""
+        return self.measure(obs).inserted
+
     def reward(self, obs: Observation, kind: str) -> float:
         """Sparse: -1 per step, 0 at the goal. Dense: 0.5 (exp(-dR/sR) + exp(-dP/sP)) - 1."""
+        m = self.measure(obs)
         if kind == "sparse":
-            return 0.0 if obs.success else -1.0
+            return 0.0 if m.inserted else -1.0
         if kind == "dense":
             c = self.config
-            return 0.5 * (np.exp(-obs.orientation_error / c.sigma_orientation)
-                          + np.exp(-obs.position_error / c.sigma_position)) - 1.0
+            return 0.5 * (np.exp(-m.orientation_error_norm / c.sigma_orientation)
+                          + np.exp(-m.position_error / c.sigma_position)) - 1.0
         raise ValueError(f"reward must be sparse or dense, got {kind!r}")
 
     def left_bore(self, obs: Observation) -> bool:
         """The shaft tip left the hole axis too far: end the episode (a failure, not terminal)."""
-        return obs.lateral_offset > self.config.max_lateral_offset
+        return self.measure(obs).lateral_offset > self.geometry.max_lateral_offset
 
     @staticmethod
     def reward_range(kind: str) -> tuple[float, float]:

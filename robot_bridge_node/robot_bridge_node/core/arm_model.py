@@ -145,6 +145,34 @@ class ArmModel:
         J = pin.getFrameJacobian(self.model, self.data, self.tool_frame, pin.LOCAL_WORLD_ALIGNED)
         return Kinematics(oMf.translation.copy(), oMf.rotation.copy(), J.copy())
 
+    def inverse_kinematics(self, position: np.ndarray, rotation: np.ndarray,
+                           q0: np.ndarray, tolerance: float = 1e-7,
+                           iterations: int = 200) -> np.ndarray:
+        """Joint angles that put the tool exactly at ``position``, ``rotation`` (base frame):
+        damped least squares from ``q0``, so the solution is the one nearest it (the posture a
+        start pose is reached with; the arm's seventh joint is redundant).
+
+        :raises RuntimeError: if the pose is out of reach (the error stays above 1e-6).
+        """
+        position = np.asarray(position, float)
+        rotation = np.asarray(rotation, float)
+        q = np.array(q0, float)
+        error = np.full(6, np.inf)
+        for _ in range(iterations):
+            kin = self.kinematics(q)
+            error = np.concatenate([position - kin.position,
+                                    pin.log3(rotation @ kin.rotation.T)])
+            if np.linalg.norm(error) < tolerance:
+                return q
+            jac = kin.jacobian
+            q = q + jac.T @ np.linalg.solve(jac @ jac.T + 1e-6 * np.eye(6), error)
+        if np.linalg.norm(error) < 1e-6:
+            # Some rotated-housing starts (yaw 90 deg, pose 7) stall at ~2.5e-7 near the wrist's
+            # limit; 1 um / 1 urad is far below the 0.5 mm start clearance.
+            return q
+        raise RuntimeError(
+            f"inverse kinematics did not converge (error {np.linalg.norm(error):.2e})")
+
     def tool_twist(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
         """Tool twist (v, w) in the base frame."""
         return self.kinematics(q).jacobian @ dq

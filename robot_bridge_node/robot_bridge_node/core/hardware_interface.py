@@ -4,7 +4,9 @@ Modelled on ros2_control: the loop, the controllers and the estimator only ever 
 (the joint state) and ``write()`` (the command for one control period) on a hardware interface,
 so they never know whether a real arm, a simulator or a topic answers. Powers only a simulation
 has (teleporting to a start pose, ground truth) sit beside the seam in ``SimulationInterface``,
-as Gazebo's ``initSim`` does; a real arm has ``simulation=None``.
+as Gazebo's ``initSim`` does; a real arm has ``simulation=None``, and the loop moves it to a
+start instead (``start_motion``). Nothing the task needs comes from the simulation: reward,
+success and the episode's ends are computed from what the arm measures.
 
 Robots are plugins: a package registers a ``RobotPlugin`` under the entry-point group
 ``robot_bridge_node.robots`` (Python's entry points play pluginlib's role), and the robot process
@@ -24,7 +26,7 @@ from typing import Any, Protocol
 import numpy as np
 from qg_common.params import (ParameterSection, load_ros_params, merge_params,
                               package_config)
-from qg_common.types import GroundTruth, JointState
+from qg_common.types import GroundTruth, JointState, StartPose
 
 __all__ = ["TorqueInterface", "PositionInterface", "StampedStates", "ForceTorqueSensor",
            "SimulationInterface", "ToolDescription",
@@ -81,10 +83,12 @@ class ForceTorqueSensor(Protocol):
 
 
 class SimulationInterface(Protocol):
-    """What only a simulated robot can do: start an episode anywhere, and tell the truth."""
+    """What only a simulated robot can do: be put at a start at once, and tell the truth
+    (for evaluation only)."""
 
-    def reset(self, initial_pose: int, housing_yaw: float = 0.0) -> None:
-        """Teleport to start ``initial_pose`` at rest (the housing turned by ``housing_yaw``)."""
+    def teleport(self, start: StartPose) -> None:
+        """Put the arm at rest with its tool at ``start``, and the task's parts at their start:
+        the shortcut for the motion a real arm makes (``RobotLoop.reset``)."""
         ...
 
     def ground_truth(self) -> GroundTruth:

@@ -138,10 +138,14 @@ class HybridImpedanceController:
 
     def reset(self, q: np.ndarray) -> None:
         """Episode start: posture and pose reference from ``q``, the task's gains."""
-        self.q_null = np.asarray(q, float).copy()
-        self._kernel.set_posture(self.q_null)
+        self.set_posture(q)
         self.set_reference_to_current(q)
         self.release()
+
+    def set_posture(self, q: np.ndarray) -> None:
+        """The null-space posture spring's rest configuration (a motion moves it along)."""
+        self.q_null = np.asarray(q, float).copy()
+        self._kernel.set_posture(self.q_null)
 
     def hold(self, q: np.ndarray) -> PoseReference:
         """Hold the pose at ``q`` stiffly along every axis (see the module doc) until

@@ -22,6 +22,7 @@ from qg_common.types import JointState
 from robot_bridge_node.core.hardware_interface import (Robot, RobotDescription,
                                                        load_registered, registered_names)
 from robot_bridge_node.core.rest_detector import RestConfig
+from robot_bridge_node.core.start_motion import ResetConfig
 from robot_bridge_node.core.robot_loop import LoopClock, LoopConfig, RobotLoop, WrenchEstimator
 
 __all__ = ["InterfaceKind", "CommandHold", "LoopBuilder", "STEP_SECTIONS", "INTERFACE_GROUP",
@@ -30,12 +31,15 @@ __all__ = ["InterfaceKind", "CommandHold", "LoopBuilder", "STEP_SECTIONS", "INTE
 #: The entry-point group interface kinds register under (``name = module:InterfaceKind``).
 INTERFACE_GROUP = "robot_bridge_node.interfaces"
 
-#: Every kind's step parameters: the rest detector that ends an RL step and the loop timing.
+#: Every kind's step parameters: the rest detector that ends an RL step, the loop timing and
+#: how a start is reached.
 STEP_SECTIONS = (
     ParameterSection("rest", RestConfig, ranges={
         "linear_threshold": (0.0, 1.0), "angular_threshold": (0.0, 10.0),
         "hold_time": (0.0, 10.0), "min_time": (0.0, 10.0), "max_time": (0.0, 10.0)}),
-    ParameterSection("loop", LoopConfig, ranges={"dt": (0.0, 0.01), "settle_time": (0.0, 10.0)}))
+    ParameterSection("loop", LoopConfig, ranges={"dt": (0.0, 0.01), "settle_time": (0.0, 10.0)}),
+    ParameterSection("reset", ResetConfig, ranges={
+        "linear_speed": (0.0, 0.5), "joint_speed": (0.0, 2.0), "min_duration": (0.0, 60.0)}))
 
 
 class CommandHold(Protocol):

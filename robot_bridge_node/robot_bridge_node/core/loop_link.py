@@ -22,6 +22,7 @@ from typing import Protocol
 
 import numpy as np
 from qg_common.process_guard import die_with_parent
+from qg_common.types import StartPose
 
 from robot_bridge_node.core.loop_process import LoopSpec, serve_forked
 from robot_bridge_node.core.loop_runner import ResetCommand, SetpointCommand, StepEvent
@@ -206,9 +207,8 @@ class LoopLink:
         """Hand a setpoint to the loop (the newest one waiting wins)."""
         self._send(command)
 
-    def reset(self, initial_pose: int, housing_yaw: float = 0.0,
-              timeout: float = 30.0) -> StepEvent:
-        """Reset and settle; the settled event (the listener gets it too).
+    def reset(self, start: StartPose, timeout: float = 30.0) -> StepEvent:
+        """Get the robot to ``start`` and settle; the settled event (the listener gets it too).
 
         :raises TimeoutError: if the loop does not answer within ``timeout`` seconds.
         :raises RuntimeError: what the reset failed with (e.g. a pose out of reach).
@@ -218,7 +218,7 @@ class LoopLink:
             self._next_job += 1
             job = self._next_job
             self._resets[job] = pending
-            self.conn.send(ResetCommand(initial_pose, housing_yaw, job))
+            self.conn.send(ResetCommand(start, job))
         try:
             if not pending.done.wait(timeout):
                 raise TimeoutError(f"the loop did not reset within {timeout:.0f} s")

@@ -62,7 +62,6 @@ class LoopSpec:
     :param estimator_params: the wrench estimator's.
     :param realtime: wall-clock 1 kHz with the watchdog; otherwise lockstep.
     :param priority: realtime: ``SCHED_FIFO`` priority of the loop (0: the normal scheduler).
-    :param initial_pose: the start pose taken before the first command.
     :param publish_every: a sample every this many ticks is marked for publishing.
     :param truth_every: the ground truth is computed every this many ticks (a multiple of
         ``publish_every``: on every so many published samples).
@@ -73,7 +72,6 @@ class LoopSpec:
     estimator_params: dict[str, Any]
     realtime: bool
     priority: int
-    initial_pose: int
     publish_every: int
     truth_every: int
 
@@ -233,7 +231,6 @@ def run(conn: Connection, ring: SampleRing) -> int:
     spec: LoopSpec = conn.recv()
     try:
         loop = _build(spec)
-        loop.reset(spec.initial_pose)
     except Exception:  # noqa: BLE001 - whatever fails, the robot process must hear why
         conn.send(("error", f"the robot loop could not be built:\n{traceback.format_exc()}"))
         return 1

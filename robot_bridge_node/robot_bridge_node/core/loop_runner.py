@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
-from qg_common.types import StepResult, WrenchSetpoint
+from qg_common.types import StartPose, StepResult, WrenchSetpoint
 
 from robot_bridge_node.core.robot_loop import RobotLoop
 from robot_bridge_node.core.safety import SetpointRejected
@@ -38,9 +38,10 @@ class SetpointCommand:
 
 @dataclass(frozen=True)
 class ResetCommand:
-    """Reset to a start pose and settle; ``job`` names it in the answer."""
-    initial_pose: int
-    housing_yaw: float = 0.0
+    """Get the robot to a start and settle (``RobotLoop.reset``); ``job`` names it in the
+    answer. ``start`` None: the robot has already been put somewhere (the separate sim
+    teleported): only restart and settle where it is."""
+    start: StartPose | None
     job: int = 0
 
 
@@ -122,12 +123,16 @@ class LoopRunner:
     :param after_reset: not lockstep: called once a reset has settled (it ran as fast as it
         could, off the wall clock): the pace starts afresh.
     :param publish_every: every this many ticks a sample is marked for publishing.
+    :param take_restart: called before a reset without a start (the robot was put at its start
+        by someone else: the separate sim), in the loop's thread: the hardware takes the new
+        state (``RemoteRobot.take_restart``).
     """
 
     def __init__(self, loop: RobotLoop, mailbox: Mailbox, outlet: LoopOutlet, *,
                  lockstep: bool, pace: Callable[[], bool] | None = None,
                  after_reset: Callable[[], None] | None = None,
-                 publish_every: int = 1) -> None:
+                 publish_every: int = 1,
+                 take_restart: Callable[[], None] | None = None) -> None:
         if not lockstep and pace is None:
             raise ValueError("a free-running (realtime) loop needs a pace")
         self.loop = loop
@@ -137,15 +142,17 @@ class LoopRunner:
         self.pace = pace
         self.after_reset = after_reset
         self.publish_every = max(1, publish_every)
+        self.take_restart = take_restart
         self._dt_ns = round(loop.config.dt * 1e9)
-        self._settle_ticks = round(loop.config.settle_time / loop.config.dt)
         self.clock_ns = 0          # simulated time: ticks run since start, resets included
         self.ticks = 0
         self._seq: int | None = None            # the running step's setpoint
         self._step_start: float | None = None   # loop time of the running step's start
 
     def run(self, stop: threading.Event) -> None:
-        """Tick until ``stop`` is set (the body of the loop's thread or process)."""
+        """Hold the robot where it is (``RobotLoop.begin``: no motion at start-up), then tick
+        until ``stop`` is set (the body of the loop's thread or process)."""
+        self.begin()
         while not stop.is_set():
             if self.lockstep:
                 waiting = self._step_start is None
@@ -161,6 +168,11 @@ class LoopRunner:
                 continue
             at_rest = self.loop.tick()
             self._after_tick(at_rest)
+
+    def begin(self) -> None:
+        """Take the robot where it is and publish that state once (a driver's first state)."""
+        self.loop.begin()
+        self.outlet.sample(self.now_ns(), self.loop, True)
 
     def _take(self, setpoint: SetpointCommand | None, reset: ResetCommand | None) -> None:
         if reset is not None:
@@ -182,14 +194,20 @@ class LoopRunner:
 
     def _reset(self, command: ResetCommand) -> None:
         try:
-            self.loop.reset(command.initial_pose, command.housing_yaw)
+            before = self.loop.ticks_run
+            if command.start is None:
+                if self.take_restart is not None:
+                    self.take_restart()
+                self.loop.settle_here()
+            else:
+                self.loop.reset(command.start)
         except (RuntimeError, ValueError, TimeoutError) as exc:
             self.outlet.log("error", f"reset failed: {exc}")
             self.outlet.reset_done(command.job, None, f"{exc}")
             return
         self._seq = None
         self._step_start = None
-        self.clock_ns += self._settle_ticks * self._dt_ns
+        self.clock_ns += (self.loop.ticks_run - before) * self._dt_ns
         t_ns = self.now_ns()
         self.outlet.sample(t_ns, self.loop, True)  # the settled start: published and recorded
         event = self._event(0, self.loop.time - self.loop.config.settle_time, t_ns)

@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from qg_common.types import WrenchSetpoint
+from qg_common.types import StartPose, WrenchSetpoint
 
 from robot_bridge_node.core.hardware_interface import (PositionInterface, Robot,
                                                        SimulationInterface)
@@ -21,6 +21,7 @@ from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
 from robot_bridge_node.core.robot_loop import (LoopClock, LoopConfig, MeasuredWrench, RobotLoop,
                                                WrenchEstimator)
 from robot_bridge_node.core.safety import SetpointRejected
+from robot_bridge_node.core.start_motion import ResetConfig
 
 __all__ = ["PositionLoop", "build_position_loop"]
 
@@ -33,26 +34,60 @@ class PositionLoop(RobotLoop):
     :param estimator: the wrench source, usually the wrist sensor's ``MeasuredWrench``; ``None`` runs without one.
     """
 
+    #: [s] a reset by motion gives up after this long; [m] and counts the start reached within this.
+    MOVE_TIMEOUT = 10.0
+    MOVE_TOLERANCE = 1e-3
+
     def __init__(self, hardware: PositionInterface, controller: TaskSpacePositionController,
                  rest_detector: RestDetector, estimator: WrenchEstimator | None = None,
                  config: LoopConfig | None = None,
                  simulation: SimulationInterface | None = None,
-                 clock: LoopClock | None = None) -> None:
+                 clock: LoopClock | None = None,
+                 reset_config: ResetConfig | None = None) -> None:
         # No torque safety filter: the controller clamps and rate-limits its own targets.
         super().__init__(hardware, controller, None, rest_detector, estimator,  # type: ignore
-                         config, simulation, clock)
+                         config, simulation, clock, reset_config)
         self.reference = np.eye(4)
 
-    def reset(self, initial_pose: int, housing_yaw: float = 0.0) -> None:
-        """New episode: the simulation at start ``initial_pose``, then settle holding that pose.
+    def begin(self) -> None:
+        """Hold the joints where they are until the first setpoint or reset."""
+        state = self._restart()
+        self.controller.reset(state.q)
+        self.controller.measure(state.q, state.dq)
+        self.reference = self.controller.pose_command
 
-        :raises RuntimeError: without a simulation (a real arm is not teleported).
+    def reset(self, start: StartPose) -> None:
+        """New episode: the arm at ``start`` (a simulation's teleport, or moved there by the
+        task-space controller: it is speed-limited and clamped to its workspace), settled.
+
+        :raises RuntimeError: if a motion does not reach the start within ``MOVE_TIMEOUT``.
         """
-        state = self._restart(initial_pose, housing_yaw)
+        if self.teleports:
+            self.simulation.teleport(start)
+        else:
+            self._move_to(start)
+        self.settle_here()
+
+    def settle_here(self) -> None:
+        """Restart the clock where the arm is and hold the pose for ``settle_time``."""
+        state = self._restart()
         self.controller.reset(state.q)
         self.controller.measure(state.q, state.dq)
         self.reference = self.controller.pose_command
         self._settle()
+
+    def _move_to(self, start: StartPose) -> None:
+        """Move the tool's reference to ``start`` and tick until the tool is there."""
+        self.reference = pose_matrix(np.asarray(start.position, float),
+                                     np.asarray(start.rotation, float))
+        began = self.time
+        while self.time - began < self.MOVE_TIMEOUT:
+            self.tick()
+            tool = self.controller.tool
+            if np.linalg.norm(tool.position - start.position) < self.MOVE_TOLERANCE \
+                    and tool.linear_speed < 1e-3:
+                return
+        raise RuntimeError(f"the start was not reached within {self.MOVE_TIMEOUT} s")
 
     def command(self, setpoint: WrenchSetpoint) -> None:
         """Move toward the setpoint's pose reference (none: hold the current pose).
@@ -80,6 +115,7 @@ class PositionLoop(RobotLoop):
             self.wrench_estimate = self.estimator.update(state.q, state.dq, state.tau, dt)
         self.hardware.write(self.controller.step(state.q, self.reference))
         self.ticks += 1
+        self.ticks_run += 1
         self.clock.advance(dt)
         state = self.hardware.read()
         tool = self.controller.measure(state.q, state.dq)
@@ -105,4 +141,5 @@ def build_position_loop(robot: Robot, bridge_params: dict[str, Any] | None = Non
         wrench = MeasuredWrench(robot.wrist_sensor.read_wrench)
     return PositionLoop(robot.hardware, controller,
                         RestDetector(RestConfig.from_dict(params.get("rest", {}))), wrench,
-                        LoopConfig.from_dict(params.get("loop", {})), robot.simulation, clock)
+                        LoopConfig.from_dict(params.get("loop", {})), robot.simulation, clock,
+                        ResetConfig.from_dict(params.get("reset", {})))

@@ -14,7 +14,8 @@ from typing import Any, Protocol
 
 import numpy as np
 from qg_common.params import config_from_dict
-from qg_common.types import NO_GROUND_TRUTH, GroundTruth, JointState, StepResult, WrenchSetpoint
+from qg_common.types import (NO_GROUND_TRUTH, GroundTruth, JointState, PoseReference, StartPose,
+                             StepResult, WrenchSetpoint)
 
 from robot_bridge_node.core.arm_model import ArmModel
 from robot_bridge_node.core.hardware_interface import (Robot, SimulationInterface,
@@ -22,6 +23,7 @@ from robot_bridge_node.core.hardware_interface import (Robot, SimulationInterfac
 from robot_bridge_node.core.impedance import HybridImpedanceController, ImpedanceConfig
 from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
 from robot_bridge_node.core.safety import SafetyFilter, SafetyLimits
+from robot_bridge_node.core.start_motion import ResetConfig, StartMotion
 
 __all__ = ["WrenchEstimator", "MeasuredWrench", "LoopConfig", "LoopClock", "TickClock",
            "StateClock", "RobotLoop", "build_loop"]
@@ -163,16 +165,19 @@ class RobotLoop:
 
     :param hardware: read and written once per tick.
     :param estimator: contact-wrench estimator updated every tick; ``None`` runs without one.
-    :param simulation: resets to start poses and ground truth; ``None`` on real hardware, where
-        ``reset`` is refused and the ground truth reads as zeros.
+    :param simulation: a simulation's extra powers (teleporting to a start, ground truth);
+        ``None`` on real hardware, where a reset is always a motion and the ground truth reads
+        as zeros.
     :param clock: the loop's time; default ``TickClock``: every tick one ``config.dt``.
+    :param reset_config: how ``reset`` gets the arm to a start; default ``ResetConfig()``.
     """
 
     def __init__(self, hardware: TorqueInterface, controller: HybridImpedanceController,
                  safety: SafetyFilter, rest_detector: RestDetector,
                  estimator: WrenchEstimator | None = None, config: LoopConfig | None = None,
                  simulation: SimulationInterface | None = None,
-                 clock: LoopClock | None = None) -> None:
+                 clock: LoopClock | None = None,
+                 reset_config: ResetConfig | None = None) -> None:
         self.hardware = hardware
         self.simulation = simulation
         self.controller = controller
@@ -180,23 +185,52 @@ class RobotLoop:
         self.rest = rest_detector
         self.estimator = estimator
         self.config = config or LoopConfig()
+        self.reset_config = reset_config or ResetConfig()
         self.clock: LoopClock = clock or TickClock(self.config.dt)
         self.setpoint = _HOLD
         self.wrench_estimate: np.ndarray | None = None
         self.holding = False
         self.ticks = 0             # since the last reset
+        self.ticks_run = 0         # since the loop was built (a reset's motion included)
 
     @property
     def time(self) -> float:
         """[s] robot time since the last reset, on the loop's ``clock``."""
         return self.clock.time
 
-    def reset(self, initial_pose: int, housing_yaw: float = 0.0) -> None:
-        """New episode: the simulation at start ``initial_pose``, then settle holding that pose.
+    @property
+    def teleports(self) -> bool:
+        """Whether ``reset`` puts the arm at the start at once (a simulation's shortcut)."""
+        return self.simulation is not None and self.reset_config.teleport
 
-        :raises RuntimeError: without a simulation (a real arm is not teleported).
+    def begin(self) -> None:
+        """Take the arm where it is and hold it there, stiffly, until the first setpoint or
+        reset: what the loop does when it starts (a robot is never moved at start-up)."""
+        state = self._restart()
+        self.controller.reset(state.q)
+        self.safety.reset(self.controller.model.gravity(state.q))
+        self.setpoint = _HOLD
+        self.controller.hold(state.q)
+        self.holding = True
+
+    def reset(self, start: StartPose) -> None:
+        """New episode: the arm at ``start``, settled there holding that pose.
+
+        A simulation with ``reset.teleport`` puts it there at once; any other robot is moved
+        there (``start_motion``: out along the approach axis, a joint motion, in along it).
+        :raises RuntimeError: if the start is out of reach (the motion is not begun).
         """
-        state = self._restart(initial_pose, housing_yaw)
+        if self.teleports:
+            self.simulation.teleport(start)
+        else:
+            self._move_to(start)
+        self.settle_here()
+
+    def settle_here(self) -> None:
+        """Restart the episode's clock and the estimator where the arm is and hold it there for
+        ``settle_time`` (the end of every reset; alone, after a separate simulation put the arm
+        at its start)."""
+        state = self._restart()
         self.controller.reset(state.q)
         self.safety.reset(self.controller.model.gravity(state.q))
         self.setpoint = _HOLD
@@ -204,11 +238,27 @@ class RobotLoop:
         self._settle()
         self.controller.set_reference_to_current(self.hardware.read().q)
 
-    def _restart(self, initial_pose: int, housing_yaw: float) -> JointState:
-        """Teleport the simulation to the start, restart the clock and the estimator."""
-        if self.simulation is None:
-            raise RuntimeError("this robot has no simulation: it cannot be reset to a start pose")
-        self.simulation.reset(initial_pose, housing_yaw)
+    def _move_to(self, start: StartPose) -> None:
+        """Tick through the motion to ``start`` with the holding gains (see ``start_motion``)."""
+        state = self.hardware.read()
+        motion = StartMotion(self.controller.model, state.q, start, self.reset_config)
+        if self.controller.q_null is None:
+            self.controller.reset(state.q)
+        self.controller.hold(state.q)
+        self.holding = True                  # the watchdog leaves a moving arm alone
+        began = self.time
+        while True:
+            t = self.time - began
+            sample = motion.at(t)
+            self.controller.set_posture(sample.posture)
+            self.setpoint = WrenchSetpoint(np.zeros(6),
+                                           PoseReference(sample.position, sample.rotation))
+            self.tick()
+            if t >= motion.duration:
+                break
+
+    def _restart(self) -> JointState:
+        """Restart the clock and the estimator at the arm's state now."""
         self.ticks = 0
         state = self.hardware.read()
         self.clock.restart()
@@ -262,6 +312,7 @@ class RobotLoop:
                                         state.dq)
         self.hardware.write(tau)
         self.ticks += 1
+        self.ticks_run += 1
         self.clock.advance(dt)
         tool = self.controller.tool
         return self.rest.update(tool.linear_speed, tool.angular_speed, dt)
@@ -297,7 +348,8 @@ def build_loop(robot: Robot, bridge_params: dict[str, Any] | None = None,
     (``ArmModel.from_description``: its URDF, joints, flange, tool and limits).
     :param robot: from a plugin (``hardware_interface.load_robot``).
     :param bridge_params: the ``ros__parameters`` of ``config/bridge.yaml`` (sections
-        ``impedance``, ``safety``, ``rest``, ``loop``); missing sections keep the defaults.
+        ``impedance``, ``safety``, ``rest``, ``loop``, ``reset``); missing sections keep the
+        defaults.
     :param estimator: builds the wrench estimator from the robot and the controller's model,
         e.g. ``lambda robot, model: MeasuredWrench(robot.simulation.contact_wrench)``; ``None``: none.
     :param clock: the loop's time; ``None``: one ``loop.dt`` per tick (``TickClock``).
@@ -310,4 +362,5 @@ def build_loop(robot: Robot, bridge_params: dict[str, Any] | None = None,
     return RobotLoop(robot.hardware, controller, safety,
                      RestDetector(RestConfig.from_dict(params.get("rest", {}))),
                      None if estimator is None else estimator(robot, model),
-                     LoopConfig.from_dict(params.get("loop", {})), robot.simulation, clock)
+                     LoopConfig.from_dict(params.get("loop", {})), robot.simulation, clock,
+                     ResetConfig.from_dict(params.get("reset", {})))

@@ -1,6 +1,11 @@
+import os
+
 from setuptools import find_packages, setup
 
 package_name = 'qg_common'
+# The repository's config/ is the one source of the numbers; this package installs the files
+# every side of the stack reads (the task's cell) to share/qg_common/config.
+config_files = [os.path.join('..', '..', '..', 'config', name) for name in ('shaft_task.yaml', 'peg_task.yaml')]
 
 setup(
     name=package_name,
@@ -9,6 +14,7 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', config_files),
     ],
     install_requires=['setuptools'],
     zip_safe=True,

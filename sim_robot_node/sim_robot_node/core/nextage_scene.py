@@ -6,14 +6,14 @@ shape: joint position targets in (motors with force limits), joint state and the
 force-torque sensor out. Ground truth (peg tip, distance to the hole bottom, success) is for
 evaluation and rewards only.
 
-The peg/hole geometry and the builders of the block and the peg live here too, because the free
-peg environment (``peg_env``) uses the same task without the arm. Positions of the task are given
+The peg/hole geometry is the cell's (``qg_common.peg_task``); the builders of the block and the
+peg live here, because the free peg environment (``peg_env``) uses the same task without the arm. Positions of the task are given
 in the workspace frame: origin on the hole axis at the block's base, z up, the workspace a cube
 of side ``workspace_side`` standing on that floor.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass
 from importlib.resources import files
 from pathlib import Path
 from typing import Any
@@ -22,16 +22,11 @@ import numpy as np
 import pybullet as p
 
 from qg_common.params import config_from_dict
+from qg_common.peg_task import TOOL_DOWN, PegCell, PegHoleGeometry, sample_start
 from qg_common.types import JointState
 
-__all__ = ["PegHoleGeometry", "PegGroundTruth", "NextageSceneConfig", "NextagePegScene",
-           "nextage_urdf_path", "build_hole_block", "build_peg", "sample_start",
-           "TOOL_DOWN", "INIT_POSE"]
-
-#: Tool orientation (base frame) with the tool z axis (the peg) pointing down and the hand's back
-#: (tool x) toward the robot: the Nextage's natural working pose.
-TOOL_DOWN = np.diag([-1.0, 1.0, -1.0])
-
+__all__ = ["PegGroundTruth", "NextageSceneConfig", "NextagePegScene", "nextage_urdf_path",
+           "build_hole_block", "build_peg", "INIT_POSE"]
 
 #: The published Nextage "init pose" of the right arm [rad]: forearm forward, hand down.
 INIT_POSE = np.deg2rad([-0.6, 0.0, -100.0, 15.2, 9.4, 3.2])
@@ -48,90 +43,6 @@ def _quaternion(rotation: np.ndarray) -> list[float]:
 def nextage_urdf_path() -> Path:
     """Path of our Nextage Open arm URDF (package data of ``sim_robot_node``)."""
     return Path(str(files("sim_robot_node") / "assets" / "nextage" / "nextage_arm.urdf"))
-
-
-@dataclass(frozen=True)
-class PegHoleGeometry:
-    """Sizes of the clearance-fit task (SPEC 4: peg 1 cm, hole 2 cm, 20 cm workspace).
-
-    :param peg_radius: [m]
-    :param peg_length: [m]
-    :param peg_mass: [kg]
-    :param hole_radius: inradius of the polygonal hole [m]
-    :param hole_depth: [m]
-    :param block_width: side of the square block (the thesis's 5 cm) [m]
-    :param block_height: [m]
-    :param ring_segments: boxes forming the round hole's wall
-    :param workspace_side: side of the cubic workspace [m]
-    :param goal_tolerance: the peg counts as inserted when its tip is this close to the centre
-        of the hole bottom; below ``hole_depth`` that is only possible inside the hole [m]
-    :param friction: lateral friction coefficient of peg and block
-    """
-    peg_radius: float = 0.005
-    peg_length: float = 0.08
-    peg_mass: float = 0.05
-    hole_radius: float = 0.01
-    hole_depth: float = 0.03
-    block_width: float = 0.05
-    block_height: float = 0.04
-    ring_segments: int = 16
-    workspace_side: float = 0.2
-    goal_tolerance: float = 0.0075
-    friction: float = 0.5
-
-    def __post_init__(self) -> None:
-        for f in fields(self):
-            if not getattr(self, f.name) > 0:
-                raise ValueError(f"{f.name} must be > 0, got {getattr(self, f.name)}")
-        if not self.peg_radius < self.hole_radius < self.block_width / 2 - 0.005:
-            raise ValueError("need peg_radius < hole_radius < block_width/2 - 5 mm, got "
-                             f"{self.peg_radius}, {self.hole_radius}, {self.block_width}")
-        if not self.hole_depth < self.block_height:
-            raise ValueError(f"hole_depth {self.hole_depth} must be < block_height "
-                             f"{self.block_height}")
-        if not self.goal_tolerance < self.hole_depth:
-            raise ValueError(f"goal_tolerance {self.goal_tolerance} must be < hole_depth "
-                             f"{self.hole_depth}, or the peg could succeed without entering")
-        if self.ring_segments < 8:
-            raise ValueError(f"ring_segments must be >= 8, got {self.ring_segments}")
-        if not self.block_height < self.workspace_side:
-            raise ValueError("the block must fit in the workspace")
-
-    @classmethod
-    def from_dict(cls, params: dict[str, Any]) -> PegHoleGeometry:
-        """Build from a parameter dict (unknown keys are an error)."""
-        return config_from_dict(cls, params)
-
-    @property
-    def goal(self) -> np.ndarray:
-        """Peg tip position when fully inserted: the centre of the hole bottom (workspace frame)."""
-        return np.array([0.0, 0.0, self.block_height - self.hole_depth])
-
-    @property
-    def workspace_low(self) -> np.ndarray:
-        """Lower corner of the workspace cube (workspace frame) [m]."""
-        return np.array([-self.workspace_side / 2, -self.workspace_side / 2, 0.0])
-
-    @property
-    def workspace_high(self) -> np.ndarray:
-        """Upper corner of the workspace cube (workspace frame) [m]."""
-        return np.array([self.workspace_side / 2, self.workspace_side / 2, self.workspace_side])
-
-    def is_free(self, tip: np.ndarray, margin: float = 0.002) -> bool:
-        """True if an upright peg with its tip at ``tip`` clears the block by ``margin``."""
-        reach = self.block_width / 2 + self.peg_radius + margin
-        return bool(tip[2] > self.block_height + margin or np.max(np.abs(tip[:2])) > reach)
-
-
-def sample_start(geometry: PegHoleGeometry, rng: np.random.Generator) -> np.ndarray:
-    """A tip position drawn uniformly from the part of the workspace where the peg is free."""
-    margin = geometry.peg_radius + 0.002
-    low = geometry.workspace_low + np.array([margin, margin, 0.002])
-    high = geometry.workspace_high - np.array([margin, margin, 0.0])
-    while True:
-        tip = rng.uniform(low, high)
-        if geometry.is_free(tip):
-            return tip
 
 
 def build_hole_block(client: int, geometry: PegHoleGeometry, origin: np.ndarray) -> int:
@@ -195,39 +106,29 @@ class NextageSceneConfig:
     """The Nextage peg scene.
 
     :param time_step: physics step [s] (1 kHz like the control loop).
-    :param workspace_origin: where the workspace frame (hole axis, block base) sits in the robot's
-        base frame [m]; the default puts the whole 20 cm cube inside the arm's tool-down reach.
     :param position_gain: pybullet POSITION_CONTROL gain (fraction of the position error
         corrected per step).
     :param velocity_gain: pybullet POSITION_CONTROL velocity gain.
     :param effort_scale: multiplies the URDF effort limits to give the motor force limits.
     :param solver_iterations: pybullet constraint solver iterations.
-    :param geometry: the peg and hole.
     """
     time_step: float = 1e-3
-    workspace_origin: tuple[float, float, float] = (0.4, -0.15, -0.15)
     position_gain: float = 0.2
     velocity_gain: float = 1.0
     effort_scale: float = 1.0
     solver_iterations: int = 50
-    geometry: PegHoleGeometry = field(default_factory=PegHoleGeometry)
 
     def __post_init__(self) -> None:
         for name in ("time_step", "position_gain", "velocity_gain", "effort_scale"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
-        if len(self.workspace_origin) != 3:
-            raise ValueError(f"workspace_origin needs 3 entries, got {self.workspace_origin}")
         if self.solver_iterations < 1:
             raise ValueError(f"solver_iterations must be >= 1, got {self.solver_iterations}")
 
     @classmethod
     def from_dict(cls, params: dict[str, Any]) -> NextageSceneConfig:
-        """Build from a parameter dict (``geometry`` nested; unknown keys are an error)."""
-        values = dict(params)
-        if isinstance(values.get("geometry"), dict):
-            values["geometry"] = PegHoleGeometry.from_dict(values["geometry"])
-        return config_from_dict(cls, values)
+        """Build from a parameter dict (unknown keys are an error)."""
+        return config_from_dict(cls, params)
 
 
 class NextagePegScene:
@@ -242,10 +143,12 @@ class NextagePegScene:
     TOOL_LINK = "RARM_TOOL"
     SENSOR_JOINT = "RARM_FT_JOINT"
 
-    def __init__(self, config: NextageSceneConfig | None = None) -> None:
+    def __init__(self, config: NextageSceneConfig | None = None,
+                 cell: PegCell | None = None) -> None:
         self.config = config or NextageSceneConfig()
-        self.geometry = self.config.geometry
-        self.origin = np.asarray(self.config.workspace_origin, float)
+        self.cell = cell or PegCell()
+        self.geometry = self.cell.geometry
+        self.origin = self.cell.origin
         self.client = p.connect(p.DIRECT)
         p.setGravity(0, 0, -9.81, physicsClientId=self.client)
         p.setPhysicsEngineParameter(fixedTimeStep=self.config.time_step,

@@ -24,10 +24,11 @@ from typing import Any, Protocol
 import numpy as np
 import pybullet as p
 
-from sim_robot_node.core.nextage_scene import (NextagePegScene, NextageSceneConfig,
-                                               PegHoleGeometry, build_hole_block, build_peg,
-                                               sample_start)
 from qg_common.params import config_from_dict
+from qg_common.peg_task import PegCell, PegHoleGeometry, sample_start
+
+from sim_robot_node.core.nextage_scene import (NextagePegScene, NextageSceneConfig,
+                                               build_hole_block, build_peg)
 
 __all__ = ["PegEnvConfig", "PegEnv", "JointTargetController", "toward_goal", "make_peg_env"]
 
@@ -86,12 +87,7 @@ class PegEnvConfig:
     @classmethod
     def from_dict(cls, params: dict[str, Any]) -> PegEnvConfig:
         """Build from a parameter dict (``geometry`` and ``arm`` nested; unknown keys fail)."""
-        values = dict(params)
-        if isinstance(values.get("geometry"), dict):
-            values["geometry"] = PegHoleGeometry.from_dict(values["geometry"])
-        if isinstance(values.get("arm"), dict):
-            values["arm"] = NextageSceneConfig.from_dict(values["arm"])
-        return config_from_dict(cls, values)
+        return config_from_dict(cls, params)
 
 
 class PegEnv:
@@ -217,8 +213,8 @@ class PegEnv:
     def _reset_arm(self, tip: np.ndarray) -> None:
         if self._scene is not None:
             self._scene.close()
-        self._scene = NextagePegScene(replace(self.config.arm, geometry=self.geometry,
-                                              time_step=self.config.time_step))
+        self._scene = NextagePegScene(replace(self.config.arm, time_step=self.config.time_step),
+                                      PegCell(geometry=self.geometry))
         q = self._scene.reset(start=tip)
         self.controller.reset(q)
         self._pose_reference = self._scene.tool_pose()

@@ -16,7 +16,9 @@ from xml.etree import ElementTree
 
 from qg_common.arm_description import ArmDescription
 
-if TYPE_CHECKING:                      # (shaft_scene imports this module)
+from qg_common.shaft_task import ShaftTaskGeometry
+
+if TYPE_CHECKING:                      # (shaft_scene imports this module's users)
     from sim_robot_node.core.shaft_scene import ShaftSceneConfig
 
 __all__ = ["arm_with_shaft_urdf", "housing_urdf", "SHAFT_JOINT"]
@@ -36,12 +38,13 @@ def _fmt(values: Any) -> str:
     return " ".join(f"{float(v):.9f}" for v in values)
 
 
-def arm_with_shaft_urdf(arm: ArmDescription, scene: ShaftSceneConfig
-                        ) -> ElementTree.ElementTree:
-    """The arm's URDF with the shaft at its flange, ready for pybullet.
+def arm_with_shaft_urdf(arm: ArmDescription, geometry: ShaftTaskGeometry,
+                        scene: ShaftSceneConfig) -> ElementTree.ElementTree:
+    """The arm's URDF with the shaft at its flange (the grasp point), ready for pybullet.
 
-    :param scene: the shaft's size, mass and grasp point; its imperfections'
-        ``payload_*_error`` adds a link the bridge's model does not have.
+    :param geometry: the shaft's size and grasp point.
+    :param scene: the shaft's mass; its imperfections' ``payload_*_error`` adds a link the
+        bridge's model does not have.
     """
     tree = ElementTree.parse(arm.urdf)
     root = tree.getroot()
@@ -59,21 +62,21 @@ def arm_with_shaft_urdf(arm: ArmDescription, scene: ShaftSceneConfig
             if float(dynamics.get("friction", "0") or 0.0) != 0.0:
                 # The friction that reaches the links is the scene's (ArmImperfections).
                 dynamics.set("friction", "0")
-    c, imperfections = scene, scene.imperfections
-    com_z = c.shaft_com[2]
-    ixx = c.shaft_mass * (3 * c.shaft_radius ** 2 + c.shaft_length ** 2) / 12
-    izz = c.shaft_mass * c.shaft_radius ** 2 / 2
+    g, c, imperfections = geometry, scene, scene.imperfections
+    com_z = g.shaft_centre[2]
+    ixx = c.shaft_mass * (3 * g.shaft_radius ** 2 + g.shaft_length ** 2) / 12
+    izz = c.shaft_mass * g.shaft_radius ** 2 / 2
     links = f"""
   <link name="shaft">
     <inertial><origin xyz="0 0 {com_z:.9f}"/><mass value="{c.shaft_mass:.9f}"/>
       <inertia ixx="{ixx:.9f}" iyy="{ixx:.9f}" izz="{izz:.9f}" ixy="0" ixz="0" iyz="0"/>
     </inertial>
     <collision><origin xyz="0 0 {com_z:.9f}"/>
-      <geometry><cylinder radius="{c.shaft_radius:.9f}" length="{c.shaft_length:.9f}"/></geometry>
+      <geometry><cylinder radius="{g.shaft_radius:.9f}" length="{g.shaft_length:.9f}"/></geometry>
     </collision>
   </link>
   <joint name="{SHAFT_JOINT}" type="fixed"><parent link="{arm.flange}"/><child link="shaft"/>
-    <origin xyz="{_fmt(c.tool_offset)}"/></joint>"""
+    </joint>"""
     if imperfections.payload_mass_error > 0.0:
         # The real arm's unmodelled load: on the hand, never in the bridge's model.
         links += f"""
@@ -83,17 +86,17 @@ def arm_with_shaft_urdf(arm: ArmDescription, scene: ShaftSceneConfig
       <inertia ixx="1e-5" iyy="1e-5" izz="1e-5" ixy="0" ixz="0" iyz="0"/></inertial>
   </link>
   <joint name="payload_error_joint" type="fixed"><parent link="{arm.flange}"/>
-    <child link="payload_error"/><origin xyz="{_fmt(c.tool_offset)}"/></joint>"""
+    <child link="payload_error"/></joint>"""
     for element in ElementTree.fromstring(f"<r>{links}</r>"):
         root.append(element)
     return tree
 
 
-def housing_urdf(c: ShaftSceneConfig) -> str:
+def housing_urdf(g: ShaftTaskGeometry, c: ShaftSceneConfig) -> str:
     """Housing: bore (ring of boxes), counterbore above it, plunger on a prismatic joint below.
 
     Origin at the bearing face centre; the plunger joint axis points down, so its position is
-    the travel already pushed.
+    the travel already pushed. :param g: the sizes; :param c: masses and the rings' segments.
     """
     boxes: list[str] = []
 
@@ -107,11 +110,11 @@ def housing_urdf(c: ShaftSceneConfig) -> str:
             boxes.append(f'<collision><origin xyz="{centre}" rpy="0 0 {a:.9f}"/>'
                          f'<geometry><box size="{size}"/></geometry></collision>')
 
-    bore_thickness = c.counterbore_extra_radius + 0.002  # reaches under the counterbore wall
-    ring(c.hole_radius, bore_thickness, -c.bore_depth, c.bore_depth, c.bore_segments)
-    ring(c.hole_radius + c.counterbore_extra_radius, 0.003, 0.0, c.counterbore_depth,
+    bore_thickness = g.counterbore_extra_radius + 0.002  # reaches under the counterbore wall
+    ring(g.hole_radius, bore_thickness, -g.bore_depth, g.bore_depth, c.bore_segments)
+    ring(g.hole_radius + g.counterbore_extra_radius, 0.003, 0.0, g.counterbore_depth,
          c.counterbore_segments)
-    plunger = _fmt([2 * c.hole_radius + 0.004, 2 * c.hole_radius + 0.004, 0.01])
+    plunger = _fmt([2 * g.hole_radius + 0.004, 2 * g.hole_radius + 0.004, 0.01])
     # One element per line: pybullet's URDF parser fails on very long lines.
     return f"""<?xml version="1.0"?>
 <robot name="housing">
@@ -127,7 +130,7 @@ def housing_urdf(c: ShaftSceneConfig) -> str:
   </link>
   <joint name="plunger_joint" type="prismatic">
     <parent link="housing"/><child link="plunger"/>
-    <origin xyz="0 0 {-c.bore_depth:.9f}"/><axis xyz="0 0 -1"/>
-    <limit lower="0" upper="{c.plunger_travel:.9f}" effort="1000" velocity="1"/>
+    <origin xyz="0 0 {-g.bore_depth:.9f}"/><axis xyz="0 0 -1"/>
+    <limit lower="0" upper="{g.plunger_travel:.9f}" effort="1000" velocity="1"/>
   </joint>
 </robot>"""

@@ -13,17 +13,18 @@ from geometry_msgs.msg import Pose, PoseStamped, TwistStamped, Wrench, WrenchSta
 from qg_interfaces.msg import AtRest
 from qg_interfaces.msg import GroundTruth as GroundTruthMsg
 from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
+from qg_interfaces.srv import MoveToStart
 from sensor_msgs.msg import JointState as JointStateMsg
 
 from qg_common.rotations import matrix_from_quaternion, quaternion_from_matrix
 from qg_common.types import (BASE_FRAME, TOOL_FRAME, GroundTruth, JointState, PoseReference,
-                             StepResult, WrenchSetpoint)
+                             StartPose, StepResult, WrenchSetpoint)
 
 __all__ = ["BASE_FRAME", "TOOL_FRAME", "time_msg", "time_ns", "joint_state_msg",
            "joint_state_from_msg", "wrench_msg", "wrench_from_msg", "wrench_stamped",
            "ground_truth_msg", "ground_truth_from_msg", "quaternion_from_matrix",
            "matrix_from_quaternion", "pose_msg", "pose_stamped", "twist_stamped", "at_rest_msg",
-           "setpoint_from_msg", "setpoint_msg"]
+           "setpoint_from_msg", "setpoint_msg", "start_pose_request", "start_pose_from_request"]
 
 
 # --- time ---------------------------------------------------------------------------------------
@@ -155,6 +156,26 @@ def at_rest_msg(seq: int, result: StepResult, position: np.ndarray, rotation: np
     return msg
 
 
+# --- start poses -------------------------------------------------------------------------------
+def start_pose_request(start: StartPose, session: str = "",
+                       request_id: str = "") -> MoveToStart.Request:
+    """The ``move_to_start`` request of a start (what the executor sends)."""
+    request = MoveToStart.Request(start=pose_msg(start.position, start.rotation),
+                                  start_index=int(start.label), session=session,
+                                  request_id=request_id)
+    request.approach.x, request.approach.y, request.approach.z = \
+        (float(v) for v in start.approach)
+    return request
+
+
+def start_pose_from_request(request: MoveToStart.Request) -> StartPose:
+    """The start a ``move_to_start`` request asks for (values are checked by the server)."""
+    p, o, a = request.start.position, request.start.orientation, request.approach
+    return StartPose(position=np.array([p.x, p.y, p.z]),
+                     rotation=matrix_from_quaternion(o.x, o.y, o.z, o.w),
+                     approach=np.array([a.x, a.y, a.z]), label=int(request.start_index))
+
+
 # --- setpoints ----------------------------------------------------------------------------------
 def setpoint_from_msg(msg: WrenchSetpointMsg) -> WrenchSetpoint:
     """The core setpoint; values are not checked here (the safety filter rejects NaN/inf)."""
@@ -170,7 +191,7 @@ def setpoint_msg(seq: int, setpoint: WrenchSetpoint, stamp: Time,
                  session: str = "") -> WrenchSetpointMsg:
     """The message of a core setpoint (what the executor sends).
 
-    :param session: the episode it belongs to, as named in its ``ResetSim`` request.
+    :param session: the episode it belongs to, as named in its ``MoveToStart`` request.
     """
     msg = WrenchSetpointMsg(seq=int(seq), session=session, wrench=wrench_msg(setpoint.wrench),
                             reference_from_current=setpoint.reference is None)

@@ -28,7 +28,8 @@ __all__ = ["ConfigError", "ParameterSection", "POSITIVE", "CONFIG_PACKAGES", "FI
            "runs_dir", "section_values", "unflatten"]
 
 #: The packages that install config files (``share/<package>/config``), searched in this order.
-CONFIG_PACKAGES = ("robot_bridge_node", "sim_robot_node", "qg_learning_node", "qg_experiments")
+CONFIG_PACKAGES = ("qg_common", "robot_bridge_node", "sim_robot_node", "qg_learning_node",
+                   "qg_experiments")
 
 
 class ConfigError(ValueError):
@@ -250,12 +251,16 @@ def _normalise(params: dict[str, Any]) -> dict[str, Any]:
 def config_from_dict(cls: type[T], params: dict[str, Any]) -> T:
     """Build the frozen config dataclass ``cls`` from a parameter dict.
 
-    Lists become tuples (ROS hands arrays over as lists; frozen configs keep tuples); unknown keys
-    raise, so a typo in a YAML file fails loudly instead of silently keeping a default.
+    Lists become tuples (ROS hands arrays over as lists; frozen configs keep tuples), a dict
+    given for a field that is itself a config dataclass becomes that dataclass (nested sections,
+    ``imperfections.*``); unknown keys raise, so a typo in a YAML file fails loudly instead of
+    silently keeping a default.
     :raises ConfigError: on keys that ``cls`` does not have.
     """
     names = {f.name for f in fields(cls)}
     unknown = sorted(set(params) - names)
     if unknown:
         raise ConfigError(f"{cls.__name__}: unknown parameters {unknown}; known: {sorted(names)}")
-    return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in params.items()})
+    hints = typing.get_type_hints(cls)
+    return cls(**{k: config_from_dict(hints[k], v) if isinstance(v, dict) and is_dataclass(hints[k])
+                  else tuple(v) if isinstance(v, list) else v for k, v in params.items()})

@@ -2,7 +2,7 @@
 
 Names are relative, so ``--ros-args -r __ns:=/robot1`` moves a whole stack (robot process,
 executor, learner) into a namespace and two robots can run side by side without crosstalk.
-In the default namespace they resolve to ``/joint_states``, ``/sim/reset`` and so on.
+In the default namespace they resolve to ``/joint_states``, ``/move_to_start`` and so on.
 """
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 __all__ = [
     "JOINT_STATES", "JOINT_COMMANDS", "GROUND_TRUTH", "GROUND_TRUTH_WRENCH", "CLOCK",
-    "SIM_RESTARTED", "SIM_RESET", "WRENCH_ESTIMATE", "WRENCH_SETPOINT", "EE_POSE", "EE_TWIST",
+    "SIM_RESTARTED", "MOVE_TO_START", "WRENCH_ESTIMATE", "WRENCH_SETPOINT", "EE_POSE", "EE_TWIST",
     "EE_AT_REST", "DIAGNOSTICS", "EPISODE_STATUS", "TRANSITIONS", "ACTOR_PARAMETERS", "LEARNER_DIAGNOSTICS",
     "START_EPISODE", "STOP_EPISODE", "TASK_SPEC", "LEARNER_NODE", "SENSOR_QOS", "COMMAND_QOS", "RESTARTED_QOS",
     "RELIABLE_DEEP", "LATCHED", "robot_topic"]
@@ -24,7 +24,9 @@ GROUND_TRUTH = "sim/ground_truth"
 GROUND_TRUTH_WRENCH = "sim/ground_truth_wrench"
 CLOCK = "clock"                                # lockstep
 SIM_RESTARTED = "sim/restarted"                # separate processes only: the sim teleported
-SIM_RESET = "sim/reset"                        # service, per episode
+#: Service, per episode: served by what moves the robot (the bridge of the composed robot
+#: process; in separate-process mode the sim, which teleports).
+MOVE_TO_START = "move_to_start"
 WRENCH_ESTIMATE = "wrench_estimate"
 WRENCH_SETPOINT = "wrench_setpoint"            # RL step
 EE_POSE = "ee_pose"

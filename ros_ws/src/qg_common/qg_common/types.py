@@ -14,12 +14,12 @@ obstacle the estimated wrench equals the commanded one.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 __all__ = ["N_START_POSES", "BASE_FRAME", "TOOL_FRAME", "JointState", "GroundTruth",
-           "NO_GROUND_TRUTH", "StepResult", "PoseReference", "WrenchSetpoint"]
+           "NO_GROUND_TRUTH", "StepResult", "PoseReference", "WrenchSetpoint", "StartPose"]
 
 #: The task's initial poses, used in a fixed rotating order (SPEC 1).
 N_START_POSES = 8
@@ -38,7 +38,8 @@ class JointState:
 
 @dataclass(frozen=True)
 class GroundTruth:
-    """Simulator-only truth, for evaluation and rewards; never part of the learner's state.
+    """Simulator-only truth, for evaluation only: never part of the learner's state, and never
+    what a reward, a success or an episode's end is computed from (those are measured).
 
     ``wrench`` is the contact wrench the environment exerts on the tool (the shaft), about the
     tool frame origin and expressed in the tool frame: the quantity the wrench estimator estimates.
@@ -56,6 +57,13 @@ class GroundTruth:
     def orientation_error_norm(self) -> float:
         """dR of the dense reward [rad]."""
         return float(np.linalg.norm(self.orientation_error))
+
+    @property
+    def measured(self) -> bool:
+        """False for :data:`NO_GROUND_TRUTH` (every field zero: a robot without a simulation);
+        a simulation's truth always has its tool somewhere off the goal or at it."""
+        return bool(self.success or self.insertion_depth or self.position_error
+                    or self.lateral_offset or self.tilt or np.any(self.wrench))
 
 
 #: What a robot without a simulation reports as ground truth: nothing measured.
@@ -80,6 +88,27 @@ class PoseReference:
     """Impedance reference pose in the base frame."""
     position: np.ndarray   # (3,) [m]
     rotation: np.ndarray   # (3, 3)
+
+
+@dataclass(frozen=True)
+class StartPose:
+    """Where an episode starts: the tool pose the robot moves to, and the way in.
+
+    A real arm gets there by a motion (``RobotLoop.reset``: back out along ``approach``, a joint
+    motion to the point ``|approach|`` before the start, then along ``approach`` into it); a
+    simulation may put the arm there at once, as a shortcut behind the same call.
+
+    :param position: (3,) tool position, base frame [m].
+    :param rotation: (3, 3) tool orientation, base frame.
+    :param approach: (3,) base frame: the start is reached moving along this direction (the bore
+        axis, tip first) for its length [m]; zero: straight to the start.
+    :param label: the task's number of this start (0..7 for the shaft's tilted starts; -1: none),
+        for logs and bags; a simulation's start jitter stream is drawn per reset, not per label.
+    """
+    position: np.ndarray
+    rotation: np.ndarray
+    approach: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    label: int = -1
 
 
 @dataclass(frozen=True)
