@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from qg_experiments.gym_envs.insertion import InsertionEnv
-from qg_experiments.runner import PandaTask, StackSettings, run_episode
+from qg_experiments.runner import InsertionRobot, StackSettings, run_episode
 from qg_learning_node.executor.episode import Episode
 
 
@@ -29,10 +29,10 @@ def _actions(episodes: int, steps: int, seed: int) -> np.ndarray:
 
 
 def runner_path(actions: np.ndarray, arm_seed: int) -> tuple[int, float]:
-    """(RL steps, wall seconds) of the runner's ``PandaTask`` + ``Episode`` + ``run_episode``
+    """(RL steps, wall seconds) of the runner's ``InsertionRobot`` + ``Episode`` + ``run_episode``
     (building the robot counted, as the environment's first reset builds it)."""
     start, steps = time.perf_counter(), 0
-    task = PandaTask(StackSettings.load().with_arm_seed(arm_seed))
+    task = InsertionRobot(StackSettings.load().with_arm_seed(arm_seed))
     for index, episode_actions in enumerate(actions):
         sequence = iter(episode_actions)
         episode = Episode(f"e{index}", "train", index % 8, "dense", task.residual)
@@ -48,7 +48,7 @@ def env_path(actions: np.ndarray, arm_seed: int) -> tuple[int, float]:
     env = InsertionEnv(max_steps=actions.shape[1])
     start, steps = time.perf_counter(), 0
     for index, episode_actions in enumerate(actions):
-        # the first reset builds the robot of that seed, as the runner's PandaTask is built
+        # the first reset builds the robot of that seed, as the runner's InsertionRobot is built
         env.reset(seed=arm_seed if index == 0 else None, options={"pose": index % 8})
         for action in episode_actions:
             *_, terminated, truncated, _ = env.step(action)

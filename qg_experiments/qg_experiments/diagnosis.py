@@ -26,18 +26,18 @@ import numpy as np
 from qg_learning_node.executor.episode import Episode
 from qg_learning_node.executor.residual_task import ACTION_DIM
 from qg_experiments.figures import pyplot
-from qg_experiments.runner import ARMS, PandaTask, StackSettings, run_episode
+from qg_experiments.runner import ARMS, InsertionRobot, StackSettings, run_episode
 
 __all__ = ["pose_states", "random_walk", "scripted_policy_steps", "diagnose", "main"]
 
 
-def _task(settings: StackSettings, cap: int) -> PandaTask:
+def _task(settings: StackSettings, cap: int) -> InsertionRobot:
     task = dataclasses.replace(settings.task, observation="tilt", train_max_steps=cap,
                                test_max_steps=cap)
-    return PandaTask(dataclasses.replace(settings, task=task))
+    return InsertionRobot(dataclasses.replace(settings, task=task))
 
 
-def pose_states(env: PandaTask) -> list[dict[str, Any]]:
+def pose_states(env: InsertionRobot) -> list[dict[str, Any]]:
     """Per start pose: the 6-D state (thesis part first) after reset and after a zero step."""
     rows = []
     for pose in range(8):
@@ -55,7 +55,7 @@ def _r_squared(x: np.ndarray, y: np.ndarray) -> float:
     return float(1.0 - residual.var(axis=0).sum() / y.var(axis=0).sum())
 
 
-def random_walk(env: PandaTask, episodes: int, steps: int, seed: int) -> dict[str, Any]:
+def random_walk(env: InsertionRobot, episodes: int, steps: int, seed: int) -> dict[str, Any]:
     """Uniform-random residual steps: states, actions and the true tilt at every rest."""
     rng = np.random.default_rng(seed)
     states, actions, truth, trace = [], [], [], []
@@ -81,7 +81,7 @@ def random_walk(env: PandaTask, episodes: int, steps: int, seed: int) -> dict[st
             "corr_torque_state_vs_last_action": torque_echo, "trace": trace}
 
 
-def scripted_policy_steps(env: PandaTask, policy: str, cap: int) -> list[int]:
+def scripted_policy_steps(env: InsertionRobot, policy: str, cap: int) -> list[int]:
     """Steps to insert from each start pose (``cap`` if not inserted) of a hand-written policy.
 
     ``torque``: push against the measured contact torque, ``a = -10 T / 3 Nm`` (thesis state only).

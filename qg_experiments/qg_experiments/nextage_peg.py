@@ -4,7 +4,8 @@
 position loop (task-space IK at 1 kHz, the wrist sensor, the rest detector that ends a step),
 and the executor's ``PegTask`` turns at-rest observations into states and rewards and actions
 into pose references. Here the same cores are called directly, read from the same config files
-(``nextage.yaml``, ``bridge.yaml``, ``executor_nextage.yaml``), behind the interface of the free
+(``peg_task.yaml``, ``nextage.yaml``, ``bridge.yaml``, ``executor_nextage.yaml``), behind the
+interface of the free
 peg environment, so experiment 5 (``peg.run_peg``) runs either robot unchanged.
 
 A start index draws the same tip position as the free peg's ``reset(seed)`` (both sample the
@@ -16,7 +17,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from qg_common.params import config_file, load_ros_params
+from qg_common.params import config_file, load_ros_params, merge_params
+from qg_common.peg_task import PegCell
 from qg_common.types import StepResult
 from robot_bridge_node.core.hardware_interface import load_robot
 from robot_bridge_node.core.position_loop import PositionLoop, build_position_loop
@@ -43,11 +45,14 @@ class NextagePeg:
                  reward: str = "dense") -> None:
         def params(name: str) -> dict[str, Any]:
             return load_ros_params(config_file(name, config_dir))
-        robot_params, bridge = params("nextage.yaml"), params("bridge.yaml")
+        robot_params = merge_params(params("peg_task.yaml"), params("nextage.yaml"))
+        bridge = params("bridge.yaml")
         self.loop: PositionLoop = build_position_loop(
             load_robot("sim_nextage", robot_params),
             {**bridge, "position_control": robot_params["position_control"]})
-        self.task = PegTask(PegTaskConfig.from_dict(params("executor_nextage.yaml")["peg"]))
+        self.loop.begin()
+        self.task = PegTask(PegTaskConfig.from_dict(params("executor_nextage.yaml")["peg"]),
+                            PegCell.from_dict(robot_params["peg_task"]))
         self.episode_steps = episode_steps
         self.reward_kind = reward
         self.steps = 0
@@ -62,7 +67,7 @@ class NextagePeg:
 
     def reset(self, seed: int) -> np.ndarray:
         """The tip at the ``seed``-th free start, the arm settled there; the initial state."""
-        self.loop.reset(seed)
+        self.loop.reset(self.task.start_pose(seed))
         self._observation = self._observe(self.loop.result(self.loop.time))
         self.steps = 0
         return self.task.state(self._observation)
@@ -90,7 +95,7 @@ class NextagePeg:
         self._observation = self._observe(result)
         return (self.task.state(self._observation),
                 self.task.reward(self._observation, self.reward_kind),
-                self._observation.success)
+                self.task.succeeded(self._observation))
 
     @property
     def observation(self) -> Observation | None:
@@ -107,4 +112,4 @@ class NextagePeg:
         """What the executor would get in the ``AtRest`` message: the result and the tool pose
         from forward kinematics of the measured joints."""
         tool = self.loop.controller.tool
-        return observation_from_step(result, tool.rotation, tool.position)
+        return observation_from_step(result, tool.position, tool.rotation)

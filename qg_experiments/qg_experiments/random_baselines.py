@@ -19,7 +19,7 @@ from qg_learning_node.executor.episode import Episode
 from qg_learning_node.executor.noise import KINDS, ActionNoise
 from qg_learning_node.executor.residual_task import ACTION_DIM
 from qg_experiments.profile import RandomBudget
-from qg_experiments.runner import (ESTIMATORS, PandaTask, StackSettings,
+from qg_experiments.runner import (ESTIMATORS, InsertionRobot, StackSettings,
                                    config_digest, episode_noise_seed, run_episode,
                                    zero_policy)
 
@@ -71,7 +71,7 @@ def run_baseline(spec: BaselineSpec) -> dict[str, Any]:
     settings = dataclasses.replace(
         settings, task=dataclasses.replace(settings.task, train_max_steps=spec.max_steps))
     noise_config = dataclasses.replace(settings.noise, kind=spec.kind, sigma=spec.sigma)
-    env = PandaTask(settings, spec.estimator)
+    env = InsertionRobot(settings, spec.estimator)
     episodes = []
     for index in range(spec.episodes):
         noise = ActionNoise(noise_config, ACTION_DIM, episode_noise_seed(spec.seed, index))

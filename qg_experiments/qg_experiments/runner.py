@@ -157,8 +157,9 @@ class StackSettings:
         estimator = load_ros_params(config_file("wrench_estimator.yaml", directory))
         # Each file through the sections its node declares: what a node would refuse (a value
         # out of range, a misspelt key), the experiments refuse too.
+        files = ", ".join(name for _, name in plugin.config_files)
         for section in plugin.parameters:
-            check_section(section, section_values(section, params), f"{robot}'s config")
+            check_section(section, section_values(section, params), files)
         for section in TORQUE.controller_sections:
             check_section(section, section_values(section, bridge), "bridge.yaml")
         return cls(robot_name=robot, robot=params, bridge=bridge,

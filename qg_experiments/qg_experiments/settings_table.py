@@ -60,15 +60,22 @@ def node_settings() -> list[NodeSettings]:
     from robot_bridge_node.recorder_node import RECORDER_SECTION
     from robot_bridge_node.simulation_node import SIM_SECTION
 
+    from qg_common.peg_task import PEG_TASK_FILE, PEG_TASK_SECTION
+    from qg_common.shaft_task import SHAFT_TASK_FILE, SHAFT_TASK_SECTION
+
     from qg_learning_node.executor.parameters import (EXECUTOR_SECTIONS, TASK_CHOICE_SECTION,
                                                       TASK_SECTIONS)
     from qg_learning_node.learner.learner_params import LEARNER_SECTIONS
     panda, nextage = robot_plugin("sim_panda"), robot_plugin("sim_nextage")
-    robots = (("sim_panda", panda.config_files), ("sim_nextage", nextage.config_files))
+    cells = (SHAFT_TASK_FILE, PEG_TASK_FILE)     # the tasks' cells: the robot's and the task's
+    robots = tuple((name, tuple(f for f in plugin.config_files if f not in cells))
+                   for name, plugin in (("sim_panda", panda), ("sim_nextage", nextage)))
     nextage_stack = "Nextage stack"
+    own = [s for s in (*panda.parameters, *nextage.parameters)
+           if s not in (SHAFT_TASK_SECTION, PEG_TASK_SECTION)]
     return [
-        NodeSettings("sim", (ROBOT_SECTION, SIM_SECTION, *panda.parameters, *nextage.parameters),
-                     (("robot_bridge_node", "sim.yaml"),), robots),
+        NodeSettings("sim", (ROBOT_SECTION, SIM_SECTION, SHAFT_TASK_SECTION, PEG_TASK_SECTION,
+                             *own), (("robot_bridge_node", "sim.yaml"), *cells), robots),
         NodeSettings("bridge", (ROBOT_SECTION, *TORQUE.controller_sections,
                                 POSITION.controller_sections[0]),
                      (("robot_bridge_node", "bridge.yaml"),), robots),
@@ -76,8 +83,9 @@ def node_settings() -> list[NodeSettings]:
                      (("robot_bridge_node", "wrench_estimator.yaml"),)),
         NodeSettings("recorder", (RECORDER_SECTION,), (("robot_bridge_node", "recorder.yaml"),)),
         NodeSettings("executor", (TASK_CHOICE_SECTION, *EXECUTOR_SECTIONS,
-                                  TASK_SECTIONS["residual"], TASK_SECTIONS["peg"]),
-                     (("qg_learning_node", "executor.yaml"),),
+                                  TASK_SECTIONS["residual"], TASK_SECTIONS["peg"],
+                                  SHAFT_TASK_SECTION, PEG_TASK_SECTION),
+                     (("qg_learning_node", "executor.yaml"), *cells),
                      ((nextage_stack, (("qg_learning_node", "executor_nextage.yaml"),)),)),
         NodeSettings("learner", LEARNER_SECTIONS, (("qg_learning_node", "learner.yaml"),),
                      ((nextage_stack, (("qg_learning_node", "learner_nextage.yaml"),)),)),

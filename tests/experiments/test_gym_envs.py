@@ -9,7 +9,7 @@ from gymnasium.utils.env_checker import check_env
 
 import qg_experiments.gym_envs as gym_envs
 from qg_experiments.gym_envs.insertion import InsertionEnv
-from qg_experiments.runner import PandaTask, StackSettings, run_episode
+from qg_experiments.runner import InsertionRobot, StackSettings, run_episode
 from qg_learning_node.executor.episode import Episode
 
 #: A fixed action sequence (actor units) for the step-by-step comparisons.
@@ -86,7 +86,7 @@ def test_the_environment_is_the_runners_task_step_for_step() -> None:
     """Same arm seed, same start pose, same actions: the runner's ``run_episode`` and the
     environment see the same states and rewards (float32 states aside)."""
     settings = StackSettings.load().with_arm_seed(3)
-    task = PandaTask(settings)
+    task = InsertionRobot(settings)
     actions = iter(ACTIONS)
     records = []
     episode = Episode("e", "train", 2, "dense", task.residual)

@@ -10,7 +10,7 @@ import json
 
 import numpy as np
 import pytest
-from qg_common.types import GroundTruth, StepResult
+from qg_common.types import NO_GROUND_TRUTH, GroundTruth, StepResult
 
 from qg_learning_node.executor.observation import observation_from_step
 from qg_experiments import grid, peg
@@ -25,14 +25,21 @@ def _truth(success: bool) -> GroundTruth:
                        orientation_error=np.array([0.3, 0.4]), lateral_offset=0.002, tilt=0.1)
 
 
-def test_observation_takes_the_estimate_and_the_truth() -> None:
+def test_observation_takes_the_estimate_the_measured_pose_and_the_truth_aside() -> None:
     estimate = np.array([1.0, 2.0, -15.0, 0.1, 0.2, 0.0])
-    obs = observation_from_step(StepResult(0.1, False, 0.0, 0.0, _truth(True), estimate))
+    position, rotation = np.array([0.4, 0.1, 0.3]), np.diag([1.0, -1.0, -1.0])
+    obs = observation_from_step(StepResult(0.1, False, 0.0, 0.0, _truth(True), estimate),
+                                position, rotation)
     np.testing.assert_array_equal(obs.wrench, estimate)
-    assert obs.success and obs.position_error == 0.003 and obs.lateral_offset == 0.002
-    assert obs.orientation_error == pytest.approx(0.5)
+    np.testing.assert_array_equal(obs.tool_position, position)
+    np.testing.assert_array_equal(obs.tool_rotation, rotation)
+    assert obs.truth is not None and obs.truth.success and obs.truth.position_error == 0.003
+    no_truth = observation_from_step(StepResult(0.1, False, 0.0, 0.0, NO_GROUND_TRUTH, estimate),
+                                     position, rotation)
+    assert no_truth.truth is None                            # a real arm: nothing to evaluate
     with pytest.raises(ValueError, match="estimator"):
-        observation_from_step(StepResult(0.1, False, 0.0, 0.0, _truth(False), None))
+        observation_from_step(StepResult(0.1, False, 0.0, 0.0, _truth(False), None), position,
+                              rotation)
 
 
 @pytest.mark.slow

@@ -11,8 +11,8 @@ from qg_common.params import ConfigError, config_file
 
 from qg_experiments.runner import StackSettings
 
-FILES = ("panda_scene.yaml", "panda_ideal.yaml", "bridge.yaml", "wrench_estimator.yaml",
-         "executor.yaml", "learner.yaml")
+FILES = ("shaft_task.yaml", "panda_scene.yaml", "panda_ideal.yaml", "bridge.yaml",
+         "wrench_estimator.yaml", "executor.yaml", "learner.yaml")
 
 
 def edited_config(tmp_path: Path, name: str, path: tuple[str, ...], value) -> Path:
@@ -45,6 +45,9 @@ def test_the_shipped_files_load() -> None:
      "'ekf.process_noise_force' = -1.0 is out of range"),
     ("panda_scene.yaml", ("panda_scene", "time_step"), 0.1,
      "'panda_scene.time_step' = 0.1 is out of range"),
+    ("shaft_task.yaml", ("shaft_task", "start_tilt"), 1.0,
+     "'shaft_task.start_tilt' = 1.0 is out of range"),
+    ("bridge.yaml", ("reset", "joint_speed"), 5.0, "'reset.joint_speed' = 5.0 is out of range"),
 ])
 def test_a_value_a_node_refuses_is_refused(tmp_path, name, path, value, message) -> None:
     with pytest.raises(ConfigError, match=message.replace("[", r"\[").replace("]", r"\]")) as err:

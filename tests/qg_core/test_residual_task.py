@@ -1,10 +1,15 @@
-"""The residual task's states: the thesis's 4-D wrench state and the tilt state beside it."""
+"""The residual task's states (the thesis's 4-D wrench state and the tilt state beside it), and
+its reward, goal and bore check measured on the tool pose against the cell's fixture."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+import math
+
+from qg_common.shaft_task import TOOL_DOWN, ShaftTaskGeometry
+from qg_common.types import N_START_POSES
 from qg_learning_node.executor.residual_task import (Observation, ResidualTask, TaskConfig,
                                                      state_dim, tilt_from_push_axis)
 from qg_learning_node.learner.actor_mlp import ActorMLP
@@ -13,9 +18,16 @@ DOWN = Rotation.from_rotvec([np.pi, 0.0, 0.0])     # tool z pointing down: the i
 PUSH = np.array([0.0, 0.0, -1.0])
 
 
-def _obs(wrench, rotation=None) -> Observation:
-    return Observation(wrench=np.asarray(wrench, float), success=False, position_error=0.0,
-                       orientation_error=0.0, lateral_offset=0.0, tool_rotation=rotation)
+CELL = ShaftTaskGeometry()
+
+
+def _obs(wrench, rotation=TOOL_DOWN, position=(0.45, 0.0, 0.4)) -> Observation:
+    return Observation(wrench=np.asarray(wrench, float), tool_position=np.asarray(position, float),
+                       tool_rotation=np.asarray(rotation, float))
+
+
+def _task(**config) -> ResidualTask:
+    return ResidualTask(TaskConfig(**config), CELL)
 
 
 @pytest.mark.parametrize("rotvec", [[0.26, 0.0, 0.0], [0.0, -0.26, 0.0], [0.1, 0.2, 0.0],
@@ -40,15 +52,13 @@ def test_tilt_ignores_rotation_about_the_shaft_and_is_zero_when_aligned() -> Non
 def test_thesis_and_tilt_states() -> None:
     wrench = [10.0, -40.0, -15.0, 1.5, 0.3, 0.0]
     rotation = (DOWN * Rotation.from_rotvec([0.1, -0.3, 0.0])).as_matrix()
-    thesis = ResidualTask(TaskConfig(observation="thesis"))
-    tilt = ResidualTask(TaskConfig(observation="tilt", tilt_range=0.5))
+    thesis = _task(observation="thesis")
+    tilt = _task(observation="tilt", tilt_range=0.5)
     assert thesis.state_dim == state_dim("thesis") == 4
     assert tilt.state_dim == state_dim("tilt") == 6
     np.testing.assert_allclose(thesis.state(_obs(wrench)), [0.5, -1.0, 0.5, 0.1])
     np.testing.assert_allclose(tilt.state(_obs(wrench, rotation)),
                                [0.5, -1.0, 0.5, 0.1, -0.2, 0.6], atol=1e-12)
-    with pytest.raises(ValueError, match="tool orientation"):
-        tilt.state(_obs(wrench))
 
 
 @pytest.mark.parametrize("observation, expected", [
@@ -59,22 +69,71 @@ def test_states_without_the_torque_echo(observation, expected) -> None:
     """The smaller tilt states take the same components, with the same scales, as ``tilt``."""
     wrench = [10.0, -40.0, -15.0, 1.5, 0.3, 0.0]
     rotation = (DOWN * Rotation.from_rotvec([0.1, -0.3, 0.0])).as_matrix()
-    task = ResidualTask(TaskConfig(observation=observation, tilt_range=0.5))
+    task = _task(observation=observation, tilt_range=0.5)
     assert task.state_dim == state_dim(observation) == len(expected)
     np.testing.assert_allclose(task.state(_obs(wrench, rotation)), expected, atol=1e-12)
-    with pytest.raises(ValueError, match="tool orientation"):
-        task.state(_obs(wrench))
 
 
-@pytest.mark.parametrize("bad", [{"observation": "pose"}, {"push_axis": (0.0, 0.0, 0.0)},
-                                 {"push_axis": (0.0, 1.0)}, {"tilt_range": 0.0}])
+@pytest.mark.parametrize("bad", [{"observation": "pose"}, {"tilt_range": 0.0},
+                                 {"sigma_position": 0.0}])
 def test_bad_observation_settings_are_refused(bad) -> None:
     with pytest.raises(ValueError):
         TaskConfig(**bad)
 
 
-def test_push_axis_is_normalised() -> None:
-    assert TaskConfig(push_axis=(0.0, 0.0, -2.0)).push_axis == (0.0, 0.0, -1.0)
+def test_the_goal_reward_and_bore_check_are_measured_on_the_tool_pose() -> None:
+    """At the inserted pose: the goal, reward 0 either way. 0.4 mm short of the full depth
+    (within the 0.5 mm tolerance) still the goal, 0.6 mm short not. Off the axis by more than
+    ``max_lateral_offset``: out of the bore. The dense reward falls with both errors."""
+    task = _task()
+    target = CELL.target_tool_position()
+    assert task.succeeded(_obs(np.zeros(6), position=target))
+    assert task.reward(_obs(np.zeros(6), position=target), "sparse") == 0.0
+    assert task.reward(_obs(np.zeros(6), position=target), "dense") == pytest.approx(0.0)
+    up = CELL.fixture().rotation[:, 2]
+    assert task.succeeded(_obs(np.zeros(6), position=target + 0.0004 * up))
+    short = _obs(np.zeros(6), position=target + 0.0006 * up)
+    assert not task.succeeded(short) and task.reward(short, "sparse") == -1.0
+    assert -0.03 < task.reward(short, "dense") < 0.0
+    tilted = Rotation.from_rotvec([0.3, 0.0, 0.0]).as_matrix() @ TOOL_DOWN
+    assert task.reward(_obs(np.zeros(6), tilted, target), "dense") < -0.15
+    beside = target + np.array([0.016, 0.0, 0.0])
+    assert task.left_bore(_obs(np.zeros(6), position=beside))
+    assert not task.left_bore(_obs(np.zeros(6), position=target + [0.014, 0.0, 0.0]))
+
+
+def test_a_turned_and_tilted_fixture_moves_the_goal_the_starts_and_the_tilt_reference() -> None:
+    """A housing turned 90 deg and tilted 10 deg: its starts are 15 deg from its bore axis with
+    the tip on it, reached along that axis; the inserted pose along it is the goal; the tilt
+    state reads zero with the shaft on the tilted axis."""
+    cell = ShaftTaskGeometry(housing_yaw=math.pi / 2, housing_tilt=math.radians(10.0))
+    task = ResidualTask(TaskConfig(observation="tilt_only"), cell)
+    axis = cell.bore_axis()
+    for k in range(N_START_POSES):
+        start = cell.start_pose(k)
+        m = cell.measure(start.position, start.rotation)
+        assert m.tilt == pytest.approx(math.radians(15.0), abs=1e-9)
+        assert m.lateral_offset < 1e-12 and not m.inserted
+        rim = -m.insertion_depth - cell.shaft_radius * math.sin(m.tilt)
+        assert rim == pytest.approx(cell.start_clearance, abs=1e-12)
+        np.testing.assert_allclose(start.approach, cell.approach_distance * axis, atol=1e-15)
+        assert start.label == k
+    inserted = Rotation.align_vectors([axis], [[0.0, 0.0, 1.0]])[0].as_matrix()
+    goal = _obs(np.zeros(6), inserted, cell.target_tool_position())
+    assert task.succeeded(goal)
+    np.testing.assert_allclose(task.state(goal), [0.0, 0.0], atol=1e-12)
+
+
+def test_the_truth_rides_along_and_never_decides() -> None:
+    """A simulation's truth saying "inserted" does not make an episode's goal: the measured pose
+    does."""
+    from qg_common.types import GroundTruth
+    truth = GroundTruth(wrench=np.zeros(6), insertion_depth=0.016, plunger_travel=0.004,
+                        success=True, position_error=0.0, orientation_error=np.zeros(2),
+                        lateral_offset=0.0, tilt=0.0)
+    above = Observation(np.zeros(6), CELL.target_tool_position() + [0.0, 0.0, 0.01], TOOL_DOWN,
+                        truth)
+    assert not _task().succeeded(above)
 
 
 def test_actor_reports_its_input_size() -> None:

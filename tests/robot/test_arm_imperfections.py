@@ -3,7 +3,6 @@ switched off they give back the ideal arm bit for bit."""
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import math
 
 import numpy as np
@@ -13,7 +12,10 @@ from qg_common.panda_description import panda_arm
 from robot_bridge_node.core.arm_model import ArmModel
 from sim_robot_node.core.arm_imperfections import (GAZ_2019_COULOMB, ArmImperfections,
                                                    ImperfectArm)
-from sim_robot_node.core.panda_scene import PandaSceneConfig, PandaShaftScene
+from sim_robot_node.core.shaft_scene import ShaftScene, ShaftSceneConfig
+from sim_robot_node.core.shaft_world import build_world
+
+from arms import cell, start
 
 IDEAL = ArmImperfections.ideal()
 
@@ -23,38 +25,44 @@ def only(**changes) -> ArmImperfections:
     return dataclasses.replace(IDEAL, **changes)
 
 
-def scene_with(imperfections: ArmImperfections, **config) -> PandaShaftScene:
-    return PandaShaftScene(PandaSceneConfig(imperfections=imperfections, **config))
+def scene_with(imperfections: ArmImperfections, cell_changes: dict | None = None,
+               **config) -> ShaftScene:
+    return ShaftScene(ShaftSceneConfig(imperfections=imperfections, **config),
+                      cell(**(cell_changes or {})), panda_arm())
 
 
-#: The hash below from the simulator of commit 61b80b8 (before imperfections existed), per
-#: OpenBLAS kernel family: the start pose's inverse kinematics goes through numpy's BLAS, whose
-#: kernels differ in the last bits (recomputed there with OPENBLAS_CORETYPE set).
-OLD_SIMULATOR_DIGESTS = {
-    "14dfc0c2b0b7eb7973d3ae6e1ed52bf66c35d1c37041c0dccb43632326a88550": "SkylakeX (AVX-512)",
-    "f7ff6419d7e3fba982e21c2f55424e24f4c081acd258d5b70b6079cf0a13c805": "Haswell, Zen (AVX2)",
-}
-
-
-def test_the_ideal_arm_is_the_simulator_before_imperfections_bit_for_bit():
-    """Hash of 300 steps of joint states under fixed torques from start 5, taken with the
-    simulator as it was before imperfections existed (commit 61b80b8) with the BLAS kernels of
-    the machine's kind."""
+def test_the_ideal_arm_is_the_bare_world_bit_for_bit():
+    """With every imperfection off the scene adds nothing to its engine's world: 300 steps under
+    varying torques from start 5 read exactly the states of a bare world stepped with the same
+    torques from the same joints (the driver's reading is the truth, the links get the
+    command), and the measured torque is the command."""
     scene = scene_with(IDEAL)
-    scene.reset(5)
-    digest = hashlib.sha256()
+    scene.teleport(start(5))
+    bare = build_world(panda_arm(), scene.geometry, scene.config)
+    bare.place_housing(scene.fixture)
+    bare.set_arm_state(*scene.world.arm_state())
     tau = np.array([0.0, -30.0, 0.0, 20.0, 1.0, 2.0, 0.0])
-    for k in range(300):
-        state = scene.joint_state()
-        scene.apply_torques(tau + 0.5 * np.sin(0.05 * k))
-        scene.step()
-        for values in (state.q, state.dq, state.tau):
-            digest.update(np.ascontiguousarray(values, dtype=np.float64).tobytes())
-    assert digest.hexdigest() in OLD_SIMULATOR_DIGESTS
+    try:
+        for k in range(300):
+            state = scene.joint_state()
+            q, dq = bare.arm_state()
+            np.testing.assert_array_equal(state.q, q)
+            np.testing.assert_array_equal(state.dq, dq)
+            command = tau + 0.5 * np.sin(0.05 * k)
+            scene.apply_torques(command)
+            np.testing.assert_array_equal(scene.joint_state().tau, command)
+            bare.set_arm_torques(command)
+            scene.step()
+            bare.step()
+        assert np.linalg.norm(scene.joint_state().q - scene.world.arm_state()[0]) == 0.0
+        assert np.linalg.norm(q - scene.joint_state().q) > 1e-3      # the arm did move
+    finally:
+        bare.close()
+        scene.close()
 
 
 def test_the_realistic_arm_is_the_default_and_every_imperfection_is_on():
-    default = PandaSceneConfig().imperfections
+    default = ShaftSceneConfig().imperfections
     assert default.payload_mass_error > 0 and default.torque_bias > 0
     np.testing.assert_allclose(default.joint_coulomb_friction,
                                0.2 * np.array(GAZ_2019_COULOMB), atol=1e-5)
@@ -71,13 +79,13 @@ def test_a_payload_error_of_m_kg_at_tilt_theta_gives_its_gravity_torque():
     import pybullet as p
     mass, com = 0.3, np.array([0.02, 0.0, -0.03])
     scene = scene_with(only(payload_mass_error=mass, payload_com_error=tuple(com)))
-    model = ArmModel.of_arm(panda_arm(), tool_offset=scene.tool_offset, payload_mass=scene.config.shaft_mass,
-                       payload_com=scene.tool_offset + scene.config.shaft_com)
+    model = ArmModel.of_arm(panda_arm(), payload_mass=scene.config.shaft_mass,
+                            payload_com=scene.geometry.shaft_centre)
     for pose in (0, 3):
-        scene.reset(pose)
+        scene.teleport(start(pose))
         q = scene.joint_state().q
-        true = np.array(p.calculateInverseDynamics(scene.robot, q.tolist(), [0.0] * 7,
-                                                   [0.0] * 7, physicsClientId=scene.cid))
+        true = np.array(p.calculateInverseDynamics(scene.world.robot, q.tolist(), [0.0] * 7,
+                                                   [0.0] * 7, physicsClientId=scene.world.cid))
         kin = model.kinematics(q)
         lever = kin.rotation @ com                     # tool origin -> the mass, base frame
         jac_com = kin.jacobian[:3] - _skew(lever) @ kin.jacobian[3:]
@@ -98,11 +106,11 @@ def test_joint_friction_is_what_the_links_lose_and_the_driver_does_not_see():
     scene = scene_with(only(joint_coulomb_friction=GAZ_2019_COULOMB,
                             joint_friction_velocity=ArmImperfections().joint_friction_velocity,
                             joint_viscous_friction=(0.05,) * 7),
-                       gravity=0.0, start_clearance=0.05)
-    model = ArmModel.of_arm(panda_arm(), tool_offset=scene.tool_offset, payload_mass=scene.config.shaft_mass,
-                       payload_com=scene.tool_offset + scene.config.shaft_com)
+                       {"start_clearance": 0.05}, gravity=0.0)
+    model = ArmModel.of_arm(panda_arm(), payload_mass=scene.config.shaft_mass,
+                            payload_com=scene.geometry.shaft_centre)
     tau = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.3])
-    scene.reset(0)
+    scene.teleport(start(0, start_clearance=0.05))
     for _ in range(60):                      # spin up joint 7 to a few tenths of rad/s
         scene.apply_torques(tau)
         scene.step()
@@ -173,12 +181,11 @@ def test_start_jitter_and_the_housing_error_have_their_size_and_the_bore_moves()
         assert error[2] == 0.0 and 0.0 < np.linalg.norm(error) < 5 * housing
         # The bore really is where the error puts it: the fully inserted tool position lies
         # on the true axis, off the configured one by the position error.
-        target = scene.target_tool_position()
-        depth = scene.config.grasp_height - scene.config.full_depth
-        configured = np.asarray(scene.config.hole_position) + np.array([0.0, 0.0, depth])
+        target = scene.geometry.target_tool_position(scene.fixture)
+        configured = scene.geometry.target_tool_position()
         assert 0.0 < np.linalg.norm(target - configured) < 1e-3
         for pose in range(4):
-            scene.reset(pose)
+            scene.teleport(start(pose))
             tilts.append(scene.ground_truth().tilt)
     spread = np.std(np.degrees(tilts))
     # Tilt against the true bore: 15 deg, spread by the jitter and the housing's error.
@@ -189,7 +196,7 @@ def test_start_jitter_and_the_housing_error_have_their_size_and_the_bore_moves()
 def test_a_seeded_arm_is_identical_twice_and_another_seed_differs():
     def run(seed: int) -> np.ndarray:
         scene = scene_with(dataclasses.replace(ArmImperfections(), seed=seed))
-        scene.reset(2)
+        scene.teleport(start(2))
         out = []
         for _ in range(50):
             state = scene.joint_state()

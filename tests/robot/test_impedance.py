@@ -10,7 +10,7 @@ from robot_bridge_node.core.hardware_interface import load_robot
 from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from qg_common.types import WrenchSetpoint
 
-from arms import ideal
+from arms import ideal, start
 
 
 @pytest.fixture(scope="module")
@@ -85,18 +85,18 @@ def lift(loop: RobotLoop, seconds: float = 0.3) -> None:
 
 
 def test_gravity_compensation_holds_the_pose_for_two_seconds(loop: RobotLoop) -> None:
-    loop.reset(0)
-    start, _ = loop.simulation.scene.tool_pose()
+    loop.reset(start(0))
+    began, _ = loop.simulation.scene.tool_pose()
     loop.command(WrenchSetpoint(np.zeros(6)))
     for _ in range(2000):
         loop.tick()
     end, _ = loop.simulation.scene.tool_pose()
-    assert np.linalg.norm(end - start) < 0.001
+    assert np.linalg.norm(end - began) < 0.001
 
 
 @pytest.mark.parametrize("axis", [0, 1])
 def test_measured_lateral_stiffness_is_the_configured_one(loop: RobotLoop, axis: int) -> None:
-    loop.reset(0)
+    loop.reset(start(0))
     lift(loop)
     loop.command(WrenchSetpoint(np.zeros(6)))
     reference = loop.controller.reference

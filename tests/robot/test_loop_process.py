@@ -23,6 +23,8 @@ from robot_bridge_node.core.loop_runner import SetpointCommand, StepEvent
 from robot_bridge_node.core.sample_ring import HAS_TRUTH, PUBLISH
 from robot_bridge_node.robot_process import shipped_loop_spec
 
+from arms import start
+
 ROBOT = "sim_panda"
 SETPOINT = WrenchSetpoint.residual(-15.0, 1.5, -0.5)
 
@@ -69,7 +71,7 @@ def test_every_tick_arrives_in_order_and_the_loop_computes_what_it_does_in_proce
     link = LoopLink(shipped_loop_spec(ROBOT), 7, listener)
     link.start()
     try:
-        start = link.reset(3)
+        settled = link.reset(start(3))
         link.send_setpoint(SetpointCommand(1, SETPOINT))
         step = listener.wait_for_event(1)
         time.sleep(0.1)
@@ -78,16 +80,17 @@ def test_every_tick_arrives_in_order_and_the_loop_computes_what_it_does_in_proce
     records = np.concatenate(listener.records)
     ticks = records["tick"]
     assert np.array_equal(ticks, np.arange(len(ticks))) and link.ring.lost == 0
-    # the settled start (one sample), then one sample per tick of the step, 1 ms apart
+    # the state the loop began with and the settled start (one sample each), then one sample
+    # per tick of the step, 1 ms apart
     step_ticks = round(step.result.duration / 1e-3)
-    assert len(records) == 1 + step_ticks
+    assert len(records) == 2 + step_ticks
     assert np.all(np.diff(records["t_ns"][1:]) == 1_000_000)
     assert [e.seq for e in listener.events] == [0, 1]
-    assert listener.last_t_at_event == [start.t_ns, step.t_ns]   # events after their ticks
+    assert listener.last_t_at_event == [settled.t_ns, step.t_ns]   # events after their ticks
     assert records["t_ns"][-1] == step.t_ns and not listener.failures
     # every 10th tick published (publish_every), each with the ground truth (truth_every 10)
     published = (records["flags"] & PUBLISH) != 0
-    assert published.sum() == 1 + step_ticks // 10
+    assert published.sum() == 2 + step_ticks // 10
     assert np.array_equal(published, (records["flags"] & HAS_TRUTH) != 0)
 
     # The same loop in this process, from the same history: the same numbers, bit for bit.
@@ -95,8 +98,8 @@ def test_every_tick_arrives_in_order_and_the_loop_computes_what_it_does_in_proce
     plugin = robot_plugin(s.robot)
     loop = interface_kind(plugin.interface).build_loop(
         plugin.create(s.sim_params), s.bridge_params, s.estimator_params)
-    loop.reset(s.initial_pose)
-    loop.reset(3)
+    loop.begin()
+    loop.reset(start(3))
     result = loop.execute(SETPOINT)
     assert result.duration == step.result.duration
     assert np.array_equal(result.wrench_estimate, step.result.wrench_estimate)
@@ -158,13 +161,13 @@ def test_a_forked_loop_process_steps_and_ends_cleanly_and_an_unused_one_ends_wit
         from robot_bridge_node.core.loop_link import ForkedLoopProcess, LoopLink
         unused, used = ForkedLoopProcess(), ForkedLoopProcess()
         sys.path.insert(0, {os.path.dirname(__file__)!r})
-        from test_loop_process import ROBOT, SETPOINT, Listener
+        from test_loop_process import ROBOT, SETPOINT, Listener, start
         from robot_bridge_node.core.loop_runner import SetpointCommand
         from robot_bridge_node.robot_process import shipped_loop_spec
         listener = Listener()
         link = LoopLink(shipped_loop_spec(ROBOT), 7, listener, forked=used)
         link.start()
-        link.reset(2)
+        link.reset(start(2))
         link.send_setpoint(SetpointCommand(1, SETPOINT))
         event = listener.wait_for_event(1)
         link.stop()

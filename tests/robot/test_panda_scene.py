@@ -10,7 +10,7 @@ from robot_bridge_node.core.hardware_interface import load_robot
 from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from qg_common.types import N_START_POSES, WrenchSetpoint
 
-from arms import ideal
+from arms import cell, ideal, start
 
 
 @pytest.fixture(scope="module")
@@ -21,12 +21,12 @@ def loop() -> RobotLoop:
 
 
 @pytest.mark.parametrize("yaw", [0.0, 0.3])
-def test_start_poses_are_tilted_on_the_axis_just_above_the_bearing(loop: RobotLoop,
-                                                                   yaw: float) -> None:
+def test_start_poses_are_tilted_on_the_axis_just_above_the_bearing(yaw: float) -> None:
+    loop = build_loop(load_robot("sim_panda", ideal({"housing_yaw": yaw})))
     scene = loop.simulation.scene
-    c = scene.config
+    c = scene.geometry
     for k in range(N_START_POSES):
-        loop.reset(k, yaw)  # placed by IK, then settled for 0.1 s under the controller
+        loop.reset(start(k, housing_yaw=yaw))  # placed by IK, then settled 0.1 s under control
         gt = scene.ground_truth()
         assert gt.tilt == pytest.approx(math.radians(15.0), abs=1e-4)
         assert gt.lateral_offset < 1e-5
@@ -39,11 +39,12 @@ def test_start_poses_are_tilted_on_the_axis_just_above_the_bearing(loop: RobotLo
         assert not gt.success and gt.plunger_travel == 0.0
         np.testing.assert_allclose(gt.wrench, np.zeros(6), atol=1e-3)  # not touching yet
         assert scene.time == pytest.approx(loop.config.settle_time)
+    scene.close()
 
 
 def test_measured_torque_is_the_last_command_and_bad_torques_are_refused(loop: RobotLoop) -> None:
     scene = loop.simulation.scene
-    scene.reset(0)
+    scene.teleport(start(0))
     tau = np.linspace(-1.0, 1.0, 7)
     scene.apply_torques(tau)
     np.testing.assert_array_equal(scene.joint_state().tau, tau)
@@ -59,7 +60,7 @@ def test_contact_wrench_matches_the_balance_of_the_arm(loop: RobotLoop, pose: in
     """J^T F = M ddq + C dq + g - tau over one step: the simulator's wrench must agree, also
     with friction and the shaft pinched in the bore (where summing pybullet's contact points
     came out tens of newtons off)."""
-    loop.reset(pose)
+    loop.reset(start(pose))
     for _ in range(2):
         loop.execute(WrenchSetpoint.residual(-15.0, *residual))
     for _ in range(10):  # then the base push alone until the arm rests
@@ -88,11 +89,12 @@ def test_a_tilted_housing_moves_the_starts_the_bore_axis_and_the_goal_with_it() 
     and tilting the shaft back onto that axis (the tilt-back policy on ground truth) inserts it
     along the tilted bore."""
     tilt = math.radians(10.0)
-    loop = build_loop(load_robot("sim_panda", ideal(housing_tilt=tilt)))
+    moved = {"housing_yaw": math.pi / 2, "housing_tilt": tilt}
+    loop = build_loop(load_robot("sim_panda", ideal(moved)))
     scene = loop.simulation.scene
     try:
         for k in (1, 6):
-            loop.reset(k, math.pi / 2)
+            loop.reset(start(k, **moved))
             gt = scene.ground_truth()
             assert gt.tilt == pytest.approx(math.radians(15.0), abs=1e-4)
             assert gt.lateral_offset < 1e-5
@@ -107,7 +109,7 @@ def test_a_tilted_housing_moves_the_starts_the_bore_axis_and_the_goal_with_it() 
                     break
             assert gt.success and gt.lateral_offset < 1e-3
             # Depth measured along the tilted bore: the shaft went all the way down it.
-            assert gt.insertion_depth == pytest.approx(scene.config.full_depth, abs=3e-4)
+            assert gt.insertion_depth == pytest.approx(cell().full_depth, abs=3e-4)
             assert gt.position_error < 2e-3
     finally:
         scene.close()

@@ -8,7 +8,9 @@ from robot_bridge_node.core.impedance import ImpedanceConfig
 from robot_bridge_node.core.rest_detector import RestConfig
 from robot_bridge_node.core.robot_loop import LoopConfig
 from robot_bridge_node.core.safety import SafetyLimits
-from sim_robot_node.core.panda_scene import PandaSceneConfig
+from qg_common.shaft_task import ShaftTaskGeometry
+from robot_bridge_node.core.start_motion import ResetConfig
+from sim_robot_node.core.shaft_scene import ShaftSceneConfig
 from qg_common.params import ConfigError, config_file, load_ros_params, unflatten
 
 
@@ -39,7 +41,11 @@ def test_unflatten_nests_dotted_names() -> None:
 def test_shipped_configs_equal_the_defaults() -> None:
     """The YAML files and the dataclass defaults must not drift apart."""
     scene = load_ros_params(config_file("panda_scene.yaml"), "sim")
-    assert PandaSceneConfig.from_dict(scene["panda_scene"]) == PandaSceneConfig()
+    assert ShaftSceneConfig.from_dict(scene["panda_scene"]) == ShaftSceneConfig()
+    cell = load_ros_params(config_file("shaft_task.yaml"), "executor")
+    assert ShaftTaskGeometry.from_dict(cell["shaft_task"]) == ShaftTaskGeometry()
+    start_motion = load_ros_params(config_file("bridge.yaml"), "bridge")["reset"]
+    assert ResetConfig.from_dict(start_motion) == ResetConfig()
     bridge = load_ros_params(config_file("bridge.yaml"), "bridge")
     assert ImpedanceConfig.from_dict(bridge["impedance"]) == ImpedanceConfig()
     assert SafetyLimits.from_dict(bridge["safety"]) == SafetyLimits()
@@ -47,13 +53,19 @@ def test_shipped_configs_equal_the_defaults() -> None:
     assert LoopConfig.from_dict(bridge["loop"]) == LoopConfig()
 
 
-@pytest.mark.parametrize("params,match", [
-    ({"shaft_radius": 0.0061}, "shaft_radius"), ({"hole_position": [0.4, 0.0]}, "hole_position"),
-    ({"plunger_friction": -1.0}, "plunger_friction"), ({"start_tilt": 1.0}, "start_tilt"),
-    ({"shaft_radiu": 0.005}, "unknown")])
-def test_scene_config_validation(params: dict, match: str) -> None:
+@pytest.mark.parametrize("config,params,match", [
+    (ShaftTaskGeometry, {"shaft_radius": 0.0061}, "shaft_radius"),
+    (ShaftTaskGeometry, {"hole_position": [0.4, 0.0]}, "hole_position"),
+    (ShaftSceneConfig, {"plunger_friction": -1.0}, "plunger_friction"),
+    (ShaftTaskGeometry, {"start_tilt": 1.0}, "start_tilt"),
+    (ShaftTaskGeometry, {"success_tolerance": 0.005}, "success_tolerance"),
+    (ShaftSceneConfig, {"engine": "ode"}, "engine"),
+    (ShaftSceneConfig, {"mujoco": {"cone": "round"}}, "cone"),
+    (ShaftSceneConfig, {"shaft_radius": 0.005}, "unknown"),
+    (ShaftTaskGeometry, {"shaft_radiu": 0.005}, "unknown")])
+def test_scene_config_validation(config: type, params: dict, match: str) -> None:
     with pytest.raises(ValueError, match=match):
-        PandaSceneConfig.from_dict(params)
+        config.from_dict(params)
 
 
 def test_impedance_config_validation() -> None:

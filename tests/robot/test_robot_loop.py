@@ -14,7 +14,7 @@ from robot_bridge_node.core.robot_loop import (MeasuredWrench, LoopConfig, Robot
 from robot_bridge_node.core.safety import SetpointRejected
 from qg_common.types import N_START_POSES, PoseReference, WrenchSetpoint
 
-from arms import ideal
+from arms import ideal, start
 
 PUSH = -15.0  # [N] the constant base policy (contact convention: pressing in)
 
@@ -42,7 +42,7 @@ def ideal_loop() -> RobotLoop:
 def run_episode(loop: RobotLoop, pose: int, max_steps: int,
                 rng: np.random.Generator | None) -> tuple[bool, int, int]:
     """Residual-policy episode; ``rng`` None is the zero residual. (success, steps, at rest)."""
-    loop.reset(pose)
+    loop.reset(start(pose))
     rested = 0
     for step in range(1, max_steps + 1):
         torques = (0.0, 0.0) if rng is None else tuple(3.0 * rng.uniform(-1.0, 1.0, 2))
@@ -93,7 +93,8 @@ def test_uniform_random_residuals_insert_from_at_least_six_of_eight_starts(
 
 def press_upright(loop: RobotLoop, force: float, seconds: float) -> None:
     """Hold the shaft upright over the hole axis and press with ``force`` [N] for ``seconds``."""
-    target = loop.simulation.scene.target_tool_position()
+    scene = loop.simulation.scene
+    target = scene.geometry.target_tool_position(scene.fixture)
     upright = np.diag([1.0, -1.0, -1.0])  # tool z down
     loop.command(WrenchSetpoint(np.array([0.0, 0.0, -force, 0.0, 0.0, 0.0]),
                                 PoseReference(target, upright)))
@@ -107,10 +108,10 @@ def test_the_last_millimetres_need_a_sustained_push_above_ten_newtons(
     """On the realistic arm the unknown payload's weight (about 1 N) adds to the commanded push,
     so the ring breaks away at about 10.3 N commanded instead of 11.25 N on the ideal arm
     (benchmarks/force_depth.py --arm realistic|ideal)."""
-    loop.reset(0)
+    loop.reset(start(0))
     press_upright(loop, 3.0, 1.2)  # straighten and slide gently down onto the inner ring
     gt = loop.simulation.scene.ground_truth()
-    assert gt.insertion_depth == pytest.approx(loop.simulation.scene.config.bore_depth, abs=0.0008)
+    assert gt.insertion_depth == pytest.approx(loop.simulation.scene.geometry.bore_depth, abs=0.0008)
     landed = gt.plunger_travel
     assert landed < 0.0005  # only the landing impact moved the ring
     # 12 N pushes the ring its 4 mm within 1 s; below the break-away force the ring only creeps,
@@ -124,7 +125,7 @@ def test_the_last_millimetres_need_a_sustained_push_above_ten_newtons(
 
 def test_rejected_setpoint_leaves_the_running_command(ideal_loop: RobotLoop) -> None:
     loop = ideal_loop
-    loop.reset(0)
+    loop.reset(start(0))
     loop.command(WrenchSetpoint.residual(PUSH, 0.0, 0.0))
     before = loop.setpoint
     with pytest.raises(SetpointRejected):
@@ -134,7 +135,7 @@ def test_rejected_setpoint_leaves_the_running_command(ideal_loop: RobotLoop) -> 
 
 def test_tilt_stays_inside_the_cone_under_maximal_torque(ideal_loop: RobotLoop) -> None:
     loop = ideal_loop
-    loop.reset(0)
+    loop.reset(start(0))
     loop.command(WrenchSetpoint.residual(8.0, 0.0, 0.0))  # lift out of the counterbore
     for _ in range(300):
         loop.tick()
@@ -153,7 +154,7 @@ def test_realtime_watchdog_holds_the_pose_when_setpoints_stop(ideal_loop: RobotL
     loop = ideal_loop
     realtime = RobotLoop(loop.hardware, loop.controller, loop.safety, loop.rest, loop.estimator,
                          LoopConfig(realtime=True), loop.simulation)
-    realtime.reset(0)
+    realtime.reset(start(0))
     realtime.command(WrenchSetpoint.residual(8.0, 0.0, 0.0))  # pulling up
     for _ in range(10):
         realtime.tick()
@@ -187,7 +188,7 @@ def test_the_watchdog_hold_keeps_the_realistic_arm_within_half_a_millimetre(robo
     scene = realtime.simulation.scene
     try:
         for pose in (0, 3):
-            realtime.reset(pose)
+            realtime.reset(start(pose))
             realtime.command(WrenchSetpoint.residual(8.0, 0.0, 0.0))  # pulling up, then silence
             while not realtime.holding:
                 realtime.tick()
@@ -205,7 +206,7 @@ def test_the_watchdog_hold_keeps_the_realistic_arm_within_half_a_millimetre(robo
 
 def test_ground_truth_estimator_reports_the_contact_wrench(ideal_loop: RobotLoop) -> None:
     loop = ideal_loop
-    loop.reset(3)
+    loop.reset(start(3))
     result = loop.execute(WrenchSetpoint.residual(PUSH, 0.0, 0.0))
     # read one tick before the step ended, at rest: equal to the final truth within noise
     np.testing.assert_allclose(result.wrench_estimate, result.ground_truth.wrench, atol=0.01)
@@ -239,11 +240,11 @@ def test_a_loop_missing_states_ends_the_step_at_its_time_limit_of_the_states_clo
     link = MissingLink(loop.hardware, every=3)
     remote = RobotLoop(link, loop.controller, loop.safety, loop.rest, loop.estimator,
                        LoopConfig(), loop.simulation, clock=StateClock(link, max_period=0.02))
-    remote.reset(1)
+    remote.reset(start(1))
     scene = loop.simulation.scene
-    start, settled = scene.time, remote.ticks
+    began, settled = scene.time, remote.ticks
     result = remote.execute(WrenchSetpoint.residual(PUSH, 3.0, 0.0))
-    elapsed = scene.time - start
+    elapsed = scene.time - began
     # The step's duration is the arm's time (to within the one tick its states are apart), not
     # ticks times 1 ms (a third of it here).
     assert result.duration == pytest.approx(elapsed, abs=0.0031)

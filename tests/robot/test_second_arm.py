@@ -14,6 +14,8 @@ from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
 from sim_robot_node.core.arm_imperfections import ArmImperfections
 
+from arms import start
+
 PUSH = -15.0  # [N] the base policy
 
 
@@ -41,16 +43,17 @@ def test_the_model_has_the_urdfs_seven_joints_limits_and_the_simulators_masses(i
     np.testing.assert_array_equal(model.limits.torque, [50, 50, 30, 30, 30, 20, 20])
     np.testing.assert_array_equal(model.limits.velocity, np.full(7, 3.14))
     scene = ideal_xarm.simulation.scene
-    bodies = range(-1, p.getNumJoints(scene.robot, physicsClientId=scene.cid))
-    pybullet_mass = sum(p.getDynamicsInfo(scene.robot, j, physicsClientId=scene.cid)[0]
+    world = scene.world
+    bodies = range(-1, p.getNumJoints(world.robot, physicsClientId=world.cid))
+    pybullet_mass = sum(p.getDynamicsInfo(world.robot, j, physicsClientId=world.cid)[0]
                         for j in bodies)
     assert pybullet_mass == pytest.approx(sum(i.mass for i in model.model.inertias[1:])
                                           + 0.88556, abs=1e-6)   # + the fixed base link
     rng = np.random.default_rng(0)
     for _ in range(3):
         q = np.array(xarm7_arm().ready) + rng.uniform(-0.5, 0.5, 7)
-        simulated = p.calculateInverseDynamics(scene.robot, q.tolist(), [0.0] * 7, [0.0] * 7,
-                                               physicsClientId=scene.cid)
+        simulated = p.calculateInverseDynamics(world.robot, q.tolist(), [0.0] * 7, [0.0] * 7,
+                                               physicsClientId=world.cid)
         np.testing.assert_allclose(simulated, model.gravity(q), atol=1e-6)
         assert np.abs(model.gravity(q)).max() > 5.0        # a real load, not zeros
     assert np.all(np.abs(model.gravity(scene.joint_state().q)) < 0.5 * model.limits.torque)
@@ -71,7 +74,7 @@ def test_a_joint_order_other_than_the_urdfs_is_refused():
 
 def _episode(loop: RobotLoop, pose: int, rng: np.random.Generator | None,
              max_steps: int) -> tuple[bool, int]:
-    loop.reset(pose)
+    loop.reset(start(pose))
     for step in range(1, max_steps + 1):
         torques = (0.0, 0.0) if rng is None else tuple(3.0 * rng.uniform(-1.0, 1.0, 2))
         if loop.execute(WrenchSetpoint.residual(PUSH, *torques)).ground_truth.success:

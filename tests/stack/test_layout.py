@@ -424,7 +424,7 @@ def test_sourcing_the_workspace_alone_lets_ament_tools_find_every_nested_type(tm
     """``source install/setup.bash`` in a clean shell is enough for ``ros2 interface show``:
     the pip-installed std_msgs and geometry_msgs are found through the ament index."""
     types = ["qg_interfaces/msg/AtRest", "qg_interfaces/msg/WrenchSetpoint",
-             "qg_interfaces/srv/ResetSim"]
+             "qg_interfaces/srv/MoveToStart"]
     script = tmp_path / "show.py"
     script.write_text(_INTERFACE_SHOW)
     command = (f". '{ROOT / 'ros_ws/install/setup.bash'}' && "

@@ -12,16 +12,22 @@ from test_episodes import Episodes, wait_for_bag
 STEPS = 8
 
 
-def test_the_peg_task_and_the_nextage_scene_agree_on_the_geometry():
-    """The executor computes the tip from the tool pose with its own copy of the geometry."""
+def test_the_peg_task_and_the_nextage_scene_read_one_cell():
+    """The executor computes the tip from the tool pose with the cell the simulated Nextage is
+    built from: one file, ``config/peg_task.yaml``, which both declare."""
     from qg_common.params import config_file, load_ros_params
+    from qg_common.peg_task import PEG_TASK_FILE, PEG_TASK_SECTION, PegCell
+    from qg_learning_node.executor.parameters import CELL_SECTIONS
     from qg_learning_node.executor.peg_task import PegTaskConfig
+    from robot_bridge_node.core.hardware_interface import robot_plugin
     peg = PegTaskConfig.from_dict(load_ros_params(config_file("executor_nextage.yaml"))["peg"])
     assert peg == PegTaskConfig()
-    scene = load_ros_params(config_file("nextage.yaml"))["scene"]
-    assert list(peg.workspace_origin) == scene["workspace_origin"]
-    assert peg.workspace_side == scene["geometry"]["workspace_side"]
-    assert peg.tool_to_tip == scene["geometry"]["peg_length"]
+    assert PegCell.from_dict(load_ros_params(config_file("peg_task.yaml"))["peg_task"]) \
+        == PegCell()
+    plugin = robot_plugin("sim_nextage")
+    assert PEG_TASK_FILE in plugin.config_files and PEG_TASK_SECTION in plugin.parameters
+    assert CELL_SECTIONS["peg"] == (PEG_TASK_SECTION, PEG_TASK_FILE)
+    assert "geometry" not in load_ros_params(config_file("nextage.yaml"))["scene"]
 
 
 @pytest.mark.ros
@@ -40,6 +46,7 @@ def test_sim_nextage_is_a_position_robot_with_a_wrist_sensor():
     from robot_bridge_node.core.hardware_interface import robot_plugin
     from robot_bridge_node.core.position_loop import PositionLoop, build_position_loop
     from qg_common.node_parameters import package_defaults
+    from qg_common.peg_task import PegCell
     from qg_common.types import PoseReference, WrenchSetpoint
     plugin = robot_plugin("sim_nextage")
     assert plugin.interface == "position"
@@ -48,8 +55,10 @@ def test_sim_nextage_is_a_position_robot_with_a_wrist_sensor():
     loop = build_position_loop(robot, package_defaults(
         "bridge", (("robot_bridge_node", "bridge.yaml"), *plugin.config_files)))
     assert isinstance(loop, PositionLoop)
-    loop.reset(3)
+    cell = PegCell.from_dict(package_defaults("sim", plugin.config_files)["peg_task"])
+    loop.reset(cell.start_pose(3))
     start = loop.controller.tool.position.copy()
+    np.testing.assert_allclose(start, cell.start_pose(3).position, atol=1e-4)
     assert np.linalg.norm(loop.wrench_estimate) < 0.05        # tared in free air
     # A 1 cm move up: the pose reference goes through IK to the joint targets.
     result = loop.execute(WrenchSetpoint(np.zeros(6), PoseReference(
@@ -58,12 +67,10 @@ def test_sim_nextage_is_a_position_robot_with_a_wrist_sensor():
     np.testing.assert_allclose(loop.controller.tool.position, start + [0.0, 0.0, 0.01],
                                atol=1e-3)
     # The same start pose is the same place every time; another pose is another place.
-    loop.reset(3)
+    loop.reset(cell.start_pose(3))
     np.testing.assert_allclose(loop.controller.tool.position, start, atol=1e-4)
-    loop.reset(4)
+    loop.reset(cell.start_pose(4))
     assert np.linalg.norm(loop.controller.tool.position - start) > 0.01
-    with pytest.raises(ValueError, match="housing_yaw"):
-        loop.reset(0, housing_yaw=0.3)
     robot.simulation.scene.close()
 
 
@@ -72,6 +79,7 @@ def test_a_nextage_peg_episode_runs_through_the_ros_stack_and_is_recorded(stack)
     from qg_recording.bag_reader import read_bag
 
     from qg_common.params import package_config
+    from qg_common.peg_task import PegCell
     from qg_learning_node.executor.peg_task import PegTaskConfig
     executor_file = package_config("qg_learning_node", "executor_nextage.yaml")
     learner_file = package_config("qg_learning_node", "learner_nextage.yaml")
@@ -111,17 +119,16 @@ def test_a_nextage_peg_episode_runs_through_the_ros_stack_and_is_recorded(stack)
     assert [t.step for t in transitions] == list(range(STEPS))
     assert joint_names == {tuple(f"RARM_JOINT{i}" for i in range(6))}
     assert counts["/joint_states"] > 10 * STEPS and counts["/wrench_setpoint"] == STEPS
-    task = PegTaskConfig()
-    half = task.workspace_side / 2
+    task, cell = PegTaskConfig(), PegCell()
+    half = cell.geometry.workspace_side / 2
     for t in transitions:
         assert len(t.state) == len(t.action) == len(t.next_state) == 3
         assert -1.0 <= t.reward <= 0.0
-        # The state is the tip from the measured tool pose; the reward the simulator's
-        # tip-to-goal distance: they agree on where the tip is to a millimetre.
+        # State and reward are both the tip from the measured tool pose: the reward's
+        # tip-to-goal distance is the state's, to rounding.
         tip = np.asarray(t.next_state) * half + [0.0, 0.0, half]
-        goal = np.array([0.0, 0.0, 0.04 - 0.03])   # block height - hole depth (nextage.yaml)
         distance = -task.reward_length * np.log(t.reward + 1.0)
-        assert abs(np.linalg.norm(tip - goal) - distance) < 1e-3, (tip, distance)
+        assert abs(np.linalg.norm(tip - cell.geometry.goal) - distance) < 1e-9, (tip, distance)
     for before, after in zip(transitions, transitions[1:]):
         assert before.next_state == after.state
     assert stack.launcher.poll() == []

@@ -3,7 +3,7 @@
 Why: a user of Stable-Baselines3, CleanRL or RL Zoo can train on the shaft insertion (and any
 Gymnasium agent on the real ROS stack) without learning our runner, and our own algorithms can be
 checked against maintained implementations on exactly the same task. The environments wrap the
-cores the runner and the ROS nodes use (``PandaTask``, ``NextagePeg``, ``ResidualTask``,
+cores the runner and the ROS nodes use (``InsertionRobot``, ``NextagePeg``, ``ResidualTask``,
 ``Episode``); none of them has its own copy of the task logic.
 
 How gymnasium finds them: ``gymnasium.make("qg_experiments:QGInsertion-v0")`` (gymnasium's

@@ -1,4 +1,4 @@
-"""``QGInsertion-v0``: the Panda shaft insertion in process, on the fast runner's ``PandaTask``.
+"""``QGInsertion-v0``: the Panda shaft insertion in process, on the fast runner's ``InsertionRobot``.
 
 The robot side is the runner's (simulator, the bridge's 1 kHz loop, the EKF, read from the same
 ``config/`` files); the MDP is the executor's (:class:`~.residual_env.ResidualEnv`). A run of
@@ -17,7 +17,7 @@ import dataclasses
 import numpy as np
 
 from qg_experiments.gym_envs.residual_env import ResidualEnv
-from qg_experiments.runner import ARMS, ESTIMATORS, PandaTask, StackSettings
+from qg_experiments.runner import ARMS, DEFAULT_ROBOT, ESTIMATORS, InsertionRobot, StackSettings
 from qg_learning_node.executor.residual_task import Observation
 
 __all__ = ["InsertionEnv", "TRAIN_MAX_STEPS"]
@@ -37,32 +37,33 @@ class InsertionEnv(ResidualEnv):
     :param estimator: ``ekf`` (as the stack) | ``ground_truth`` (a perfect wrench sensor).
     :param housing_yaw: [rad] the housing's rotation about the vertical (start tilts turn with it).
     :param config_dir: the stack's ``config/``; ``None``: the installed files.
+    :param robot: the robot plugin (``sim_panda``, ``sim_panda_mujoco``, ...).
     """
 
     def __init__(self, observation: str | None = None, reward: str | None = None,
                  max_steps: int = TRAIN_MAX_STEPS, arm: str = "realistic",
                  arm_seed: int | None = None, estimator: str = "ekf", housing_yaw: float = 0.0,
-                 config_dir: str | None = None) -> None:
+                 config_dir: str | None = None, robot: str = DEFAULT_ROBOT) -> None:
         if arm not in ARMS:
             raise ValueError(f"arm must be one of {ARMS}, got {arm!r}")
         if estimator not in ESTIMATORS:
             raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
-        settings = StackSettings.load(config_dir, arm)
+        settings = StackSettings.load(config_dir, arm, robot)
+        if housing_yaw:
+            settings = settings.with_cell(housing_yaw=float(housing_yaw))
         task = dataclasses.replace(settings.task,
                                    observation=observation or settings.task.observation)
-        super().__init__(task, reward, max_steps)
+        super().__init__(task, settings.geometry, reward, max_steps)
         self.settings = dataclasses.replace(settings, task=task)
         self.arm, self.arm_seed, self.estimator = arm, arm_seed, estimator
-        self.housing_yaw = float(housing_yaw)
-        self.robot: PandaTask | None = None
+        self.robot: InsertionRobot | None = None
 
     def _reseed(self, seed: int) -> None:
         self._build(seed if self.arm_seed is None else self.arm_seed)
 
     def _build(self, arm_seed: int) -> None:
         self.close()
-        self.robot = PandaTask(self.settings.with_arm_seed(arm_seed), self.estimator)
-        self.robot.housing_yaw = self.housing_yaw
+        self.robot = InsertionRobot(self.settings.with_arm_seed(arm_seed), self.estimator)
 
     def _reset_robot(self, pose: int) -> Observation:
         if self.robot is None:

@@ -26,6 +26,7 @@ from gymnasium import spaces
 from qg_common.types import N_START_POSES
 
 from qg_learning_node.executor.episode import Episode
+from qg_common.shaft_task import ShaftTaskGeometry
 from qg_learning_node.executor.residual_task import (ACTION_DIM, Observation, ResidualTask,
                                                      TaskConfig)
 
@@ -36,16 +37,18 @@ class ResidualEnv(gymnasium.Env):
     """Base of the residual-policy environments; subclasses say how the robot resets and steps.
 
     :param task: the executor's task settings (observation, reward scales, ...).
+    :param geometry: the cell (its fixture, the target, the starts).
     :param reward: ``dense`` | ``sparse``; ``None``: ``task.reward``.
     :param max_steps: step cap of an episode (``truncated`` when it is reached).
     """
 
     metadata: dict[str, Any] = {"render_modes": []}
 
-    def __init__(self, task: TaskConfig, reward: str | None, max_steps: int) -> None:
+    def __init__(self, task: TaskConfig, geometry: ShaftTaskGeometry, reward: str | None,
+                 max_steps: int) -> None:
         if max_steps < 1:
             raise ValueError(f"max_steps must be >= 1, got {max_steps}")
-        self.residual = ResidualTask(task)
+        self.residual = ResidualTask(task, geometry)
         self.reward_kind = reward or task.reward
         if self.reward_kind not in ("dense", "sparse"):
             raise ValueError(f"reward must be dense or sparse, got {self.reward_kind!r}")
@@ -115,10 +118,14 @@ class ResidualEnv(gymnasium.Env):
         return np.asarray(state, dtype=np.float32)
 
     def _info(self, observation: Observation) -> dict[str, Any]:
-        episode = self._episode
-        return {"is_success": bool(observation.success),
-                "position_error": float(observation.position_error),
-                "orientation_error": float(observation.orientation_error),
-                "lateral_offset": float(observation.lateral_offset),
+        """The goal and the errors as the task measures them (the tool pose of the measured
+        joints); ``truly_inserted``: a simulation's truth, for evaluation (None without one)."""
+        episode, m = self._episode, self.residual.measure(observation)
+        truth = observation.truth
+        return {"is_success": bool(m.inserted),
+                "position_error": float(m.position_error),
+                "orientation_error": float(m.orientation_error_norm),
+                "lateral_offset": float(m.lateral_offset),
+                "truly_inserted": None if truth is None else bool(truth.success),
                 "pose": -1 if episode is None else episode.initial_pose,
                 "end_reason": "" if episode is None else episode.end_reason}

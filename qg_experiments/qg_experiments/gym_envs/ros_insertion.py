@@ -2,7 +2,7 @@
 
 Any Gymnasium agent learns through the real stack this way, as SERL's robot environments do over
 their robot servers: the environment takes the executor's place. A reset calls the robot's
-``sim/reset`` service, which opens a session (the bridge executes only that session's
+``move_to_start`` service, which opens a session (the bridge executes only that session's
 setpoints from then on, so a stale sender cannot move the arm) and answers with the settled
 start; a step publishes one wrench setpoint of the session on ``wrench_setpoint`` and waits for
 the ``ee_at_rest`` event that completes it. States, rewards, caps and the goal come from the
@@ -28,15 +28,16 @@ from typing import Any
 
 import numpy as np
 from qg_common import topics
-from qg_common.conversions import setpoint_msg
+from qg_common.conversions import setpoint_msg, start_pose_request
 from qg_common.params import config_file, load_ros_params
 from qg_interfaces.msg import AtRest, WrenchSetpoint
-from qg_interfaces.srv import ResetSim
+from qg_interfaces.srv import MoveToStart
 
 from qg_experiments.gym_envs.insertion import TRAIN_MAX_STEPS
 from qg_experiments.gym_envs.residual_env import ResidualEnv
 from qg_learning_node.cli.ros_client import CliNode, call_service
 from qg_learning_node.conversions import observation_from_msg
+from qg_learning_node.executor.parameters import load_geometry
 from qg_learning_node.executor.residual_task import Observation, TaskConfig
 
 __all__ = ["RosInsertionEnv"]
@@ -54,7 +55,7 @@ class RosInsertionEnv(ResidualEnv):
     :param reward: ``dense`` | ``sparse``; ``None``: ``executor.yaml``'s.
     :param max_steps: step cap of an episode (default: the grid's training cap, 50).
     :param step_timeout: [s] wall time to wait for one step's at-rest event.
-    :param reset_timeout: [s] wall time to wait for ``sim/reset`` (its discovery included).
+    :param reset_timeout: [s] wall time to wait for ``move_to_start`` (its discovery included).
     :param config_dir: the stack's ``config/``; ``None``: the installed files.
     """
 
@@ -66,13 +67,15 @@ class RosInsertionEnv(ResidualEnv):
                                                                 config_dir))["task"])
         if observation is not None:
             task = dataclasses.replace(task, observation=observation)
-        super().__init__(task, reward, max_steps)
+        geometry = load_geometry(load_ros_params(config_file("shaft_task.yaml", config_dir)),
+                                 "shaft_task.yaml")
+        super().__init__(task, geometry, reward, max_steps)
         if not step_timeout > 0 or not reset_timeout > 0:
             raise ValueError("step_timeout and reset_timeout must be > 0 s")
         self.namespace = namespace.strip("/")
         self.step_timeout, self.reset_timeout = float(step_timeout), float(reset_timeout)
         domain = domain_id if domain_id is not None else int(os.environ.get("ROS_DOMAIN_ID", 0))
-        self._reset_service = topics.robot_topic(self.namespace, topics.SIM_RESET)
+        self._reset_service = topics.robot_topic(self.namespace, topics.MOVE_TO_START)
         self._cli = CliNode("gym_env", domain_id=domain).__enter__()
         node = self._cli.node
         self._events: dict[int, AtRest] = {}
@@ -98,9 +101,9 @@ class RosInsertionEnv(ResidualEnv):
 
     def _reset_robot(self, pose: int) -> Observation:
         self.session = f"{self._env_id}_ep{self.episodes}"
-        response = call_service(self._cli, ResetSim, self._reset_service,
-                                ResetSim.Request(initial_pose=pose, housing_yaw=0.0,
-                                                 session=self.session), self.reset_timeout)
+        response = call_service(self._cli, MoveToStart, self._reset_service,
+                                start_pose_request(self.residual.start_pose(pose),
+                                                   session=self.session), self.reset_timeout)
         if not response.success:
             raise RuntimeError(f"{self._reset_service} refused the reset: {response.message}")
         # Nothing may be lost from here on: both ends of the step topics must be matched.

@@ -158,13 +158,14 @@ def wait_for_stack(cli, timeout: float, robots: Sequence[str] = ("",)) -> None:
     requests then go through clients the executors have long matched.
     """
     from qg_interfaces.msg import LearnerDiagnostics
-    from qg_interfaces.srv import ResetSim, StartEpisode
+    from qg_interfaces.srv import MoveToStart, StartEpisode
 
-    from qg_common.topics import LEARNER_DIAGNOSTICS, SIM_RESET, START_EPISODE
+    from qg_common.topics import LEARNER_DIAGNOSTICS, MOVE_TO_START, START_EPISODE
     heartbeats: list = []
     sub = cli.node.create_subscription(LearnerDiagnostics, "/" + LEARNER_DIAGNOSTICS,
                                        heartbeats.append, 10)
-    resets = {robot_name(r, SIM_RESET): cli.node.create_client(ResetSim, robot_name(r, SIM_RESET))
+    resets = {robot_name(r, MOVE_TO_START): cli.node.create_client(MoveToStart,
+                                                                   robot_name(r, MOVE_TO_START))
               for r in robots}
     clients = {**resets, **{robot_name(r, START_EPISODE):
                             cli.client(StartEpisode, robot_name(r, START_EPISODE)) for r in robots}}

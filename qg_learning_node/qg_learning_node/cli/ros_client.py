@@ -80,7 +80,7 @@ def call_service(cli: CliNode, srv_type: Any, name: str, request: Any,
 
     :param resend_after: [s] send the request again when it is unanswered this long; only for
         requests that are safe to repeat (queries, refused requests, parameter sets, a
-        ``sim/reset`` or ``start_episode`` with a ``request_id``), e.g. ``RESEND_AFTER``.
+        ``move_to_start`` or ``start_episode`` with a ``request_id``), e.g. ``RESEND_AFTER``.
     :raises TimeoutError: naming the service, when it is not available or does not answer.
     """
     client = cli.client(srv_type, name)

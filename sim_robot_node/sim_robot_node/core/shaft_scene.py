@@ -118,10 +118,12 @@ class ShaftSceneConfig:
             raise ValueError(f"engine must be one of {sorted(ENGINES)}, got {self.engine!r}")
         if not 0.0 < self.time_step <= 0.01:
             raise ValueError(f"time_step must be in (0, 0.01] s, got {self.time_step}")
-        for name in ("gravity", "bore_segments", "counterbore_segments", "plunger_mass",
+        for name in ("bore_segments", "counterbore_segments", "plunger_mass",
                      "plunger_friction", "shaft_mass", "friction"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        if not self.gravity >= 0.0:
+            raise ValueError(f"gravity must be >= 0, got {self.gravity}")
 
     @classmethod
     def from_dict(cls, params: dict[str, Any]) -> ShaftSceneConfig:
@@ -212,13 +214,13 @@ class ShaftScene:
         return self._steps * self.config.time_step
 
     def true_joint_state(self) -> JointState:
-        """The joints as they are (evaluation only), with the torque the drives realised."""
-        return self._true
+        """The joints as they are (evaluation only), with the last torque command."""
+        return JointState(self._true.q, self._true.dq, self._tau.copy())
 
     def joint_state(self) -> JointState:
         """What the driver reports: joint positions, velocities and measured torques (the last
         command as the torque sensors read it), with the arm's encoder and sensor errors."""
-        return self._true if self._measured is None else self._measured
+        return self.true_joint_state() if self._measured is None else self._measured
 
     def apply_torques(self, tau: np.ndarray) -> None:
         """Joint torques for the next step [Nm]; the caller enforces limits. With joint
@@ -243,7 +245,7 @@ class ShaftScene:
         """Take this step's true state and the driver's reading of it (once per step, so every
         ``joint_state`` of the step agrees)."""
         q, dq = self.world.arm_state()
-        self._true = JointState(q=q, dq=dq, tau=self._tau.copy())
+        self._true = JointState(q=q, dq=dq, tau=self._tau)
         if self._sensor_errors:
             m = self.arm_errors.measure(q, dq, self._tau)
             self._measured = JointState(q=m.q, dq=m.dq, tau=m.tau)

@@ -2,8 +2,8 @@
 
 A service reply can be lost: a client that the server has not matched yet does not get it
 (discovery runs per direction, more often late on a loaded host). So a client asks again with
-the same ``request_id`` (``sim/reset``, ``executor/start_episode``), and the server answers that
-from its last reply instead of resetting the robot, or starting an episode, a second time.
+the same ``request_id`` (``move_to_start``, ``executor/start_episode``), and the server answers
+that from its last reply instead of moving the robot, or starting an episode, a second time.
 Pure: no rclpy.
 """
 from __future__ import annotations

@@ -1,8 +1,12 @@
-"""Rotation helpers shared by the simulator, the controller and the message conversions.
+"""Rotation helpers shared by the simulator, the controller, the task and the message
+conversions.
 
 Thin names over Pinocchio's SO(3) maps, which the controller already uses (`pin.log3` in the
-impedance law): `exp3` (Rodrigues), `log3` (right up to and at pi, where a formula through
-``acos`` and the skew part loses the axis' signs) and Eigen's quaternion of a matrix. Eigen picks
+impedance law): `log3` (right up to and at pi, where a formula through ``acos`` and the skew part
+loses the axis' signs) and Eigen's quaternion of a matrix; Pinocchio is imported by those
+functions only, so the task's geometry (``shaft_task``, which the executor's core uses on a
+machine without the robot's libraries) needs NumPy alone: a rotation from an axis and an angle
+is Rodrigues' formula. Eigen picks
 the sign by the matrix (``w > 0`` if the trace is positive, else the component of the largest
 diagonal entry), so the quaternion is continuous around the tool pointing down (a half turn,
 w close to 0, x chosen positive), where a ``w >= 0`` rule flips every sign whenever the tool
@@ -14,15 +18,21 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pinocchio as pin
 
 __all__ = ["axis_angle_matrix", "housing_rotation", "matrix_from_quaternion",
            "quaternion_from_matrix", "rotation_log", "tilt_from_down"]
 
 
 def axis_angle_matrix(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rotation matrix about the unit vector ``axis`` by ``angle`` [rad]."""
-    return pin.exp3(np.asarray(axis, float) * float(angle))
+    """Rotation matrix about ``axis`` by ``angle`` [rad] (Rodrigues; the rotation vector is
+    ``axis * angle``, so a non-unit axis scales the angle, as ``exp3`` of it would)."""
+    vector = np.asarray(axis, float) * float(angle)
+    theta = math.sqrt(float(vector @ vector))
+    if theta < 1e-12:
+        return np.eye(3)
+    x, y, z = vector / theta
+    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    return np.eye(3) + math.sin(theta) * k + (1.0 - math.cos(theta)) * (k @ k)
 
 
 def housing_rotation(yaw: float, tilt: float = 0.0) -> np.ndarray:
@@ -36,11 +46,13 @@ def housing_rotation(yaw: float, tilt: float = 0.0) -> np.ndarray:
 
 def rotation_log(rotation: np.ndarray) -> np.ndarray:
     """Angle-axis vector (angle in [0, pi]) of a rotation matrix."""
+    import pinocchio as pin
     return pin.log3(np.asarray(rotation, float))
 
 
 def quaternion_from_matrix(rotation: np.ndarray) -> tuple[float, float, float, float]:
     """Unit quaternion ``(x, y, z, w)`` of a rotation matrix, with Eigen's sign (see above)."""
+    import pinocchio as pin
     x, y, z, w = pin.Quaternion(np.asarray(rotation, float)).coeffs().tolist()
     return x, y, z, w
 
@@ -50,6 +62,7 @@ def matrix_from_quaternion(x: float, y: float, z: float, w: float) -> np.ndarray
 
     A zero or non-finite quaternion gives a NaN matrix, which the safety filter rejects.
     """
+    import pinocchio as pin
     norm = math.sqrt(x * x + y * y + z * z + w * w)
     if not (math.isfinite(norm) and norm > 0.0):
         return np.full((3, 3), math.nan)
