@@ -7,10 +7,25 @@ import uuid
 import numpy as np
 import rclpy.qos
 from qg_interfaces.msg import AtRest, WrenchSetpoint
-from qg_interfaces.srv import ResetSim
+from qg_interfaces.srv import MoveToStart
 from qg_learning_node.cli.ros_client import RESEND_AFTER, CliNode, call_service
 from qg_common import conversions, types
-from qg_common.conversions import time_msg
+from qg_common.conversions import start_pose_request, time_msg
+from qg_common.params import config_file, load_ros_params
+from qg_common.peg_task import PegCell
+from qg_common.shaft_task import ShaftTaskGeometry
+
+
+def shaft_start(index: int) -> types.StartPose:
+    """The installed shaft cell's start ``index`` (what the executor asks for)."""
+    return ShaftTaskGeometry.from_dict(
+        load_ros_params(config_file("shaft_task.yaml"))["shaft_task"]).start_pose(index)
+
+
+def peg_start(index: int) -> types.StartPose:
+    """The installed peg cell's start ``index`` (the Nextage's)."""
+    return PegCell.from_dict(
+        load_ros_params(config_file("peg_task.yaml"))["peg_task"]).start_pose(index)
 
 #: Best effort like the 1 kHz publishers, deep enough that a slow test process loses nothing.
 DEEP = rclpy.qos.QoSProfile(depth=2000, reliability=rclpy.qos.ReliabilityPolicy.BEST_EFFORT)
@@ -30,17 +45,19 @@ class RobotClient:
         self.setpoints = cli.node.create_publisher(WrenchSetpoint, f"{namespace}/wrench_setpoint",
                                                    10)
 
-    def reset(self, pose: int, timeout: float = 60.0, session: str = "") -> ResetSim.Response:
-        """Reset to ``pose``; the bridge then serves only ``session``'s setpoints ("" = any).
+    def reset(self, pose: int | types.StartPose, timeout: float = 60.0,
+              session: str = "") -> MoveToStart.Response:
+        """Move to the shaft cell's start ``pose`` (or to a given start); the bridge then serves
+        only ``session``'s setpoints ("" = any).
 
         Asked again after ``RESEND_AFTER`` s without a reply (a reply to a client the server has
         not matched yet is lost), with the same request id: the robot answers that without
-        resetting twice.
+        moving twice.
         """
-        request = ResetSim.Request(initial_pose=pose, session=session,
-                                   request_id=uuid.uuid4().hex)
-        return call_service(self.cli, ResetSim, f"{self.namespace}/sim/reset", request, timeout,
-                            resend_after=RESEND_AFTER)
+        start = shaft_start(pose) if isinstance(pose, int) else pose
+        request = start_pose_request(start, session=session, request_id=uuid.uuid4().hex)
+        return call_service(self.cli, MoveToStart, f"{self.namespace}/move_to_start", request,
+                            timeout, resend_after=RESEND_AFTER)
 
     def send(self, seq: int, wrench: tuple[float, ...], session: str = "") -> None:
         assert self.cli.spin_until(lambda: self.setpoints.get_subscription_count() > 0, 30.0), \

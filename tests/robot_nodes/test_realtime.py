@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import Stack
 from qg_common import conversions
-from robot_client import DEEP, RobotClient, wrench
+from robot_client import DEEP, RobotClient, peg_start, wrench
 
 pytestmark = pytest.mark.ros
 
@@ -188,7 +188,7 @@ def test_a_position_robot_runs_as_separate_sim_and_bridge_processes(nextage: Sta
         # The first reset right after start-up: the bridge is still commanding the old pose.
         # (sim/restarted is latched: the start's restart may come first.)
         asked = time.time_ns()
-        reply = robot.reset(2, timeout=30.0)
+        reply = robot.reset(peg_start(2), timeout=30.0)
         assert reply.success, reply.message + stack.logs()
         assert cli.spin_until(lambda: restarts and restarts[-1] > asked, 5.0), restarts
         # The reply is the bridge's report of settling from this reset, not from the start.
@@ -225,7 +225,7 @@ def test_a_bridge_started_after_a_reset_takes_control_of_the_separate_sim(nextag
     stack = nextage
     with stack.client() as cli:
         robot = RobotClient(cli)
-        assert robot.reset(3, timeout=30.0).success, stack.logs()
+        assert robot.reset(peg_start(3), timeout=30.0).success, stack.logs()
         bridge = next(r for r in stack.launcher.running if r.spec.name == "bridge").popen
         bridge.send_signal(signal.SIGINT)
         assert bridge.wait(timeout=10.0) == 0, stack.logs()

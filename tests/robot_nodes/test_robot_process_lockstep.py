@@ -1,6 +1,7 @@
 """The composed ``robot`` process in lockstep: resets, RL steps, bad input, clean exit."""
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Iterator
@@ -8,7 +9,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 from conftest import Stack
-from robot_client import DEEP, RobotClient, wrench
+from robot_client import DEEP, RobotClient, shaft_start, wrench
 
 pytestmark = pytest.mark.ros
 
@@ -101,7 +102,8 @@ def test_a_reset_asked_again_with_its_request_id_is_answered_not_redone(
         robot_process: Stack) -> None:
     """A client whose reply got lost asks again with the same id: it gets the first reply, and
     the arm, which has moved on, is not reset again (no settling: the lockstep clock stands)."""
-    from qg_interfaces.srv import ResetSim
+    from qg_common.conversions import start_pose_request
+    from qg_interfaces.srv import MoveToStart
     from rosgraph_msgs.msg import Clock
 
     from qg_learning_node.cli.ros_client import call_service
@@ -111,21 +113,21 @@ def test_a_reset_asked_again_with_its_request_id_is_answered_not_redone(
         cli.node.create_subscription(
             Clock, "/clock", lambda m: clock.append(m.clock.sec * 10**9 + m.clock.nanosec), DEEP)
         robot = RobotClient(cli)
-        request = ResetSim.Request(initial_pose=2, request_id="reset-once")
-        first = call_service(cli, ResetSim, "/sim/reset", request, 60.0)
+        request = start_pose_request(shaft_start(2), request_id="reset-once")
+        first = call_service(cli, MoveToStart, "/move_to_start", request, 60.0)
         assert first.success, first.message + stack.logs()
         moved = robot.step(1, (0.0, 0.0, -10.0, 1.0, 0.0, 0.0))
         assert moved is not None, stack.logs()
         cli.spin_for(0.3)
         before = clock[-1]
-        again = call_service(cli, ResetSim, "/sim/reset", request, 60.0)
+        again = call_service(cli, MoveToStart, "/move_to_start", request, 60.0)
         cli.spin_for(0.3)
         assert (again.success, again.message, again.observation) == \
             (first.success, first.message, first.observation)
         assert clock[-1] == before                      # nothing stepped: no second reset
-        assert "reset reset-once asked again: its reply again" in stack.logs()
-        fresh = call_service(cli, ResetSim, "/sim/reset",
-                             ResetSim.Request(initial_pose=2, request_id="reset-twice"), 60.0)
+        assert "move_to_start reset-once asked again: its reply again" in stack.logs()
+        fresh = call_service(cli, MoveToStart, "/move_to_start",
+                             start_pose_request(shaft_start(2), request_id="reset-twice"), 60.0)
         cli.spin_for(0.3)
         assert fresh.success and clock[-1] >= before + 0.1e9 - 1   # a new id: settled again
 
@@ -136,9 +138,12 @@ def test_bad_reset_and_nan_setpoint_are_rejected_and_the_process_stays_up(
     stack = robot_process
     with stack.client() as cli:
         robot = RobotClient(cli)
-        bad = robot.reset(9)
-        assert not bad.success
-        assert "initial_pose" in bad.message and "0..7" in bad.message
+        nowhere = shaft_start(2)
+        bad = robot.reset(dataclasses.replace(nowhere, position=np.array([0.4, math.nan, 0.3])))
+        assert not bad.success and "finite" in bad.message, bad.message
+        far = robot.reset(dataclasses.replace(nowhere, position=np.array([3.0, 0.0, 0.3])))
+        assert not far.success and "moving to start 2 failed" in far.message, far.message
+        assert "inverse kinematics did not converge" in far.message
 
         assert robot.step(1, (0.0, 0.0, math.nan, 0.0, 0.0, 0.0), timeout=1.0) is None
         logs = stack.logs()

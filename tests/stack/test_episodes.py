@@ -59,8 +59,8 @@ class Episodes:
             "the learner is not up"
 
     def wait_for_robot(self, timeout: float = 60.0) -> None:
-        from qg_interfaces.srv import ResetSim
-        client = self.cli.node.create_client(ResetSim, "/sim/reset")
+        from qg_interfaces.srv import MoveToStart
+        client = self.cli.node.create_client(MoveToStart, "/move_to_start")
         assert self.cli.spin_until(client.service_is_ready, timeout), "the robot is not up"
         self.cli.node.destroy_client(client)
 
@@ -384,8 +384,7 @@ def test_in_process_runner_repeats_the_ros_stack_episode(stack, tmp_path):
     start pose, the learner's initial actor, no noise) gives the same transitions in both."""
     from qg_learning_node.executor.episode import Episode
     from qg_learning_node.learner.learner_params import learner_config_from_params
-    from qg_experiments.runner import (LivePolicy, PandaTask, StackSettings,
-                                       run_episode)
+    from qg_experiments.runner import LivePolicy, InsertionRobot, StackSettings, run_episode
     from qg_learning_node.learner.learner_core import LearnerCore
     from qg_learning_node.executor.residual_task import ACTION_DIM, OBSERVATION_COMPONENTS
     from qg_learning_node.learner.offline import iter_transitions
@@ -409,10 +408,7 @@ def test_in_process_runner_repeats_the_ros_stack_episode(stack, tmp_path):
     settings = dataclasses.replace(
         settings, task=dataclasses.replace(settings.task, test_max_steps=steps))
     params = load_ros_params(config_file("learner.yaml"), "learner")["learner"]
-    env = PandaTask(settings, "ekf")
-    # The robot process settles its start pose (sim.initial_pose, 0) when it starts, and
-    # pybullet keeps contact state across resets: give the twin the same history.
-    env.reset(load_ros_params(config_file("sim.yaml"))["sim"]["initial_pose"])
+    env = InsertionRobot(settings, "ekf")     # holds the arm where it starts, as the process does
     learner = LearnerCore(learner_config_from_params(params), env.residual.state_dim, ACTION_DIM)
     local: list = []
     episode = Episode("local", "test", pose, "dense", env.residual)
