@@ -8,6 +8,7 @@ through ``core/hardware_interface.py``: which robot it is was decided by the plu
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -23,7 +24,7 @@ from robot_bridge_node.core.hardware_interface import (Robot, SimulationInterfac
 from robot_bridge_node.core.impedance import HybridImpedanceController, ImpedanceConfig
 from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
 from robot_bridge_node.core.safety import SafetyFilter, SafetyLimits
-from robot_bridge_node.core.start_motion import ResetConfig, StartMotion
+from robot_bridge_node.core.start_motion import Arrival, ResetConfig, StartMotion
 
 __all__ = ["WrenchEstimator", "MeasuredWrench", "LoopConfig", "LoopClock", "TickClock",
            "StateClock", "RobotLoop", "build_loop"]
@@ -222,40 +223,63 @@ class RobotLoop:
         """
         if self.teleports:
             self.simulation.teleport(start)
+            self.settle_here()
         else:
-            self._move_to(start)
-        self.settle_here()
+            self.settle_here(self._move_to(start))
 
-    def settle_here(self) -> None:
-        """Restart the episode's clock and the estimator where the arm is and hold it there for
-        ``settle_time`` (the end of every reset; alone, after a separate simulation put the arm
-        at its start)."""
+    def settle_here(self, reference: PoseReference | None = None) -> None:
+        """Restart the episode's clock and the estimator where the arm is and hold it there,
+        stiffly (the holding gains: the task's leave z free), for ``settle_time`` (the end of
+        every reset; alone, after a separate simulation put the arm at its start). The first
+        setpoint releases the hold.
+
+        :param reference: the pose to hold (a motion's arrival); ``None``: the pose now.
+        """
         state = self._restart()
         self.controller.reset(state.q)
         self.safety.reset(self.controller.model.gravity(state.q))
-        self.setpoint = _HOLD
-        self.holding = False
+        self.controller.hold(state.q)
+        self.setpoint = _HOLD if reference is None else WrenchSetpoint(np.zeros(6), reference)
+        self.holding = True
         self._settle()
-        self.controller.set_reference_to_current(self.hardware.read().q)
 
-    def _move_to(self, start: StartPose) -> None:
-        """Tick through the motion to ``start`` with the holding gains (see ``start_motion``)."""
+    def _move_to(self, start: StartPose) -> PoseReference:
+        """Tick through the motion to ``start`` with the holding gains, then through its arrival
+        (see ``start_motion``); the reference the arm arrived with.
+
+        :raises RuntimeError: if the start is out of reach, or not reached in time.
+        """
         state = self.hardware.read()
-        motion = StartMotion(self.controller.model, state.q, start, self.reset_config)
+        config = self.reset_config
+        motion = StartMotion(self.controller.model, state.q, start, config)
         if self.controller.q_null is None:
             self.controller.reset(state.q)
         self.controller.hold(state.q)
         self.holding = True                  # the watchdog leaves a moving arm alone
         began = self.time
-        while True:
-            t = self.time - began
-            sample = motion.at(t)
+        while self.time - began < motion.duration:
+            sample = motion.at(self.time - began)
             self.controller.set_posture(sample.posture)
-            self.setpoint = WrenchSetpoint(np.zeros(6),
-                                           PoseReference(sample.position, sample.rotation))
-            self.tick()
-            if t >= motion.duration:
-                break
+            self._hold_at(PoseReference(sample.position, sample.rotation))
+        arrival, rest = Arrival(start, config), self.rest.config
+        began = self.time
+        while self.time - began < config.arrive_timeout:
+            tool = self.controller.tool
+            reference = PoseReference(*arrival.reference(tool.position, tool.rotation,
+                                                         tool.linear_speed, self.config.dt))
+            self._hold_at(reference)
+            tool = self.controller.tool
+            if arrival.arrived(tool.linear_speed, tool.angular_speed, rest.linear_threshold,
+                               rest.angular_threshold):
+                return reference
+        raise RuntimeError(f"the arm did not arrive at the start within {config.arrive_timeout} "
+                           f"s (off by {arrival.position_error * 1e3:.2f} mm, "
+                           f"{math.degrees(arrival.angle_error):.2f} deg)")
+
+    def _hold_at(self, reference: PoseReference) -> None:
+        """One tick holding ``reference`` with no feed-forward wrench."""
+        self.setpoint = WrenchSetpoint(np.zeros(6), reference)
+        self.tick()
 
     def _restart(self) -> JointState:
         """Restart the clock and the estimator at the arm's state now."""

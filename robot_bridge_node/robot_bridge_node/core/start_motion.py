@@ -12,10 +12,16 @@ moves along it:
    the bridge's model, from the current joints, so the posture changes least); the tool's
    reference follows the forward kinematics of the interpolated joints and the null-space
    posture the joints themselves, so the arm moves as a joint motion;
-3. **approach**: straight along the approach axis into the start.
+3. **approach**: straight along the approach axis into the start;
 
-``StartMotion`` is the plan as a function of time; ``RobotLoop.reset`` ticks through it and then
-settles at the start. Speeds are the bridge's ``reset.*`` parameters.
+and then it **arrives**: it holds the start until the tool is there and at rest. A stiff spring
+alone leaves the arm off by what its model does not know (an unknown payload sags the tool
+0.3 mm at 3000 N/m, joint friction holds the wrist half a degree away); ``Arrival`` moves the
+reference by the integral of the remaining error until the measured tool is at the start.
+
+``StartMotion`` is the plan as a function of time; ``RobotLoop.reset`` ticks through it, then
+through ``Arrival``, and settles holding the reference it arrived with. Speeds and tolerances
+are the bridge's ``reset.*`` parameters.
 """
 from __future__ import annotations
 
@@ -29,7 +35,7 @@ from qg_common.types import StartPose
 
 from robot_bridge_node.core.arm_model import ArmModel
 
-__all__ = ["ResetConfig", "StartMotion", "MotionSample"]
+__all__ = ["ResetConfig", "StartMotion", "MotionSample", "Arrival"]
 
 
 @dataclass(frozen=True)
@@ -42,14 +48,25 @@ class ResetConfig:
     :param linear_speed: [m/s] the tool's speed backing out and approaching along the axis.
     :param joint_speed: [rad/s] the peak joint speed of the joint motion.
     :param min_duration: [s] the joint motion takes at least this long.
+    :param arrive_tolerance: [m] at the end of the path the arm holds the start until its tool
+        is this close to it, ``arrive_angle`` [rad] turned from it and at rest (the rest
+        detector's thresholds) ...
+    :param arrive_timeout: [s] ... or gives up after this long (the reset fails).
+    :param arrive_gain: [1/s] the rate at which the reference moves to cancel the remaining
+        error (the integral action of the arrival).
     """
     teleport: bool = True
     linear_speed: float = 0.05
     joint_speed: float = 0.5
     min_duration: float = 0.5
+    arrive_tolerance: float = 0.0002
+    arrive_angle: float = 0.005
+    arrive_timeout: float = 2.0
+    arrive_gain: float = 3.0
 
     def __post_init__(self) -> None:
-        for name in ("linear_speed", "joint_speed", "min_duration"):
+        for name in ("linear_speed", "joint_speed", "min_duration", "arrive_tolerance",
+                     "arrive_angle", "arrive_timeout", "arrive_gain"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"reset.{name} must be finite and > 0, got {value}")
@@ -124,3 +141,52 @@ class StartMotion:
         position = self.entry + s * (self.start_position - self.entry)
         return MotionSample(position, self.rotation, self.q_entry)
 
+
+
+class Arrival:
+    """The end of a move to ``start``: the reference moved by the integral of the measured
+    tool's error, until the tool is at the start and still (see the module doc).
+
+    :param start: where the tool should be.
+    :param config: tolerances, gain and time limit.
+    """
+
+    #: The error is integrated within this many tolerances of the start ...
+    CATCH_UP = 10.0
+    #: [m/s] ... and below this tool speed.
+    CATCH_UP_SPEED = 0.01
+
+    def __init__(self, start: StartPose, config: ResetConfig) -> None:
+        self.position = np.asarray(start.position, float)
+        self.rotation = np.asarray(start.rotation, float)
+        self.config = config
+        self._shift = np.zeros(3)        # [m] the reference's offset from the start
+        self._turn = np.zeros(3)         # [rad] its rotation vector, base frame
+        self.position_error = math.inf
+        self.angle_error = math.inf
+
+    def reference(self, position: np.ndarray, rotation: np.ndarray, linear_speed: float,
+                  dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """The reference for the next tick, given the tool's measured pose and speed now.
+
+        The error is integrated only once the arm has caught up with the path (within
+        ``CATCH_UP`` times the tolerance, moving slower than ``CATCH_UP_SPEED``): the path's own
+        lag (5 mm at 0.05 m/s under the holding gains) would wind the integral up.
+        """
+        import pinocchio as pin
+        error = self.position - position
+        turn = pin.log3(self.rotation @ rotation.T)
+        self.position_error = float(np.linalg.norm(error))
+        self.angle_error = float(np.linalg.norm(turn))
+        if (self.position_error < self.CATCH_UP * self.config.arrive_tolerance
+                and linear_speed < self.CATCH_UP_SPEED):
+            self._shift += self.config.arrive_gain * dt * error
+            self._turn += self.config.arrive_gain * dt * turn
+        return self.position + self._shift, pin.exp3(self._turn) @ self.rotation
+
+    def arrived(self, linear_speed: float, angular_speed: float, linear_rest: float,
+                angular_rest: float) -> bool:
+        """At the start within the tolerances, and at rest by the rest detector's thresholds."""
+        return (self.position_error < self.config.arrive_tolerance
+                and self.angle_error < self.config.arrive_angle
+                and linear_speed < linear_rest and angular_speed < angular_rest)
