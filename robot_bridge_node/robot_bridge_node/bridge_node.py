@@ -13,7 +13,9 @@ up by the name its plugin gives: this module names no robot and no kind.
 """
 from __future__ import annotations
 
+import math
 import threading
+import time
 from collections.abc import Callable
 
 import numpy as np
@@ -105,12 +107,25 @@ class RosOutlet:
         log_at(self.bridge, level, message)
 
 
+#: [s] The same line from the loop is logged at most this often.
+LOG_REPEAT = 1.0
+_logged: dict[tuple[str, str], float] = {}
+
+
 def log_at(node: Node, level: str, message: str) -> None:
-    """Log a line the loop reported (``info``, ``warning``, else error), at most once a second
-    for the same call site (a loop can repeat a complaint every tick)."""
+    """Log a line the loop reported (``info``, ``warning``, else error), the same line at most
+    once a second (a loop can repeat a complaint every tick). Throttled by its text, not by
+    rclpy's call site: every line comes through here, and a rejected setpoint's line once
+    went unlogged because a failed reset's had been logged the moment before."""
+    now, key = time.monotonic(), (level, message)
+    if now - _logged.get(key, -math.inf) < LOG_REPEAT:
+        return
+    _logged[key] = now
+    if len(_logged) > 1000:              # lines carrying numbers: forget the old ones
+        for old in [k for k, t in _logged.items() if now - t >= LOG_REPEAT]:
+            del _logged[old]
     logger = node.get_logger()
-    {"info": logger.info, "warning": logger.warning}.get(level, logger.error)(
-        message, throttle_duration_sec=1.0)
+    {"info": logger.info, "warning": logger.warning}.get(level, logger.error)(message)
 
 
 # --- separate-process mode ------------------------------------------------------------------

@@ -71,8 +71,9 @@ class NextagePegEnv(gymnasium.Env):
     def _info(self, start: int | None = None) -> dict[str, Any]:
         observation = self.peg.observation
         assert observation is not None
-        info: dict[str, Any] = {"is_success": bool(observation.success),
-                                "position_error": float(observation.position_error),
+        task = self.peg.task
+        info: dict[str, Any] = {"is_success": task.succeeded(observation),
+                                "position_error": task.distance(observation),
                                 "tip": self.peg.tip()}
         if start is not None:
             info["start"] = start

@@ -150,8 +150,13 @@ class LoopRunner:
         self._step_start: float | None = None   # loop time of the running step's start
 
     def run(self, stop: threading.Event) -> None:
-        """Hold the robot where it is (``RobotLoop.begin``: no motion at start-up), then tick
-        until ``stop`` is set (the body of the loop's thread or process)."""
+        """Hold the robot where it is (``RobotLoop.begin``: no motion at start-up) once it has a
+        state (the first tick due: a remote robot's first state), then tick until ``stop`` is
+        set (the body of the loop's thread or process)."""
+        while not (self.lockstep or stop.is_set() or self.pace()):
+            pass
+        if stop.is_set():
+            return
         self.begin()
         while not stop.is_set():
             if self.lockstep:
