@@ -17,6 +17,7 @@ import argparse
 import importlib
 import os
 import signal
+import subprocess
 import sys
 import threading
 import time
@@ -28,7 +29,7 @@ from qg_common.params import ConfigError, load_ros_params, package_config
 from franka_robot_node.core.franka_config import FrankaConfig
 from franka_robot_node.core.franky_sim_host import FrankySimHost, SceneExtension
 
-__all__ = ["main", "scene_extensions", "DEFAULT_SCENE"]
+__all__ = ["main", "scene_extensions", "spawn", "DEFAULT_SCENE"]
 
 #: The scene ``franka_sim`` builds unless told otherwise.
 DEFAULT_SCENE = "franka_robot_node.core.franky_sim_scene:demo_scene"
@@ -47,6 +48,37 @@ def scene_extensions(name: str, config: FrankaConfig) -> list[SceneExtension]:
     except (ImportError, AttributeError) as exc:
         raise ValueError(f"--scene {name!r}: {exc}") from exc
     return list(make(config.tool))
+
+
+def spawn(address: str, *args: str, timeout: float = 30.0) -> subprocess.Popen:
+    """``franka_sim`` serving at ``address`` as a child process (``python -m``), returned once
+    it serves; its standard input takes ``wrench`` lines, its output is a pipe.
+
+    :param args: more of ``franka_sim``'s arguments.
+    :raises RuntimeError: if it ended or did not serve within ``timeout`` seconds (with what it
+        printed).
+    """
+    process = subprocess.Popen([sys.executable, "-m", "franka_robot_node.franka_sim",
+                                "--address", address, *args], stdin=subprocess.PIPE,
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                               bufsize=1)
+    lines: list[str] = []
+    ready = threading.Event()
+
+    def pump() -> None:
+        for line in process.stdout:
+            lines.append(line.rstrip())
+            if "serving libfranka" in line:
+                ready.set()
+        ready.set()
+
+    threading.Thread(target=pump, daemon=True, name="franka_sim output").start()
+    if not ready.wait(timeout) or process.poll() is not None:
+        process.kill()
+        raise RuntimeError(f"franka_sim did not serve at {address} within {timeout} s: "
+                           + " | ".join(lines))
+    process.output = lines  # type: ignore[attr-defined]
+    return process
 
 
 def _serve_stdin(host: FrankySimHost, stdin: TextIO, out: TextIO) -> None:

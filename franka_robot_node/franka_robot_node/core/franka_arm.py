@@ -202,7 +202,7 @@ class FrankaArm:
             raise RuntimeError("write before the first read: no state to answer")
         state = self._state
         stamp = state.time.to_msec()
-        sent = tau - self._model.gravity(state.q, state.m_total, state.F_x_Ctotal)
+        sent = tau - self.robot_gravity()
         starting = self._motion is None
         if starting:                       # the robot held gravity alone until now
             self._last_sent = np.zeros_like(sent)
@@ -219,6 +219,14 @@ class FrankaArm:
         self.commanded = tau
 
     # --- what libfranka tells beside the seam --------------------------------------------------
+    def robot_gravity(self) -> np.ndarray:
+        """(7,) [Nm] the gravity torque the robot adds to every command at the last state read:
+        libfranka's model with the state's end effector and load (``m_total``, ``F_x_Ctotal``)."""
+        state = self._state
+        if state is None:
+            raise RuntimeError("no state read yet")
+        return self._model.gravity(state.q, state.m_total, state.F_x_Ctotal)
+
     def external_wrench(self) -> np.ndarray:
         """(6,) libfranka's estimate of the external wrench on the end effector
         (``O_F_ext_hat_K``: base frame, at the stiffness frame K) in the last state read."""
