@@ -259,9 +259,11 @@ class FrankaArm:
         return message
 
     def close(self) -> None:
-        """Stop the torque motion (libfranka then holds the arm) and forget it."""
-        if self._motion is not None and self.robot.is_in_control:
-            self.robot.stop()
+        """Stop the torque motion (libfranka then holds the arm) and forget it, and how it
+        ended: franky keeps a motion's exception for the next ``move`` otherwise."""
+        if self._motion is not None:
+            if self.robot.is_in_control:
+                self.robot.stop()
             try:
                 self.robot.join_motion(1.0)
             except Exception:  # noqa: BLE001 - the stop preempts the motion with an exception
