@@ -18,7 +18,8 @@ cylinder's tip) on a private loopback address, connects ``robot:=franka`` and me
 
 The benchmark process runs at ``SCHED_FIFO`` ``--priority`` (the loop process's default, 50) and
 franky-sim at ``--sim-priority`` (40), as a robot's own computer would; 0 runs either at normal
-priority. The last line is one JSON object.
+priority. A loop that stalls past libfranka's signal timeout ends the run's phases with the
+fault libfranka reported (``fault``). The last line is one JSON object.
 
 Usage: python benchmarks/franka_bench.py [--hold 10] [--steps 20] [--priority 50]
 """
@@ -31,7 +32,7 @@ import os
 import time
 
 import numpy as np
-from franka_robot_node.core.franka_arm import FrankaConnectError
+from franka_robot_node.core.franka_arm import FrankaConnectError, FrankaFault
 from franka_robot_node.core.start_in_place import StartInPlace
 from franka_robot_node.franka_sim import spawn
 from franka_robot_node.plugin import FRANKA
@@ -161,21 +162,27 @@ def main() -> None:
     try:
         params = {"franka": {"address": address}}
         robot = FRANKA.create(params)
-        results["hold"] = hold(robot, args.hold)
-        print(f"hold {args.hold} s: {results['hold']}", flush=True)
-        robot.hardware.close()                       # the loop's first write starts anew
-        bridge = robot_defaults(FRANKA, (("robot_bridge_node", "bridge.yaml"),), "bridge")
-        ekf = load_ros_params(package_config("robot_bridge_node", "wrench_estimator.yaml"))
-        loop = build_loop(dataclasses.replace(robot, simulation=StartInPlace()), bridge,
-                          lambda robot, model: build_ekf(ekf, model),
-                          StateClock(robot.hardware, 0.02))
-        loop.reset(0)
-        results["loop"] = loop_steps(loop, args.steps)
-        print(f"loop, {args.steps} steps: {results['loop']}", flush=True)
-        results["push"] = known_push(loop, sim)
-        print(f"known push on the hand: {results['push']}", flush=True)
-        robot.hardware.close()
-        results["success_rate_end"] = robot.hardware.command_success_rate()
+        arm = robot.hardware
+        try:
+            results["hold"] = hold(robot, args.hold)
+            print(f"hold {args.hold} s: {results['hold']}", flush=True)
+            arm.close()                              # the loop's first write starts anew
+            bridge = robot_defaults(FRANKA, (("robot_bridge_node", "bridge.yaml"),), "bridge")
+            ekf = load_ros_params(package_config("robot_bridge_node", "wrench_estimator.yaml"))
+            loop = build_loop(dataclasses.replace(robot, simulation=StartInPlace()), bridge,
+                              lambda robot, model: build_ekf(ekf, model),
+                              StateClock(arm, 0.02))
+            loop.reset(0)
+            results["loop"] = loop_steps(loop, args.steps)
+            print(f"loop, {args.steps} steps: {results['loop']}", flush=True)
+            results["push"] = known_push(loop, sim)
+            print(f"known push on the hand: {results['push']}", flush=True)
+        except FrankaFault as exc:                   # what a stalled loop gets from libfranka
+            results["fault"] = {"after_phases": [k for k in ("hold", "loop", "push")
+                                                 if k in results], "reason": str(exc)}
+            print(f"fault: {results['fault']}", flush=True)
+        arm.close()
+        results["success_rate_end"] = arm.command_success_rate()
     finally:
         sim.terminate()
         sim.wait(10)
