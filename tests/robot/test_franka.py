@@ -182,8 +182,11 @@ def test_a_missed_signal_timeout_is_a_fault_until_recovered(robot):
 
 @pytest.mark.ros
 @pytest.mark.parametrize("address, reason", [(UNSERVED, "connection refused"),
-                                             ("10.255.255.1", "no answer within 1.0 s")])
+                                             ("10.255.255.1", "no answer within 1.0 s")],
+                         ids=["nothing_serves", "no_answer"])
 def test_an_unreachable_address_is_refused_in_time_with_its_reason(address, reason):
+    """Refused connections are retried for ``connect_timeout`` (franky-sim may be starting), a
+    silent address is given up after it (libfranka alone waits 60 s); both name the address."""
     start = time.monotonic()
     with pytest.raises(FrankaConnectError, match=reason) as refused:
         FRANKA.create({"franka": {"address": address, "connect_timeout": 1.0}})
