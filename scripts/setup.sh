@@ -55,7 +55,7 @@ fi
 # 4. Our packages' sources are importable from .venv (the pure-Python cores need no ROS
 #    environment), with their metadata: robots and environments are plugins found through
 #    entry points (egg-info beside each source tree), and `qgl` is a console script of the venv.
-PY_PACKAGES=(ros_ws/src/qg_common ros_ws/src/qg_recording sim_robot_node robot_bridge_node qg_learning_node
+PY_PACKAGES=(ros_ws/src/qg_common ros_ws/src/qg_recording sim_robot_node franka_robot_node robot_bridge_node qg_learning_node
              qg_experiments)
 site="$("$PY" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
 printf "$ROOT/%s\n" "${PY_PACKAGES[@]}" > "$site/qg_stack_sources.pth"
@@ -80,7 +80,7 @@ sys.exit(qgl.load()())
 EOF
 chmod +x "$VENV/bin/qgl"
 
-# 5. colcon build of the workspace (interface package + the six ament_python packages).
+# 5. colcon build of the workspace (interface package + the seven ament_python packages).
 src_hash="$(cd "$ROOT" && find ros_ws/src/qg_interfaces "${PY_PACKAGES[@]}" \
   -type f \( -name '*.msg' -o -name '*.srv' -o -name 'CMakeLists.txt' -o -name 'package.xml' \
   -o -name 'setup.py' -o -name 'setup.cfg' \) -print0 | sort -z | xargs -0 cat | sha256sum | cut -c1-16)"

@@ -14,6 +14,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 CORE_FILES = [
     *ROOT.glob("sim_robot_node/sim_robot_node/core/**/*.py"),
+    *ROOT.glob("franka_robot_node/franka_robot_node/core/**/*.py"),
     *(p for p in ROOT.glob("ros_ws/src/qg_common/qg_common/*.py")
       if p.name not in ("callback_executor.py", "conversions.py", "node_parameters.py",
                         "node_runtime.py", "topics.py")),
@@ -33,6 +34,7 @@ def test_cores_do_not_import_rclpy():
 #: The project's Python packages and their source folders (qg_interfaces is generated).
 PACKAGE_DIRS = {"qg_common": "ros_ws/src/qg_common", "qg_recording": "ros_ws/src/qg_recording",
                 "robot_bridge_node": "robot_bridge_node", "sim_robot_node": "sim_robot_node",
+                "franka_robot_node": "franka_robot_node",
                 "qg_learning_node": "qg_learning_node", "qg_experiments": "qg_experiments"}
 PROJECT = {*PACKAGE_DIRS, "qg_interfaces"}
 #: What the executor and learner may import from the project: nothing of a robot stack.
@@ -134,6 +136,7 @@ def test_only_the_experiments_compose_the_bridge_and_the_learner():
     assert imports["qg_experiments"] >= {"robot_bridge_node", "qg_learning_node", "qg_common"}
     assert [p for p, used in imports.items() if "qg_experiments" in used] == []
     assert [p for p, used in imports.items() if "sim_robot_node" in used] == []
+    assert [p for p, used in imports.items() if "franka_robot_node" in used] == []
 
 
 def _exec_depends(package: str) -> set[str]:
@@ -151,7 +154,8 @@ def test_package_xml_declares_what_the_sources_import_and_learning_needs_no_robo
 
 
 #: Every Python source folder of the project (ros_ws/src/qg_learning_node etc. are symlinks).
-SOURCE_DIRS = ("qg_learning_node", "robot_bridge_node", "sim_robot_node", "qg_experiments",
+SOURCE_DIRS = ("qg_learning_node", "robot_bridge_node", "sim_robot_node", "franka_robot_node",
+               "qg_experiments",
                "ros_ws/src/qg_common", "ros_ws/src/qg_recording", "benchmarks", "tests")
 
 
@@ -221,10 +225,11 @@ def import_everything(refused: set[str], packages: list[str],
 
 @pytest.mark.ros
 def test_bridge_learning_and_experiments_import_without_the_simulator():
-    """No arrow from the bridge, learning or experiments to the simulator: every module of the
-    common, recording, bridge, learning and experiment packages imports where
-    ``sim_robot_node`` cannot."""
-    names = import_everything({"sim_robot_node", "pybullet"},
+    """No arrow from the bridge, learning or experiments to the simulator or the Franka plugin:
+    every module of the common, recording, bridge, learning and experiment packages imports
+    where ``sim_robot_node``, ``franka_robot_node`` and libfranka's client cannot."""
+    names = import_everything({"sim_robot_node", "pybullet", "franka_robot_node", "franky",
+                               "franky_sim", "mujoco"},
                               ["qg_common", "qg_recording", "robot_bridge_node",
                                "qg_learning_node", "qg_experiments"])
     assert len(names) >= 80, names

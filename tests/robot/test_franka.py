@@ -1,0 +1,194 @@
+"""``robot:=franka`` (franka_robot_node) against franky-sim's MuJoCo FR3 on a private loopback
+address: the bridge's model of the FR3 matches the simulated arm, the plugin connects and holds,
+subtracts exactly the gravity the robot adds, the bridge's loop moves the free arm the way a
+wrench setpoint says, refused torques never reach libfranka, a missed signal timeout is a fault
+until recovered, and an unreachable address is refused in time with its reason."""
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+import pytest
+from franka_robot_node.core.fr3_description import FR3_READY, fr3_arm
+from franka_robot_node.core.franka_arm import FrankaConnectError, FrankaFault, TorqueRejected
+from franka_robot_node.core.franky_sim_host import FrankySimHost
+from franka_robot_node.core.start_in_place import StartInPlace
+from franka_robot_node.franka_sim import spawn
+from franka_robot_node.plugin import FRANKA, describe_franka
+from qg_common.types import WrenchSetpoint
+from robot_bridge_node.core.arm_model import ArmModel
+from robot_bridge_node.core.hardware_interface import robot_defaults
+from robot_bridge_node.core.robot_loop import StateClock, build_loop
+
+#: A loopback address of this test run's own (franky-sim binds libfranka's fixed port 1337).
+ADDRESS = f"127.0.{35 + os.getpid() % 200}.{1 + os.getpid() % 200}"
+UNSERVED = f"127.0.{35 + os.getpid() % 200}.250"
+
+
+def test_the_bridges_fr3_model_is_franky_sims_arm():
+    """Pinocchio reads franky-sim's FR3 URDF (hand, fingers locked): its joints, the datasheet's
+    limits, and within 0.05 kg and 0.25 Nm the masses and gravity torques of franky-sim's MuJoCo
+    arm (its hand weighs 0.76 kg there, 0.71 kg in the URDF)."""
+    model = ArmModel.from_description(describe_franka({"franka": {"tool": {"mass": 0.0}}}))
+    assert model.joint_names == tuple(f"fr3_joint{i}" for i in range(1, 8))
+    np.testing.assert_array_equal(model.limits.torque, [87, 87, 87, 87, 12, 12, 12])
+    np.testing.assert_array_equal(model.limits.torque_rate, np.full(7, 1000.0))
+    host = FrankySimHost(UNSERVED)
+    try:
+        m, d = host.sim.model, host.sim.data
+        link1 = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "robot0_fr3_link1")
+        assert m.body_subtreemass[link1] == pytest.approx(
+            sum(i.mass for i in model.model.inertias[1:]), abs=0.05)
+        rng = np.random.default_rng(0)
+        for _ in range(3):
+            q = np.array(FR3_READY) + rng.uniform(-0.4, 0.4, 7)
+            d.qpos[host.robot._qpos_addrs] = q
+            d.qvel[:] = 0.0
+            mujoco.mj_forward(m, d)
+            np.testing.assert_allclose(d.qfrc_bias[host.robot._dof_addrs], model.gravity(q),
+                                       atol=0.25)
+            assert np.abs(model.gravity(q)).max() > 10.0
+        # The ready pose holds the tool centre point down, 0.45 m in front and 0.31 m up.
+        kinematics = model.kinematics(np.array(FR3_READY))
+        np.testing.assert_allclose(kinematics.position, [0.45, 0.0, 0.31], atol=1e-3)
+        np.testing.assert_allclose(kinematics.rotation, np.diag([1.0, -1.0, -1.0]), atol=1e-3)
+    finally:
+        host.close()
+    assert pin.buildModelFromUrdf(fr3_arm().urdf).nq == 9       # 7 joints and 2 fingers
+
+
+@pytest.fixture(scope="module")
+def franky_sim():
+    process = spawn(ADDRESS, "--realtime-priority", "40")
+    yield process
+    process.terminate()
+    process.wait(10)
+
+
+@pytest.fixture(scope="module")
+def connected(franky_sim):
+    """The robot, driven at the loop process's realtime priority (SCHED_FIFO 50: libfranka's
+    thread inherits it) as the stack drives it: at normal priority a loaded test machine stalls
+    the test's loop past the 50 ms signal timeout."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(50))
+    except OSError:
+        pass
+    robot = FRANKA.create({"franka": {"address": ADDRESS}})
+    yield robot
+    robot.hardware.close()
+    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
+@pytest.fixture
+def robot(connected):
+    """The connected robot; its torque motion stopped after the test (a test that pauses longer
+    than the signal timeout, building a loop say, would otherwise find it ended)."""
+    yield connected
+    connected.hardware.close()
+
+
+def _hold(arm, seconds: float) -> list[float]:
+    stamps = []
+    end = arm.state_time() + seconds
+    while arm.state_time() < end:
+        arm.read()
+        stamps.append(arm.state_time())
+        arm.write(arm.robot_gravity())
+    return stamps
+
+
+@pytest.mark.ros
+def test_the_plugin_connects_holds_and_sends_what_libfranka_expects(robot):
+    """One second of gravity-only torques: every read is a new millisecond of the robot's, the
+    arm stays within 5 mrad, and what the robot applied (``tau_J``) minus what it was sent
+    (``tau_J_d``) is the gravity the plugin subtracted, to 0.05 Nm."""
+    arm = robot.hardware
+    q0 = arm.read().q.copy()
+    stamps = _hold(arm, 1.0)
+    assert np.all(np.diff(stamps) > 0.0)
+    assert len(stamps) > 500                     # a busy test machine misses some states
+    assert np.abs(arm.read().q - q0).max() < 5e-3
+    state = arm.robot.state
+    added = np.asarray(state.tau_J) - np.asarray(state.tau_J_d)
+    np.testing.assert_allclose(added, arm.robot_gravity(), atol=0.05)
+    assert np.abs(added).max() > 10.0
+    assert arm.command_success_rate() == 1.0
+
+
+@pytest.mark.ros
+def test_a_wrench_setpoint_moves_the_free_arm_the_way_it_says(robot):
+    """The bridge's loop (config/bridge.yaml, the EKF, the robot's state clock) on the arm: a
+    15 N push along the tool axis (down) moves the tool down, a 15 N pull moves it up."""
+    from robot_bridge_node.core.torque_kind import build_ekf
+    bridge = robot_defaults(FRANKA, (("robot_bridge_node", "bridge.yaml"),), "bridge")
+    loop = build_loop(dataclasses.replace(robot, simulation=StartInPlace()), bridge,
+                      lambda robot, model: build_ekf({}, model),
+                      StateClock(robot.hardware, 0.02))
+    loop.reset(0)
+    moved = {}
+    for force in (-15.0, 15.0):
+        loop.execute(WrenchSetpoint.residual(0.0, 0.0, 0.0))     # from rest (damped)
+        z0 = loop.controller.tool.position[2]
+        loop.execute(WrenchSetpoint.residual(force, 0.0, 0.0))
+        moved[force] = loop.controller.tool.position[2] - z0
+    assert moved[-15.0] < -0.005 and moved[15.0] > 0.005, moved
+    assert np.all(np.isfinite(loop.wrench_estimate))
+
+
+@pytest.mark.ros
+def test_a_refused_torque_never_reaches_libfranka(robot):
+    """NaN and beyond-the-limit torques raise ``TorqueRejected`` in ``write``: libfranka's
+    commanded torque (``tau_J_d``) stays the last good one."""
+    arm = robot.hardware
+    _hold(arm, 0.05)
+    good = np.asarray(arm.robot.state.tau_J_d).copy()
+    bad = arm.robot_gravity()
+    for value in (np.nan, np.inf, 200.0):
+        tau = bad.copy()
+        tau[0] = value
+        arm.read()
+        with pytest.raises(TorqueRejected):
+            arm.write(tau)
+    with pytest.raises(TorqueRejected):
+        arm.write(np.zeros(6))
+    time.sleep(0.01)
+    commanded = np.asarray(arm.robot.state.tau_J_d)
+    assert np.all(np.isfinite(commanded))
+    np.testing.assert_allclose(commanded, good, atol=0.5)
+    _hold(arm, 0.05)                              # the motion still takes good torques
+
+
+@pytest.mark.ros
+def test_a_missed_signal_timeout_is_a_fault_until_recovered(robot):
+    """A loop silent for longer than ``signal_timeout`` (50 ms): the next read raises
+    ``FrankaFault`` with libfranka's reason, writes are refused until ``recover``."""
+    arm = robot.hardware
+    _hold(arm, 0.05)
+    time.sleep(0.15)
+    with pytest.raises(FrankaFault, match="TorqueSignalTimeout"):
+        arm.read()
+    arm.read()
+    with pytest.raises(FrankaFault, match="recover"):
+        arm.write(arm.robot_gravity())
+    assert "succeeded" in arm.recover()
+    assert arm.fault is None
+    assert len(_hold(arm, 0.1)) > 50
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("address, reason", [(UNSERVED, "connection refused"),
+                                             ("10.255.255.1", "no answer within 1.0 s")],
+                         ids=["nothing_serves", "no_answer"])
+def test_an_unreachable_address_is_refused_in_time_with_its_reason(address, reason):
+    """Refused connections are retried for ``connect_timeout`` (franky-sim may be starting), a
+    silent address is given up after it (libfranka alone waits 60 s); both name the address."""
+    start = time.monotonic()
+    with pytest.raises(FrankaConnectError, match=reason) as refused:
+        FRANKA.create({"franka": {"address": address, "connect_timeout": 1.0}})
+    assert time.monotonic() - start < 2.0
+    assert address in str(refused.value)
