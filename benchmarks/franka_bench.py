@@ -26,20 +26,18 @@ Usage: python benchmarks/franka_bench.py [--hold 10] [--steps 20] [--priority 50
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import os
 import time
 
 import numpy as np
 from franka_robot_node.core.franka_arm import FrankaConnectError, FrankaFault
-from franka_robot_node.core.start_in_place import StartInPlace
 from franka_robot_node.franka_sim import spawn
 from franka_robot_node.plugin import FRANKA
 from qg_common.params import load_ros_params, package_config
 from qg_common.types import WrenchSetpoint
 from robot_bridge_node.core.hardware_interface import robot_defaults
-from robot_bridge_node.core.robot_loop import RobotLoop, StateClock, build_loop
+from robot_bridge_node.core.robot_loop import MAX_STATE_GAP, RobotLoop, StateClock, build_loop
 from robot_bridge_node.core.torque_kind import build_ekf
 
 PUSH = 15.0        # [N] along the tool axis, each way
@@ -169,10 +167,10 @@ def main() -> None:
             arm.close()                              # the loop's first write starts anew
             bridge = robot_defaults(FRANKA, (("robot_bridge_node", "bridge.yaml"),), "bridge")
             ekf = load_ros_params(package_config("robot_bridge_node", "wrench_estimator.yaml"))
-            loop = build_loop(dataclasses.replace(robot, simulation=StartInPlace()), bridge,
-                              lambda robot, model: build_ekf(ekf, model),
-                              StateClock(arm, 0.02))
-            loop.reset(0)
+            loop = build_loop(robot, bridge, lambda robot, model: build_ekf(ekf, model),
+                              StateClock(arm, MAX_STATE_GAP))
+            loop.begin()
+            loop.settle_here()                       # the episode starts where the arm is
             results["loop"] = loop_steps(loop, args.steps)
             print(f"loop, {args.steps} steps: {results['loop']}", flush=True)
             results["push"] = known_push(loop, sim)

@@ -1,9 +1,11 @@
 """``robot:=franka``: a Franka FR3 through libfranka, registered under the bridge's entry-point
 group ``robot_bridge_node.robots`` (``setup.py``); the bridge never imports this module.
 
-The robot is a real arm to the bridge (``simulation=None``): against franky-sim as against a
-real FR3 the plugin only speaks libfranka's protocol, and only ``franka.address`` and
-``franka.realtime`` (``config/franka.yaml``) change between the two.
+The robot is a real arm to the bridge (``simulation=None``: resets are motions, reward and
+success are measured): against franky-sim as against a real FR3 the plugin only speaks
+libfranka's protocol, and only ``franka.address`` and ``franka.realtime``
+(``config/franka.yaml``) change between the two. Its ``read`` waits for the robot's next state,
+so the robot paces the bridge's realtime loop (``paced_by_hardware``).
 """
 from __future__ import annotations
 
@@ -42,7 +44,7 @@ def describe_franka(params: dict[str, Any]) -> RobotDescription:
 def _create(params: dict[str, Any]) -> Robot:
     description = describe_franka(params)
     arm = FrankaArm.connect(franka_config(params), description)
-    return Robot(hardware=arm, simulation=None, description=description)
+    return Robot(hardware=arm, simulation=None, description=description, paced_by_hardware=True)
 
 
 #: ``robot:=franka`` (config/franka.yaml).

@@ -368,6 +368,8 @@ class ExecutorNode(Node):
                 self.at_rest_event.clear()
                 event = self.at_rest.pop(self.seq, None)
                 self.at_rest = {k: v for k, v in self.at_rest.items() if k > self.seq}
+            if event is not None and event.fault:
+                raise EpisodeAborted(f"the robot stopped: {event.fault}")
             if event is not None:
                 return event
             if self.stop_requested.is_set():

@@ -40,9 +40,9 @@ from robot_bridge_node.core.impedance import ToolState
 from robot_bridge_node.core.interface_kinds import interface_kind
 from robot_bridge_node.core.loop_runner import (LoopRunner, ResetCommand, SetpointCommand,
                                                 StepEvent, ThreadMailbox)
-from robot_bridge_node.core.robot_loop import RobotLoop, StateClock
+from robot_bridge_node.core.robot_loop import MAX_STATE_GAP, RobotLoop, StateClock
 
-__all__ = ["BridgeNode", "RosOutlet", "log_at", "RemoteRobot", "LatestWrench", "MAX_STATE_GAP",
+__all__ = ["BridgeNode", "RosOutlet", "log_at", "RemoteRobot", "LatestWrench",
            "main"]
 
 
@@ -129,9 +129,6 @@ def log_at(node: Node, level: str, message: str) -> None:
 
 
 # --- separate-process mode ------------------------------------------------------------------
-#: [s] The most one tick of the separate bridge counts (``StateClock``): the sim's
-#: ``command_timeout``, after which it holds the arm itself rather than following the bridge.
-MAX_STATE_GAP = 0.02
 
 
 class RemoteRobot:

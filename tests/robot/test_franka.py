@@ -5,7 +5,6 @@ wrench setpoint says, refused torques never reach libfranka, a missed signal tim
 until recovered, and an unreachable address is refused in time with its reason."""
 from __future__ import annotations
 
-import dataclasses
 import os
 import time
 
@@ -16,13 +15,12 @@ import pytest
 from franka_robot_node.core.fr3_description import FR3_READY, fr3_arm
 from franka_robot_node.core.franka_arm import FrankaConnectError, FrankaFault, TorqueRejected
 from franka_robot_node.core.franky_sim_host import FrankySimHost
-from franka_robot_node.core.start_in_place import StartInPlace
 from franka_robot_node.franka_sim import spawn
 from franka_robot_node.plugin import FRANKA, describe_franka
 from qg_common.types import WrenchSetpoint
 from robot_bridge_node.core.arm_model import ArmModel
 from robot_bridge_node.core.hardware_interface import robot_defaults
-from robot_bridge_node.core.robot_loop import StateClock, build_loop
+from robot_bridge_node.core.robot_loop import MAX_STATE_GAP, StateClock, build_loop
 
 #: A loopback address of this test run's own (franky-sim binds libfranka's fixed port 1337).
 ADDRESS = f"127.0.{35 + os.getpid() % 200}.{1 + os.getpid() % 200}"
@@ -126,10 +124,10 @@ def test_a_wrench_setpoint_moves_the_free_arm_the_way_it_says(robot):
     15 N push along the tool axis (down) moves the tool down, a 15 N pull moves it up."""
     from robot_bridge_node.core.torque_kind import build_ekf
     bridge = robot_defaults(FRANKA, (("robot_bridge_node", "bridge.yaml"),), "bridge")
-    loop = build_loop(dataclasses.replace(robot, simulation=StartInPlace()), bridge,
-                      lambda robot, model: build_ekf({}, model),
-                      StateClock(robot.hardware, 0.02))
-    loop.reset(0)
+    loop = build_loop(robot, bridge, lambda robot, model: build_ekf({}, model),
+                      StateClock(robot.hardware, MAX_STATE_GAP))
+    loop.begin()
+    loop.settle_here()                        # the episode starts where the arm is
     moved = {}
     for force in (-15.0, 15.0):
         loop.execute(WrenchSetpoint.residual(0.0, 0.0, 0.0))     # from rest (damped)

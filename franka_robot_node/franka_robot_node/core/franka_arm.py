@@ -31,7 +31,7 @@ import numpy as np
 import pinocchio as pin
 from qg_common.types import JointState
 from robot_bridge_node.core.arm_model import ArmModel
-from robot_bridge_node.core.hardware_interface import RobotDescription
+from robot_bridge_node.core.hardware_interface import HardwareFault, RobotDescription
 
 from franka_robot_node.core.fr3_description import FR3_FLANGE
 from franka_robot_node.core.franka_config import FrankaConfig
@@ -52,10 +52,10 @@ _PAYLOAD_INERTIA = [1e-5, 0.0, 0.0, 0.0, 1e-5, 0.0, 0.0, 0.0, 1e-5]
 _RETRY = 0.2
 
 
-class FrankaFault(RuntimeError):
+class FrankaFault(HardwareFault):
     """libfranka ended the torque motion (a reflex, a missed signal timeout, the connection),
     or the robot stopped sending states: the step under way is over. The message is the reason;
-    ``FrankaArm.recover`` must run before the arm takes torques again."""
+    ``FrankaArm.recover`` must run before the arm takes torques again (the bridge's reset does)."""
 
 
 class FrankaConnectError(ConnectionError):

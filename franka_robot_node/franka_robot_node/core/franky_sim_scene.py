@@ -19,9 +19,14 @@ from collections.abc import Sequence
 from franky_sim.mujoco_simulator import MujocoSimulator
 
 from franka_robot_node.core.franka_config import HeldTool
+
+#: The share of a joint's friction a Franka's own compensation leaves (the simulated Panda's
+#: ``sim_robot_node.core.arm_imperfections.RESIDUAL_FRICTION_SHARE``, from the same reasoning).
+RESIDUAL_FRICTION_SHARE = 0.2
 from franka_robot_node.core.franky_sim_host import HAND_BODY, TCP_IN_HAND, SceneExtension
 
-__all__ = ["fixture_box", "held_cylinder", "demo_scene", "HELD_BODY", "FIXTURE_BODY"]
+__all__ = ["fixture_box", "held_cylinder", "residual_joint_friction", "demo_scene", "HELD_BODY",
+           "FIXTURE_BODY"]
 
 #: Names of the demo's bodies in the MJCF.
 HELD_BODY = "held_part"
@@ -64,9 +69,32 @@ def held_cylinder(tool: HeldTool, radius: float, length: float,
     return extend
 
 
+def residual_joint_friction(share: float) -> SceneExtension:
+    """The arm's joint friction scaled to ``share`` of franky-sim's (0.25-1.14 Nm a joint): what
+    a real Franka's own friction compensation leaves of it. libfranka's torque commands are
+    joint torques without gravity and friction, which the robot adds itself; franky-sim adds
+    gravity but simulates the raw friction, against which the bridge's holding stiffness of
+    10 Nm/rad leaves the wrist up to 6 deg from where it should be. The simulated Panda takes
+    the same share of its identified friction (``arm_imperfections.RESIDUAL_FRICTION_SHARE``).
+
+    :raises ValueError: unless ``0 <= share <= 1``.
+    """
+    if not 0.0 <= share <= 1.0:
+        raise ValueError(f"the residual friction share must be in [0, 1], got {share}")
+
+    def extend(sim: MujocoSimulator) -> None:
+        # every <joint> of the scene: the arm's own and its class defaults' (joints 1-4)
+        for joint in sim.scene.iter("joint"):
+            if joint.get("frictionloss") is not None:
+                joint.set("frictionloss", f"{share * float(joint.get('frictionloss')):.6g}")
+    return extend
+
+
 def demo_scene(tool: HeldTool) -> list[SceneExtension]:
     """The extension mechanism's proof: a 10 x 10 x 20 cm block on the floor 0.45 m in front of
     the arm (its top 5 cm below the held part's tip at the ready pose) and the shaft-sized
-    cylinder in the hand (0.1 m long, 5.9 mm radius, gripped 6 cm above its tip)."""
-    return [fixture_box(center=(0.45, 0.0, 0.1), half_size=(0.05, 0.05, 0.1)),
+    cylinder in the hand (0.1 m long, 5.9 mm radius, gripped 6 cm above its tip), the arm's
+    friction what a real Franka leaves of it."""
+    return [residual_joint_friction(RESIDUAL_FRICTION_SHARE),
+            fixture_box(center=(0.45, 0.0, 0.1), half_size=(0.05, 0.05, 0.1)),
             held_cylinder(tool, radius=0.0059, length=0.1)]

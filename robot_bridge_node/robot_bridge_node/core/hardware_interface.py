@@ -28,7 +28,8 @@ from qg_common.params import (ParameterSection, load_ros_params, merge_params,
                               package_config)
 from qg_common.types import GroundTruth, JointState, StartPose
 
-__all__ = ["TorqueInterface", "PositionInterface", "StampedStates", "ForceTorqueSensor",
+__all__ = ["HardwareFault", "Recoverable", "TorqueInterface", "PositionInterface",
+           "StampedStates", "ForceTorqueSensor",
            "SimulationInterface", "ToolDescription",
            "RobotDescription", "Robot", "RobotPlugin", "RobotChoice", "ROBOT_SECTION",
            "ROBOT_PLUGIN_GROUP", "robot_names", "robot_plugin", "load_robot", "robot_defaults",
@@ -36,6 +37,28 @@ __all__ = ["TorqueInterface", "PositionInterface", "StampedStates", "ForceTorque
 
 #: The entry-point group robots register under (``name = module:RobotPlugin instance``).
 ROBOT_PLUGIN_GROUP = "robot_bridge_node.robots"
+
+
+class HardwareFault(RuntimeError):
+    """The robot stopped what it was doing (a reflex, a missed deadline, a lost connection):
+    raised by ``read`` or ``write``; the step under way is over. The message is the robot's
+    reason. A ``Recoverable`` robot takes commands again only after ``recover``."""
+
+
+class Recoverable(Protocol):
+    """Hardware that must be told to leave a fault, as a Franka's error recovery does."""
+
+    @property
+    def fault(self) -> str | None:
+        """Why the robot stopped, until ``recover`` (``None``: no fault)."""
+        ...
+
+    def recover(self) -> str:
+        """Leave the fault (the robot's own recovery); what was done, for the log.
+
+        :raises HardwareFault: if the robot refuses.
+        """
+        ...
 
 
 class TorqueInterface(Protocol):
@@ -149,11 +172,15 @@ class Robot:
     :param simulation: the simulation's extra powers; ``None`` on real hardware.
     :param wrist_sensor: a force-torque sensor at the wrist, if the robot has one; the loop's
         wrench then comes from it instead of an estimator.
+    :param paced_by_hardware: ``read`` waits for the robot's next state (a real arm's 1 kHz, as
+        libfranka's ``readOnce``; the hardware is ``StampedStates``): a realtime loop ticks
+        when the robot says, on the states' clock, with no pace of its own.
     """
     hardware: TorqueInterface | PositionInterface
     simulation: SimulationInterface | None
     description: RobotDescription
     wrist_sensor: ForceTorqueSensor | None = None
+    paced_by_hardware: bool = False
 
 
 @dataclass(frozen=True)

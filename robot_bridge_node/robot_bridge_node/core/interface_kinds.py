@@ -40,8 +40,8 @@ STEP_SECTIONS = (
     ParameterSection("loop", LoopConfig, ranges={"dt": (0.0, 0.01), "settle_time": (0.0, 10.0)}),
     ParameterSection("reset", ResetConfig, ranges={
         "linear_speed": (0.0, 0.5), "joint_speed": (0.0, 2.0), "min_duration": (0.0, 60.0),
-        "arrive_tolerance": (0.0, 0.01), "arrive_angle": (0.0, 0.2),
-        "arrive_timeout": (0.0, 60.0), "arrive_gain": (0.0, 1000.0)}))
+        "arrive_tolerance": (0.0, 0.01), "arrive_angle": (0.0, 0.2), "arrive_speed": (0.0, 1.0),
+        "arrive_timeout": (0.0, 60.0), "arrive_gain": (0.0, 100.0)}))
 
 
 class CommandHold(Protocol):

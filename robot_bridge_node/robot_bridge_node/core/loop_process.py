@@ -39,7 +39,7 @@ from robot_bridge_node.core.hardware_interface import robot_plugin
 from robot_bridge_node.core.interface_kinds import interface_kind
 from robot_bridge_node.core.loop_runner import (LoopRunner, ResetCommand, SetpointCommand,
                                                 StepEvent)
-from robot_bridge_node.core.robot_loop import RobotLoop
+from robot_bridge_node.core.robot_loop import MAX_STATE_GAP, RobotLoop, StateClock
 from robot_bridge_node.core.sample_ring import (HAS_TOOL, HAS_TRUTH, HAS_WRENCH, PUBLISH,
                                                 SampleRing, truth_to_array)
 from robot_bridge_node.core.tick_timing import TickTiming
@@ -186,13 +186,17 @@ class PipeMailbox:
         return setpoint, reset
 
 
-def _build(spec: LoopSpec) -> RobotLoop:
+def _build(spec: LoopSpec) -> tuple[RobotLoop, bool]:
+    """The robot's loop, and whether the robot paces it (``Robot.paced_by_hardware``: its loop
+    ticks on its states' clock)."""
     plugin = robot_plugin(spec.robot)
     robot = plugin.create(spec.sim_params)
     bridge_params = {**spec.bridge_params,
                      "loop": {**spec.bridge_params.get("loop", {}), "realtime": spec.realtime}}
-    return interface_kind(plugin.interface).build_loop(robot, bridge_params,
-                                                       spec.estimator_params)
+    clock = StateClock(robot.hardware, MAX_STATE_GAP) if robot.paced_by_hardware else None
+    loop = interface_kind(plugin.interface).build_loop(robot, bridge_params,
+                                                       spec.estimator_params, clock=clock)
+    return loop, robot.paced_by_hardware
 
 
 class RealtimePace:
@@ -206,14 +210,16 @@ class RealtimePace:
     ~25 at every episode's reset).
     """
 
-    def __init__(self, dt: float, events: EventSender, spin: float = DEFAULT_SPIN) -> None:
-        self.pacer = RealtimePacer(dt, spin)
+    def __init__(self, dt: float, events: EventSender, spin: float = DEFAULT_SPIN,
+                 wait: bool = True) -> None:
+        self.pacer = RealtimePacer(dt, spin) if wait else None
         self.timing = TickTiming(dt)
         self.events = events
         self._next_report = time.monotonic() + TIMING_PERIOD
 
     def __call__(self) -> bool:
-        self.timing.drop(self.pacer.wait())
+        if self.pacer is not None:
+            self.timing.drop(self.pacer.wait())
         self.timing.tick(time.perf_counter_ns())
         if time.monotonic() >= self._next_report:
             self._next_report += TIMING_PERIOD
@@ -222,7 +228,8 @@ class RealtimePace:
 
     def restart(self) -> None:
         """The loop paused on purpose: the next tick is due at once and has no predecessor."""
-        self.pacer.restart()
+        if self.pacer is not None:
+            self.pacer.restart()
         self.timing.restart()
 
 
@@ -230,7 +237,7 @@ def run(conn: Connection, ring: SampleRing) -> int:
     """Receive the spec, build the loop, say ``ready`` (or why not), run until stopped."""
     spec: LoopSpec = conn.recv()
     try:
-        loop = _build(spec)
+        loop, paced_by_robot = _build(spec)
     except Exception:  # noqa: BLE001 - whatever fails, the robot process must hear why
         conn.send(("error", f"the robot loop could not be built:\n{traceback.format_exc()}"))
         return 1
@@ -250,7 +257,10 @@ def run(conn: Connection, ring: SampleRing) -> int:
     stop = threading.Event()
     events = EventSender(conn, stop)      # after the priority: its thread has the loop's
     outlet = RingOutlet(ring, events, spec.truth_every // spec.publish_every)
-    pace = RealtimePace(loop.config.dt, events, spin) if spec.realtime else None
+    # A robot that paces its loop (its read waits for its next state) needs no wall-clock
+    # pacer: the loop's timing is then the robot's periods as the loop saw them.
+    pace = RealtimePace(loop.config.dt, events, spin, wait=not paced_by_robot) \
+        if spec.realtime else None
     runner = LoopRunner(loop, PipeMailbox(conn, stop), outlet, lockstep=not spec.realtime,
                         pace=pace, after_reset=pace.restart if pace is not None else None,
                         publish_every=spec.publish_every)

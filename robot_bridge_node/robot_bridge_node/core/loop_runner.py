@@ -10,6 +10,10 @@ previous command stays.
 Clock modes: ``lockstep`` ticks only while a step runs, as fast as it can, stamped with simulated
 time (deterministic); otherwise the loop ticks whenever ``pace`` says a tick is due, stamped with
 the wall clock, and the watchdog holds the pose when setpoints stop coming.
+
+A robot that stops by itself (``HardwareFault``: a Franka's reflex, a missed signal timeout)
+ends the step under way: its at-rest event carries the reason (``StepResult.fault``), the loop
+ticks no more and refuses setpoints until a reset, which first has the robot recover.
 """
 from __future__ import annotations
 
@@ -22,6 +26,7 @@ from typing import Protocol
 import numpy as np
 from qg_common.types import StartPose, StepResult, WrenchSetpoint
 
+from robot_bridge_node.core.hardware_interface import HardwareFault
 from robot_bridge_node.core.robot_loop import RobotLoop
 from robot_bridge_node.core.safety import SetpointRejected
 
@@ -148,6 +153,7 @@ class LoopRunner:
         self.ticks = 0
         self._seq: int | None = None            # the running step's setpoint
         self._step_start: float | None = None   # loop time of the running step's start
+        self.fault = ""                         # why the robot stopped, until a reset
 
     def run(self, stop: threading.Event) -> None:
         """Hold the robot where it is (``RobotLoop.begin``: no motion at start-up) once it has a
@@ -169,9 +175,13 @@ class LoopRunner:
             else:
                 setpoint, reset = self.mailbox.take(0.0)
             self._take(setpoint, reset)
-            if self.lockstep and self._step_start is None:
+            if self.fault or (self.lockstep and self._step_start is None):
                 continue
-            at_rest = self.loop.tick()
+            try:
+                at_rest = self.loop.tick()
+            except HardwareFault as exc:
+                self._stopped(str(exc))
+                continue
             self._after_tick(at_rest)
 
     def begin(self) -> None:
@@ -185,6 +195,10 @@ class LoopRunner:
         if setpoint is None:
             return
         loop = self.loop
+        if self.fault:
+            self.outlet.log("error", f"setpoint {setpoint.seq} refused: the robot stopped "
+                                     f"({self.fault}); move_to_start recovers it")
+            return
         if setpoint.seq == self._seq:
             loop.feed_watchdog()
             return
@@ -210,6 +224,11 @@ class LoopRunner:
             self.outlet.log("error", f"reset failed: {exc}")
             self.outlet.reset_done(command.job, None, f"{exc}")
             return
+        finally:
+            if self.loop.recovered:
+                self.outlet.log("warning", self.loop.recovered)
+                self.loop.recovered = ""
+        self.fault = ""
         self._seq = None
         self._step_start = None
         self.clock_ns += (self.loop.ticks_run - before) * self._dt_ns
@@ -220,6 +239,18 @@ class LoopRunner:
         self.outlet.reset_done(command.job, event, None)
         if self.after_reset is not None:
             self.after_reset()
+
+    def _stopped(self, reason: str) -> None:
+        """The robot stopped by itself: the step under way ends with the reason."""
+        self.fault = reason
+        self.outlet.log("error", f"the robot stopped: {reason}")
+        if self._step_start is not None:
+            tool = self.loop.controller.tool
+            self.outlet.at_rest(StepEvent(self._seq or 0,
+                                          self.loop.result(self._step_start, reason),
+                                          tool.position.copy(), tool.rotation.copy(),
+                                          self.now_ns()))
+            self._step_start = None
 
     def _after_tick(self, at_rest: bool) -> None:
         self.ticks += 1

@@ -111,7 +111,7 @@ class PositionLoop(RobotLoop):
         """One control period. True when the current step has come to rest or timed out."""
         state = self.hardware.read()
         dt = self.clock.period()
-        if self.estimator is not None:
+        if self.estimator is not None and dt > 0.0:   # (0: the same state read again)
             self.wrench_estimate = self.estimator.update(state.q, state.dq, state.tau, dt)
         self.hardware.write(self.controller.step(state.q, self.reference))
         self.ticks += 1

@@ -24,10 +24,10 @@ from robot_bridge_node.core.hardware_interface import (Robot, SimulationInterfac
 from robot_bridge_node.core.impedance import HybridImpedanceController, ImpedanceConfig
 from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
 from robot_bridge_node.core.safety import SafetyFilter, SafetyLimits
-from robot_bridge_node.core.start_motion import Arrival, ResetConfig, StartMotion
+from robot_bridge_node.core.start_motion import JointHold, ResetConfig, StartMotion
 
 __all__ = ["WrenchEstimator", "MeasuredWrench", "LoopConfig", "LoopClock", "TickClock",
-           "StateClock", "RobotLoop", "build_loop"]
+           "StateClock", "MAX_STATE_GAP", "RobotLoop", "build_loop"]
 
 
 class WrenchEstimator(Protocol):
@@ -125,6 +125,12 @@ class TickClock:
         self.ticks += 1
 
 
+#: [s] The most one tick on a ``StateClock`` counts: a longer gap between states (the loop, the
+#: robot or the link between them stalled) counts as this long, so one hiccup cannot end a step.
+#: It is the separate sim's ``command_timeout``, after which that sim holds the arm itself.
+MAX_STATE_GAP = 0.02
+
+
 class StateClock:
     """The time of the states read: a tick covers the time from the previous state's stamp to
     its own. A loop that misses states (a busy machine, states over topics) still ends a step
@@ -193,6 +199,7 @@ class RobotLoop:
         self.holding = False
         self.ticks = 0             # since the last reset
         self.ticks_run = 0         # since the loop was built (a reset's motion included)
+        self.recovered = ""        # what the last recovery from a fault did
 
     @property
     def time(self) -> float:
@@ -221,65 +228,78 @@ class RobotLoop:
         there (``start_motion``: out along the approach axis, a joint motion, in along it).
         :raises RuntimeError: if the start is out of reach (the motion is not begun).
         """
+        self.recover()
         if self.teleports:
             self.simulation.teleport(start)
-            self.settle_here()
         else:
-            self.settle_here(self._move_to(start))
+            self._move_to(start)
+        self.settle_here()
 
-    def settle_here(self, reference: PoseReference | None = None) -> None:
+    def recover(self) -> str:
+        """Take the robot out of a fault (``Recoverable``: a Franka's error recovery) before it
+        is moved again; what was done ("" if there was no fault).
+
+        :raises HardwareFault: if the robot refuses to recover.
+        """
+        if getattr(self.hardware, "fault", None) is None:
+            return ""
+        self.recovered = self.hardware.recover()
+        return self.recovered
+
+    def settle_here(self) -> None:
         """Restart the episode's clock and the estimator where the arm is and hold it there,
         stiffly (the holding gains: the task's leave z free), for ``settle_time`` (the end of
         every reset; alone, after a separate simulation put the arm at its start). The first
-        setpoint releases the hold.
-
-        :param reference: the pose to hold (a motion's arrival); ``None``: the pose now.
-        """
+        setpoint releases the hold."""
         state = self._restart()
         self.controller.reset(state.q)
         self.safety.reset(self.controller.model.gravity(state.q))
+        self.setpoint = _HOLD
         self.controller.hold(state.q)
-        self.setpoint = _HOLD if reference is None else WrenchSetpoint(np.zeros(6), reference)
         self.holding = True
         self._settle()
 
-    def _move_to(self, start: StartPose) -> PoseReference:
-        """Tick through the motion to ``start`` with the holding gains, then through its arrival
-        (see ``start_motion``); the reference the arm arrived with.
+    def _move_to(self, start: StartPose) -> None:
+        """Tick through the motion to ``start`` under the joint impedance law, then hold its
+        joints until they are there and still (see ``start_motion``).
 
-        :raises RuntimeError: if the start is out of reach, or not reached in time.
+        :raises RuntimeError: if the start is out of reach (nothing moved), or not reached in
+            ``reset.arrive_timeout`` after the path.
         """
-        state = self.hardware.read()
         config = self.reset_config
-        motion = StartMotion(self.controller.model, state.q, start, config)
-        if self.controller.q_null is None:
-            self.controller.reset(state.q)
-        self.controller.hold(state.q)
+        motion = StartMotion(self.controller.model, self.hardware.read().q, start, config)
+        law = JointHold(self.controller.model, config)
         self.holding = True                  # the watchdog leaves a moving arm alone
-        began = self.time
-        while self.time - began < motion.duration:
-            sample = motion.at(self.time - began)
-            self.controller.set_posture(sample.posture)
-            self._hold_at(PoseReference(sample.position, sample.rotation))
-        arrival, rest = Arrival(start, config), self.rest.config
-        began = self.time
+        began, target = self.time, motion.at(0.0)
+        while self.time - began <= motion.duration:
+            following = motion.at(self.time - began + self.config.dt)
+            self._joint_tick(law, target, (following - target) / self.config.dt)
+            target = following
+        # Holding the start: its joint targets moved by the integral of the joints' error, which
+        # takes out what the model does not know (an unknown payload's weight: 1 mm at the tool).
+        began, still, shift = self.time, np.zeros_like(target), np.zeros_like(target)
         while self.time - began < config.arrive_timeout:
-            tool = self.controller.tool
-            reference = PoseReference(*arrival.reference(tool.position, tool.rotation,
-                                                         tool.linear_speed, self.config.dt))
-            self._hold_at(reference)
-            tool = self.controller.tool
-            if arrival.arrived(tool.linear_speed, tool.angular_speed, rest.linear_threshold,
-                               rest.angular_threshold):
-                return reference
+            state = self._joint_tick(law, motion.q_start + shift, still)
+            shift += config.arrive_gain * self.config.dt * (motion.q_start - state.q)
+            off, turned = motion.error(state.q)
+            if (off < config.arrive_tolerance and turned < config.arrive_angle
+                    and np.max(np.abs(state.dq)) < config.arrive_speed):
+                return
         raise RuntimeError(f"the arm did not arrive at the start within {config.arrive_timeout} "
-                           f"s (off by {arrival.position_error * 1e3:.2f} mm, "
-                           f"{math.degrees(arrival.angle_error):.2f} deg)")
+                           f"s ({off * 1e3:.2f} mm, {math.degrees(turned):.2f} deg off)")
 
-    def _hold_at(self, reference: PoseReference) -> None:
-        """One tick holding ``reference`` with no feed-forward wrench."""
-        self.setpoint = WrenchSetpoint(np.zeros(6), reference)
-        self.tick()
+    def _joint_tick(self, law: JointHold, q_target: np.ndarray,
+                    dq_target: np.ndarray) -> JointState:
+        """One control period under the reset's joint law (the safety filter's torque limits
+        still apply); the state it acted on."""
+        state = self.hardware.read()
+        dt = self.clock.period()
+        self.hardware.write(self.safety.limit_torques(law.torque(state.q, state.dq, q_target,
+                                                                dq_target), dt, state.dq))
+        self.ticks += 1
+        self.ticks_run += 1
+        self.clock.advance(dt)
+        return state
 
     def _restart(self) -> JointState:
         """Restart the clock and the estimator at the arm's state now."""
@@ -318,7 +338,7 @@ class RobotLoop:
         """One control period. True when the current step has come to rest or timed out."""
         state = self.hardware.read()
         dt = self.clock.period()
-        if self.estimator is not None:
+        if self.estimator is not None and dt > 0.0:   # (0: the same state read again)
             self.wrench_estimate = self.estimator.update(state.q, state.dq, state.tau, dt)
         if (self.config.realtime and not self.holding
                 and self.safety.watchdog_expired(self.time)):
@@ -353,14 +373,15 @@ class RobotLoop:
         """The simulation's truth now; zeros on real hardware."""
         return NO_GROUND_TRUTH if self.simulation is None else self.simulation.ground_truth()
 
-    def result(self, start: float) -> StepResult:
-        """How the step that started at loop time ``start`` [s] ended (its at-rest event)."""
+    def result(self, start: float, fault: str = "") -> StepResult:
+        """How the step that started at loop time ``start`` [s] ended (its at-rest event);
+        ``fault``: the robot stopped it, and why."""
         tool = self.controller.tool
         return StepResult(duration=self.time - start, timed_out=self.rest.timed_out,
                           linear_speed=tool.linear_speed, angular_speed=tool.angular_speed,
                           ground_truth=self.ground_truth(),
                           wrench_estimate=None if self.wrench_estimate is None
-                          else self.wrench_estimate.copy())
+                          else self.wrench_estimate.copy(), fault=fault)
 
 
 def build_loop(robot: Robot, bridge_params: dict[str, Any] | None = None,

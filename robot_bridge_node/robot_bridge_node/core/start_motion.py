@@ -1,27 +1,26 @@
 """The way a torque arm gets from wherever it is to an episode's start: a motion, not a teleport.
 
 A real arm cannot be put at a start pose; between episodes it has to back out of the task and
-move there, as a robot's operator would teach it. The path has three legs, each tracked by the
-bridge's impedance law with the stiff holding gains (``HOLD_STIFFNESS``) and a reference that
-moves along it:
+move there, as a robot's operator would teach it. The path has three legs, all tracked by a
+stiff joint impedance law (``JointHold``: libfranka's joint impedance example's gains) on joint
+targets that move along it:
 
 1. **back out**: straight back along the start's approach axis (the bore's axis) until the tool
-   is level with the approach point ``start - approach``, clear of the housing;
+   is level with the approach point ``start - approach``, clear of the housing (a straight line
+   of the tool: the joint targets are its inverse kinematics, each from the one before);
 2. **joint motion**: a minimum-jerk interpolation of the joints from there to the configuration
    that puts the tool at the approach point with the start's orientation (inverse kinematics of
-   the bridge's model, from the current joints, so the posture changes least); the tool's
-   reference follows the forward kinematics of the interpolated joints and the null-space
-   posture the joints themselves, so the arm moves as a joint motion;
+   the bridge's model from the current joints, so the posture changes least);
 3. **approach**: straight along the approach axis into the start;
 
-and then it **arrives**: it holds the start until the tool is there and at rest. A stiff spring
-alone leaves the arm off by what its model does not know (an unknown payload sags the tool
-0.3 mm at 3000 N/m, joint friction holds the wrist half a degree away); ``Arrival`` moves the
-reference by the integral of the remaining error until the measured tool is at the start.
+and then it **arrives**: it holds the start's joints until they are there and still. Joint
+stiffness is what makes the arrival precise: the task-space holding gains (10 Nm/rad about the
+tool) leave a wrist held by 0.2-1 Nm of joint friction a degree or more from where it should be,
+the joint law's 50-600 Nm/rad a hundredth of that.
 
-``StartMotion`` is the plan as a function of time; ``RobotLoop.reset`` ticks through it, then
-through ``Arrival``, and settles holding the reference it arrived with. Speeds and tolerances
-are the bridge's ``reset.*`` parameters.
+``StartMotion`` is the plan as a function of time; ``RobotLoop.reset`` ticks through it with
+``JointHold`` and settles at the start. Speeds, gains and tolerances are the bridge's
+``reset.*`` parameters.
 """
 from __future__ import annotations
 
@@ -35,54 +34,63 @@ from qg_common.types import StartPose
 
 from robot_bridge_node.core.arm_model import ArmModel
 
-__all__ = ["ResetConfig", "StartMotion", "MotionSample", "Arrival"]
+__all__ = ["ResetConfig", "StartMotion", "JointHold"]
 
 
 @dataclass(frozen=True)
 class ResetConfig:
     """How the bridge resets the robot to an episode's start (the ``reset`` section of
-    ``config/bridge.yaml``).
+    ``config/bridge.yaml``; a robot's own file may set its gains).
 
     :param teleport: a simulated robot is put at the start at once (its simulation's shortcut);
         false moves it there as a real arm is moved. A robot without a simulation always moves.
     :param linear_speed: [m/s] the tool's speed backing out and approaching along the axis.
     :param joint_speed: [rad/s] the peak joint speed of the joint motion.
     :param min_duration: [s] the joint motion takes at least this long.
+    :param joint_stiffness: (n,) [Nm/rad] the joint impedance law's stiffness, one a joint
+        (libfranka's joint impedance example: 600 for the four base joints, 250, 150, 50).
+    :param joint_damping: (n,) [Nms/rad] its damping (the same example's 50, 50, 50, 20, 20,
+        20, 10, but 4 on joint 7); a light wrist needs less: the explicit 1 kHz law's limit is
+        about 2 I / dt, 13 Nms/rad for the simulated Panda's joint 7, whose hand has no motor
+        inertia.
     :param arrive_tolerance: [m] at the end of the path the arm holds the start until its tool
-        is this close to it, ``arrive_angle`` [rad] turned from it and at rest (the rest
-        detector's thresholds) ...
+        (forward kinematics of the measured joints) is this close to it, ``arrive_angle``
+        [rad] turned from it, and every joint slower than ``arrive_speed`` [rad/s] ...
     :param arrive_timeout: [s] ... or gives up after this long (the reset fails).
-    :param arrive_gain: [1/s] the rate at which the reference moves to cancel the remaining
-        error (the integral action of the arrival).
+    :param arrive_gain: [1/s] while holding the start, its joint targets move by this times the
+        integral of the joints' error (what the model does not know: an unknown payload).
     """
     teleport: bool = True
     linear_speed: float = 0.05
     joint_speed: float = 0.5
     min_duration: float = 0.5
-    arrive_tolerance: float = 0.0002
+    joint_stiffness: tuple[float, ...] = (600.0, 600.0, 600.0, 600.0, 250.0, 150.0, 50.0)
+    joint_damping: tuple[float, ...] = (50.0, 50.0, 50.0, 20.0, 20.0, 20.0, 4.0)
+    arrive_tolerance: float = 0.0005
     arrive_angle: float = 0.005
+    arrive_speed: float = 0.005
     arrive_timeout: float = 2.0
-    arrive_gain: float = 3.0
+    arrive_gain: float = 5.0
 
     def __post_init__(self) -> None:
         for name in ("linear_speed", "joint_speed", "min_duration", "arrive_tolerance",
-                     "arrive_angle", "arrive_timeout", "arrive_gain"):
+                     "arrive_angle", "arrive_speed", "arrive_timeout", "arrive_gain"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"reset.{name} must be finite and > 0, got {value}")
+        if len(self.joint_stiffness) != len(self.joint_damping):
+            raise ValueError(f"reset.joint_stiffness and reset.joint_damping need one value a "
+                             f"joint each, got {len(self.joint_stiffness)} and "
+                             f"{len(self.joint_damping)}")
+        for name in ("joint_stiffness", "joint_damping"):
+            if not all(math.isfinite(v) and v > 0.0 for v in getattr(self, name)):
+                raise ValueError(f"reset.{name} must be finite and > 0, got "
+                                 f"{getattr(self, name)}")
 
     @classmethod
     def from_dict(cls, params: dict[str, Any]) -> ResetConfig:
         """From the ``reset`` section of ``config/bridge.yaml``."""
         return config_from_dict(cls, params)
-
-
-@dataclass(frozen=True)
-class MotionSample:
-    """Where the motion should be at one instant: the tool's pose and the arm's posture."""
-    position: np.ndarray
-    rotation: np.ndarray
-    posture: np.ndarray
 
 
 def _min_jerk(s: float) -> float:
@@ -92,9 +100,10 @@ def _min_jerk(s: float) -> float:
 
 
 class StartMotion:
-    """The planned path from the arm's configuration ``q`` to ``start`` (see the module doc).
+    """The planned path from the arm's configuration ``q`` to ``start`` (see the module doc),
+    as joint targets in time.
 
-    :raises RuntimeError: if the approach point is out of the arm's reach.
+    :raises RuntimeError: if the approach point or the start is out of the arm's reach.
     """
 
     def __init__(self, model: ArmModel, q: np.ndarray, start: StartPose,
@@ -104,89 +113,77 @@ class StartMotion:
         here = model.kinematics(q)
         approach = np.asarray(start.approach, float)
         length = float(np.linalg.norm(approach))
-        self.axis = approach / length if length > 0.0 else np.zeros(3)
-        self.start_position = np.asarray(start.position, float)
+        axis = approach / length if length > 0.0 else np.zeros(3)
+        position = np.asarray(start.position, float)
         self.rotation = np.asarray(start.rotation, float)
-        self.entry = self.start_position - approach          # the approach point
-        # 1. back out along the axis to the approach point's level
-        depth = float(np.dot(here.position - self.entry, self.axis))
-        self.here_position = here.position
-        self.out_position = here.position - max(depth, 0.0) * self.axis
-        self.out_rotation = here.rotation
-        self.t_out = max(depth, 0.0) / config.linear_speed
-        self.q_out = q if depth <= 0.0 else model.inverse_kinematics(
-            self.out_position, here.rotation, q)
+        entry = position - approach                          # the approach point
+        # 1. back out along the axis to the approach point's level, the tool's orientation kept
+        depth = max(float(np.dot(here.position - entry, axis)), 0.0)
+        self._out = (here.position, here.position - depth * axis, here.rotation)
+        self.t_out = depth / config.linear_speed
+        self.q_out = q if depth == 0.0 else model.inverse_kinematics(self._out[1],
+                                                                     here.rotation, q)
         # 2. the joint motion to the approach point with the start's orientation
-        self.q_entry = model.inverse_kinematics(self.entry, self.rotation, self.q_out)
+        self.q_entry = model.inverse_kinematics(entry, self.rotation, self.q_out)
         travel = float(np.max(np.abs(self.q_entry - self.q_out)))
         # minimum jerk peaks at 1.875 x the mean speed
         self.t_joint = max(config.min_duration, 1.875 * travel / config.joint_speed)
         # 3. along the axis into the start
+        self._in = (entry, position, self.rotation)
         self.t_in = length / config.linear_speed
+        self.q_start = model.inverse_kinematics(position, self.rotation, self.q_entry)
+        self.position = position
         self.duration = self.t_out + self.t_joint + self.t_in
+        self._last = q                       # the last straight-line target (warm start)
 
-    def at(self, t: float) -> MotionSample:
-        """The path at ``t`` [s] after it began (held at its ends outside ``[0, duration]``)."""
+    def at(self, t: float) -> np.ndarray:
+        """(n,) the joint targets at ``t`` [s] after the motion began (the start's beyond it).
+
+        Call it with increasing ``t``: each straight-line target is solved from the one before.
+        """
         if t < self.t_out:
-            s = max(t, 0.0) / self.t_out
-            position = self.here_position + s * (self.out_position - self.here_position)
-            return MotionSample(position, self.out_rotation, self.q_out)
+            return self._line(self._out, t / self.t_out)
         t -= self.t_out
         if t < self.t_joint:
-            q = self.q_out + _min_jerk(t / self.t_joint) * (self.q_entry - self.q_out)
-            kin = self.model.kinematics(q)
-            return MotionSample(kin.position, kin.rotation, q)
+            self._last = self.q_entry
+            return self.q_out + _min_jerk(t / self.t_joint) * (self.q_entry - self.q_out)
         t -= self.t_joint
-        s = min(t / self.t_in, 1.0) if self.t_in > 0.0 else 1.0
-        position = self.entry + s * (self.start_position - self.entry)
-        return MotionSample(position, self.rotation, self.q_entry)
+        if t < self.t_in:
+            return self._line(self._in, t / self.t_in)
+        return self.q_start
+
+    def error(self, q: np.ndarray) -> tuple[float, float]:
+        """How far the tool of the joints ``q`` is from the start: [m] and [rad]."""
+        import pinocchio as pin
+        tool = self.model.kinematics(q)
+        return (float(np.linalg.norm(tool.position - self.position)),
+                float(np.linalg.norm(pin.log3(self.rotation @ tool.rotation.T))))
+
+    def _line(self, segment: tuple[np.ndarray, np.ndarray, np.ndarray], s: float) -> np.ndarray:
+        begin, end, rotation = segment
+        self._last = self.model.inverse_kinematics(begin + s * (end - begin), rotation,
+                                                   self._last, tolerance=1e-9)
+        return self._last
 
 
+class JointHold:
+    """A joint impedance law with the model's gravity: ``K (q_d - q) + D (dq_d - dq) + g(q)``,
+    the reset's controller (libfranka's joint impedance example's, gravity added here because the
+    bridge's torques include it).
 
-class Arrival:
-    """The end of a move to ``start``: the reference moved by the integral of the measured
-    tool's error, until the tool is at the start and still (see the module doc).
-
-    :param start: where the tool should be.
-    :param config: tolerances, gain and time limit.
+    :raises ValueError: if the gains are not one a joint of the model.
     """
 
-    #: The error is integrated within this many tolerances of the start ...
-    CATCH_UP = 10.0
-    #: [m/s] ... and below this tool speed.
-    CATCH_UP_SPEED = 0.01
+    def __init__(self, model: ArmModel, config: ResetConfig) -> None:
+        if len(config.joint_stiffness) != model.nv:
+            raise ValueError(f"reset.joint_stiffness has {len(config.joint_stiffness)} values, "
+                             f"the arm {model.nv} joints")
+        self.model = model
+        self.stiffness = np.asarray(config.joint_stiffness, float)
+        self.damping = np.asarray(config.joint_damping, float)
 
-    def __init__(self, start: StartPose, config: ResetConfig) -> None:
-        self.position = np.asarray(start.position, float)
-        self.rotation = np.asarray(start.rotation, float)
-        self.config = config
-        self._shift = np.zeros(3)        # [m] the reference's offset from the start
-        self._turn = np.zeros(3)         # [rad] its rotation vector, base frame
-        self.position_error = math.inf
-        self.angle_error = math.inf
-
-    def reference(self, position: np.ndarray, rotation: np.ndarray, linear_speed: float,
-                  dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """The reference for the next tick, given the tool's measured pose and speed now.
-
-        The error is integrated only once the arm has caught up with the path (within
-        ``CATCH_UP`` times the tolerance, moving slower than ``CATCH_UP_SPEED``): the path's own
-        lag (5 mm at 0.05 m/s under the holding gains) would wind the integral up.
-        """
-        import pinocchio as pin
-        error = self.position - position
-        turn = pin.log3(self.rotation @ rotation.T)
-        self.position_error = float(np.linalg.norm(error))
-        self.angle_error = float(np.linalg.norm(turn))
-        if (self.position_error < self.CATCH_UP * self.config.arrive_tolerance
-                and linear_speed < self.CATCH_UP_SPEED):
-            self._shift += self.config.arrive_gain * dt * error
-            self._turn += self.config.arrive_gain * dt * turn
-        return self.position + self._shift, pin.exp3(self._turn) @ self.rotation
-
-    def arrived(self, linear_speed: float, angular_speed: float, linear_rest: float,
-                angular_rest: float) -> bool:
-        """At the start within the tolerances, and at rest by the rest detector's thresholds."""
-        return (self.position_error < self.config.arrive_tolerance
-                and self.angle_error < self.config.arrive_angle
-                and linear_speed < linear_rest and angular_speed < angular_rest)
+    def torque(self, q: np.ndarray, dq: np.ndarray, q_target: np.ndarray,
+               dq_target: np.ndarray) -> np.ndarray:
+        """(n,) [Nm] the joint torques towards ``q_target`` moving at ``dq_target``."""
+        return (self.stiffness * (q_target - q) + self.damping * (dq_target - dq)
+                + self.model.gravity(q))

@@ -150,7 +150,7 @@ def at_rest_msg(seq: int, result: StepResult, position: np.ndarray, rotation: np
                  angular_speed=float(result.angular_speed), timed_out=bool(result.timed_out),
                  wrench_estimate=wrench_msg(wrench), ee_pose=pose_msg(position, rotation),
                  ground_truth=ground_truth_msg(result.ground_truth, stamp),
-                 foreign_setpoints=int(foreign_setpoints))
+                 foreign_setpoints=int(foreign_setpoints), fault=result.fault)
     msg.header.stamp = stamp
     msg.header.frame_id = BASE_FRAME
     return msg

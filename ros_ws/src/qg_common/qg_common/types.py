@@ -81,6 +81,7 @@ class StepResult:
     angular_speed: float                # [rad/s]
     ground_truth: GroundTruth
     wrench_estimate: np.ndarray | None  # (6,) estimator output at the end, None without one
+    fault: str = ""                     # why the robot stopped the step ("" : it did not)
 
 
 @dataclass(frozen=True)
