@@ -15,7 +15,7 @@ from typing import Any, Protocol
 
 import numpy as np
 from qg_common.params import config_from_dict
-from qg_common.types import (NO_GROUND_TRUTH, GroundTruth, JointState, PoseReference, StartPose,
+from qg_common.types import (NO_GROUND_TRUTH, GroundTruth, JointState, StartPose,
                              StepResult, WrenchSetpoint)
 
 from robot_bridge_node.core.arm_model import ArmModel
