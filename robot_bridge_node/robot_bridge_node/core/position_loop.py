@@ -70,10 +70,7 @@ class PositionLoop(RobotLoop):
 
     def settle_here(self) -> None:
         """Restart the clock where the arm is and hold the pose for ``settle_time``."""
-        state = self._restart()
-        self.controller.reset(state.q)
-        self.controller.measure(state.q, state.dq)
-        self.reference = self.controller.pose_command
+        self.begin()
         self._settle()
 
     def _move_to(self, start: StartPose) -> None:

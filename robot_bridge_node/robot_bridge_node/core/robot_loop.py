@@ -212,8 +212,9 @@ class RobotLoop:
         return self.simulation is not None and self.reset_config.teleport
 
     def begin(self) -> None:
-        """Take the arm where it is and hold it there, stiffly, until the first setpoint or
-        reset: what the loop does when it starts (a robot is never moved at start-up)."""
+        """Take the arm where it is and hold it there, stiffly (the holding gains: the task's
+        leave z free), until the first setpoint or reset: what the loop does when it starts (a
+        robot is never moved at start-up), and after a reset."""
         state = self._restart()
         self.controller.reset(state.q)
         self.safety.reset(self.controller.model.gravity(state.q))
@@ -247,16 +248,10 @@ class RobotLoop:
         return self.recovered
 
     def settle_here(self) -> None:
-        """Restart the episode's clock and the estimator where the arm is and hold it there,
-        stiffly (the holding gains: the task's leave z free), for ``settle_time`` (the end of
-        every reset; alone, after a separate simulation put the arm at its start). The first
-        setpoint releases the hold."""
-        state = self._restart()
-        self.controller.reset(state.q)
-        self.safety.reset(self.controller.model.gravity(state.q))
-        self.setpoint = _HOLD
-        self.controller.hold(state.q)
-        self.holding = True
+        """Restart the episode's clock and the estimator where the arm is and hold it there
+        (``begin``) for ``settle_time``: the end of every reset; alone, after a separate
+        simulation put the arm at its start. The first setpoint releases the hold."""
+        self.begin()
         self._settle()
 
     def _move_to(self, start: StartPose) -> None:
