@@ -34,6 +34,12 @@ setup(
             'sim_xarm7 = sim_robot_node.plugins:SIM_XARM7',
             'sim_nextage = sim_robot_node.plugins:SIM_NEXTAGE',
         ],
+        # What viewers draw of each robot's task beside its URDF (robot_bridge_node.task_scenes).
+        'robot_bridge_node.task_scenes': [
+            'sim_panda = sim_robot_node.core.task_visuals:SIM_PANDA_SCENE',
+            'sim_xarm7 = sim_robot_node.core.task_visuals:SIM_XARM7_SCENE',
+            'sim_nextage = sim_robot_node.core.task_visuals:nextage_task_scene',
+        ],
         # Environments of the in-process experiments (qg_experiments.environments).
         'qg_experiments.environments': [
             'peg = sim_robot_node.core.peg_env:make_peg_env',

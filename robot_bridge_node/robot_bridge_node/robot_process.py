@@ -43,11 +43,13 @@ from robot_bridge_node.core.loop_process import LoopSpec
 from robot_bridge_node.core.loop_runner import SetpointCommand, StepEvent
 from robot_bridge_node.core.robot_loop import LoopConfig
 from robot_bridge_node.core.sample_ring import PUBLISH
-from robot_bridge_node.core.tick_messages import serialized_ticks
+from robot_bridge_node.core.robot_frames import RobotFrames, task_scene
+from robot_bridge_node.core.tick_messages import TopicRows, serialized_ticks
 from robot_bridge_node.core.tick_timing import TimingSnapshot
 from robot_bridge_node.estimator_node import WrenchEstimatorNode
 from robot_bridge_node.loop_diagnostics import LoopDiagnostics
 from robot_bridge_node.recorder_node import RecorderNode
+from robot_bridge_node.robot_state import RobotStatePublisher
 from robot_bridge_node.simulation_node import SimConfig, SimulationNode, serve_reset
 
 __all__ = ["RobotProcess", "loop_spec", "shipped_loop_spec", "main"]
@@ -100,6 +102,17 @@ class RobotProcess:
         bridge.setpoint_handler = self.submit_setpoint
         if recorder is not None:
             recorder.clock_ns = self.link.now_ns
+        # The robot as viewers draw it (robot_description, tf_static, scene_markers, tf).
+        robot = str(sim.get_parameter("robot").value)
+        description = sim.plugin.describe(sim.params)
+        self.frames: RobotFrames | None = None
+        self.robot_state: RobotStatePublisher | None = None
+        if description.urdf and description.tool_frame:
+            self.frames = RobotFrames(description)
+            self.robot_state = RobotStatePublisher(
+                bridge, self.frames, lambda yaw: task_scene(robot, sim.params, yaw),
+                self.link.now_ns, recorder)
+            self._publishers["/tf"] = self.robot_state.tf
         if config.realtime:
             LoopDiagnostics(bridge, lambda: self._timing, str(sim.get_parameter("robot").value))
         serve_reset(sim, self)
@@ -139,21 +152,25 @@ class RobotProcess:
             self.bridge.get_logger().warning(
                 f"no /episode_status of episode '{session}' within {EPISODE_STATUS_WAIT} s: "
                 f"its bag, if any, begins after the reset's settled start")
+        if self.robot_state is not None:
+            self.robot_state.housing(housing_yaw)
         return self._at_rest_msg(self.link.reset(initial_pose, housing_yaw, timeout))
 
     # --- the loop's output (the link's reader thread) ------------------------------------------
     def samples(self, records: np.ndarray) -> None:
-        published = records[(records["flags"] & PUBLISH) != 0]
-        if len(published):
-            self._publish(published)
+        tf = None if self.frames is None else self.frames.tf_rows(records)
+        extra = [] if tf is None else [tf]
+        publish = (records["flags"] & PUBLISH) != 0
+        if publish.any() or extra:
+            self._publish(records, publish, extra)
         if self.recorder is not None:
-            self.recorder.record_samples(records, self.joint_names)
+            self.recorder.record_samples(records, self.joint_names, extra)
 
-    def _publish(self, records: np.ndarray) -> None:
-        """The ticks on the 1 kHz topics under the nodes' names, tick by tick, each message
-        published serialized (``tick_messages``: the bytes the recorder writes)."""
-        ticks = serialized_ticks(records, self.joint_names)
-        for t_ns, messages in zip(records["t_ns"].tolist(), ticks):
+    def _publish(self, records: np.ndarray, publish: np.ndarray, extra: list[TopicRows]) -> None:
+        """The ticks on the 1 kHz topics (those ``publish`` marks) and ``/tf`` under the nodes'
+        names, tick by tick, each message published serialized (``tick_messages``: the bytes
+        the recorder writes)."""
+        for t_ns, messages in serialized_ticks(records, self.joint_names, publish, extra):
             for topic, message in messages:
                 self._publishers[topic].publish(message)
             if self.lockstep:       # rosgraph_msgs/Clock: the stamp alone
