@@ -40,6 +40,10 @@ setup(
             'sim_xarm7 = sim_robot_node.core.task_visuals:SIM_XARM7_SCENE',
             'sim_nextage = sim_robot_node.core.task_visuals:nextage_task_scene',
         ],
+        # The episode renderer of `qgl render` and the Gymnasium environments' render modes.
+        'qg_learning_node.renderers': [
+            'pybullet = sim_robot_node.core.episode_render',
+        ],
         # Environments of the in-process experiments (qg_experiments.environments).
         'qg_experiments.environments': [
             'peg = sim_robot_node.core.peg_env:make_peg_env',
