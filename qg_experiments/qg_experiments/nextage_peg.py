@@ -44,6 +44,7 @@ class NextagePeg:
         def params(name: str) -> dict[str, Any]:
             return load_ros_params(config_file(name, config_dir))
         robot_params, bridge = params("nextage.yaml"), params("bridge.yaml")
+        self.robot_params = robot_params          # the sim_nextage plugin's
         self.loop: PositionLoop = build_position_loop(
             load_robot("sim_nextage", robot_params),
             {**bridge, "position_control": robot_params["position_control"]})

@@ -16,6 +16,7 @@ import dataclasses
 
 import numpy as np
 
+from qg_experiments.gym_envs.rendering import RobotView
 from qg_experiments.gym_envs.residual_env import ResidualEnv
 from qg_experiments.runner import ARMS, ESTIMATORS, PandaTask, StackSettings
 from qg_learning_node.executor.residual_task import Observation
@@ -37,12 +38,13 @@ class InsertionEnv(ResidualEnv):
     :param estimator: ``ekf`` (as the stack) | ``ground_truth`` (a perfect wrench sensor).
     :param housing_yaw: [rad] the housing's rotation about the vertical (start tilts turn with it).
     :param config_dir: the stack's ``config/``; ``None``: the installed files.
+    :param render_mode: ``rgb_array`` | ``human`` | None (``residual_env``).
     """
 
     def __init__(self, observation: str | None = None, reward: str | None = None,
                  max_steps: int = TRAIN_MAX_STEPS, arm: str = "realistic",
                  arm_seed: int | None = None, estimator: str = "ekf", housing_yaw: float = 0.0,
-                 config_dir: str | None = None) -> None:
+                 config_dir: str | None = None, render_mode: str | None = None) -> None:
         if arm not in ARMS:
             raise ValueError(f"arm must be one of {ARMS}, got {arm!r}")
         if estimator not in ESTIMATORS:
@@ -50,7 +52,7 @@ class InsertionEnv(ResidualEnv):
         settings = StackSettings.load(config_dir, arm)
         task = dataclasses.replace(settings.task,
                                    observation=observation or settings.task.observation)
-        super().__init__(task, reward, max_steps)
+        super().__init__(task, reward, max_steps, render_mode)
         self.settings = dataclasses.replace(settings, task=task)
         self.arm, self.arm_seed, self.estimator = arm, arm_seed, estimator
         self.housing_yaw = float(housing_yaw)
@@ -74,8 +76,17 @@ class InsertionEnv(ResidualEnv):
         assert self.robot is not None
         return self.robot.step(action)
 
+    def _view(self) -> RobotView:
+        return RobotView("sim_panda", self.settings.robot, self.render_mode, self.housing_yaw)
+
+    def _joint_positions(self) -> np.ndarray:
+        if self.robot is None:
+            raise RuntimeError("render() before reset(): there is no robot yet")
+        return self.robot.loop.hardware.read().q
+
     def close(self) -> None:
-        """Release the simulation (its pybullet client)."""
+        """Release the simulation (its pybullet client) and the renderer's."""
+        super().close()
         if self.robot is not None:
             self.robot.close()
             self.robot = None

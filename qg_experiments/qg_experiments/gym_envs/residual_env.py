@@ -15,6 +15,11 @@ in-process environment and the ROS-backed one cannot drift apart from the runner
 
 ``info`` carries ``is_success`` (SB3's key) and the ground-truth errors; they come from the
 simulator and are for evaluation only, never part of the observation.
+
+``render_mode="rgb_array"`` makes ``render()`` return the picture of the robot as it is now
+(``rendering.RobotView``: the renderer of ``qgl render``) with the step, the residual torques
+and the wrench estimate written on it; ``"human"`` shows it in a window (needs a display).
+A subclass that can be drawn says how (``_view``, ``_joint_positions``).
 """
 from __future__ import annotations
 
@@ -25,6 +30,8 @@ import numpy as np
 from gymnasium import spaces
 from qg_common.types import N_START_POSES
 
+from qg_experiments.gym_envs.rendering import (RENDER_FPS, RENDER_MODES, RobotView,
+                                                check_render_mode)
 from qg_learning_node.executor.episode import Episode
 from qg_learning_node.executor.residual_task import (ACTION_DIM, Observation, ResidualTask,
                                                      TaskConfig)
@@ -40,11 +47,20 @@ class ResidualEnv(gymnasium.Env):
     :param max_steps: step cap of an episode (``truncated`` when it is reached).
     """
 
-    metadata: dict[str, Any] = {"render_modes": []}
+    metadata: dict[str, Any] = {"render_modes": RENDER_MODES, "render_fps": RENDER_FPS}
 
-    def __init__(self, task: TaskConfig, reward: str | None, max_steps: int) -> None:
+    def __init__(self, task: TaskConfig, reward: str | None, max_steps: int,
+                 render_mode: str | None = None) -> None:
         if max_steps < 1:
             raise ValueError(f"max_steps must be >= 1, got {max_steps}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or "
+                             f"None, got {render_mode!r}")
+        check_render_mode(render_mode)
+        self.render_mode = render_mode
+        self._robot_view: RobotView | None = None
+        self._last_action = np.zeros(ACTION_DIM)
+        self._last_observation: Observation | None = None
         self.residual = ResidualTask(task)
         self.reward_kind = reward or task.reward
         if self.reward_kind not in ("dense", "sparse"):
@@ -67,6 +83,14 @@ class ResidualEnv(gymnasium.Env):
     def _execute(self, action: np.ndarray) -> Observation:
         """Execute the residual ``action`` (actor units) until the tool is at rest."""
         raise NotImplementedError
+
+    def _view(self) -> RobotView:
+        """The renderer of the robot behind the environment (``render_mode`` set)."""
+        raise NotImplementedError(f"{type(self).__name__} has no render modes")
+
+    def _joint_positions(self) -> np.ndarray:
+        """The robot's joints now [rad], in the order of its description."""
+        raise NotImplementedError(f"{type(self).__name__} has no render modes")
 
     # --- gymnasium -----------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None,
@@ -91,6 +115,7 @@ class ResidualEnv(gymnasium.Env):
         self.episodes += 1
         observation = self._reset_robot(pose)
         self._episode = episode
+        self._last_action, self._last_observation = np.zeros(ACTION_DIM), observation
         return self._state(episode.begin(observation)), self._info(observation)
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
@@ -101,9 +126,42 @@ class ResidualEnv(gymnasium.Env):
         # as the executor does: a non-finite action becomes the zero residual, never a command
         a = np.clip(a, -1.0, 1.0) if np.all(np.isfinite(a)) else np.zeros(ACTION_DIM)
         observation = self._execute(a)
+        self._last_action, self._last_observation = a, observation
         record = episode.observe(a, observation)
         return (self._state(record.next_state), float(record.reward), bool(record.terminal),
                 bool(record.timeout), self._info(observation))
+
+    def render(self) -> np.ndarray | None:
+        """The robot as it is now (``rgb_array``: the frame; ``human``: in the window)."""
+        if self.render_mode is None:
+            gymnasium.logger.warn("render() without a render_mode: make the environment with "
+                                  "render_mode='rgb_array' or 'human'")
+            return None
+        if self._robot_view is None:
+            self._robot_view = self._view()
+        return self._robot_view.render(self._joint_positions(), self._render_lines())
+
+    def _render_lines(self) -> list[str]:
+        """The step, the residual torques of the last action and the wrench estimate."""
+        episode = self._episode
+        lines = [f"{self.spec.id if self.spec else type(self).__name__}   "
+                 f"episode {self.episodes}, start {episode.initial_pose if episode else '-'}, "
+                 f"step {episode.step if episode else 0}"]
+        wrench = self.residual.wrench(self._last_action)
+        lines.append(f"residual  Tx {wrench[3]:+5.2f}  Ty {wrench[4]:+5.2f} Nm   "
+                     f"push Fz {wrench[2]:+6.1f} N")
+        observation = self._last_observation
+        if observation is not None:
+            f = observation.wrench
+            lines.append(f"estimate  Fz {f[2]:+6.1f} N   Tx {f[3]:+5.2f}  Ty {f[4]:+5.2f} Nm   "
+                         f"to go {observation.position_error * 1e3:5.1f} mm")
+        return lines
+
+    def close(self) -> None:
+        """Close the renderer's world (subclasses release their robot too)."""
+        if self._robot_view is not None:
+            self._robot_view.close()
+            self._robot_view = None
 
     @property
     def episode(self) -> Episode | None:
