@@ -71,23 +71,30 @@ def _resolve(uri: str) -> str | None:
 
 
 def renderable_urdf(urdf: str) -> str:
-    """``urdf`` as this renderer draws it: each link's collision geometry as its visual, mesh
-    files found on this machine (a mesh it cannot find is left out), no materials."""
+    """``urdf`` as this renderer draws it: a link whose visuals are meshes drawn with its
+    collision geometry instead (coarser, and much faster), mesh files found on this machine (a
+    shape whose mesh it cannot find is left out), no materials (the arm gets one colour)."""
     root = ElementTree.fromstring(urdf)
     for material in root.findall("material"):
         root.remove(material)
     for link in root.findall("link"):
+        visuals, collisions = link.findall("visual"), link.findall("collision")
+        if collisions and any(v.find("geometry/mesh") is not None for v in visuals):
+            for visual in visuals:
+                link.remove(visual)
+            for collision in collisions:
+                visual = ElementTree.SubElement(link, "visual")
+                visual.extend(list(collision))
         for visual in link.findall("visual"):
-            link.remove(visual)
-        for collision in link.findall("collision"):
-            mesh = collision.find("geometry/mesh")
+            for material in visual.findall("material"):
+                visual.remove(material)
+            mesh = visual.find("geometry/mesh")
             if mesh is not None:
                 path = _resolve(mesh.get("filename", ""))
                 if path is None:
-                    continue
-                mesh.set("filename", path)
-            visual = ElementTree.SubElement(link, "visual")
-            visual.extend(list(collision))
+                    link.remove(visual)
+                else:
+                    mesh.set("filename", path)
     return ElementTree.tostring(root, encoding="unicode")
 
 
