@@ -30,7 +30,7 @@ import numpy as np
 import rclpy
 from qg_common.conversions import at_rest_msg, setpoint_from_msg, time_msg
 from qg_common.node_parameters import package_defaults
-from qg_common.node_runtime import run_nodes
+from qg_common.node_runtime import favour_loop_thread, run_nodes
 from qg_interfaces.msg import AtRest
 from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
 from qg_recording.cdr import CdrBuffer
@@ -41,9 +41,10 @@ from robot_bridge_node.core.hardware_interface import robot_defaults, robot_plug
 from robot_bridge_node.core.loop_link import ForkedLoopProcess, LoopLink
 from robot_bridge_node.core.loop_process import LoopSpec
 from robot_bridge_node.core.loop_runner import SetpointCommand, StepEvent
+from robot_bridge_node.core.paced_publisher import PacedPublisher
+from robot_bridge_node.core.robot_frames import RobotFrames, task_scene
 from robot_bridge_node.core.robot_loop import LoopConfig
 from robot_bridge_node.core.sample_ring import PUBLISH
-from robot_bridge_node.core.robot_frames import RobotFrames, task_scene
 from robot_bridge_node.core.tick_messages import TopicRows, serialized_ticks
 from robot_bridge_node.core.tick_timing import TimingSnapshot
 from robot_bridge_node.estimator_node import WrenchEstimatorNode
@@ -88,7 +89,11 @@ class RobotProcess:
         self.lockstep = not config.realtime
         spec = loop_spec(str(sim.get_parameter("robot").value), sim.params, bridge.params,
                          estimator.params)
-        self.link = LoopLink(spec, len(self.joint_names), self, forked=forked)
+        # Realtime: the reader thread and the paced publisher below the loop's priority, so
+        # the ticks leave on time however busy the machine is (``paced_publisher``).
+        publishing = max(0, config.realtime_priority - 10) if config.realtime else 0
+        self.link = LoopLink(spec, len(self.joint_names), self, forked=forked,
+                             reader_priority=publishing)
         self._lock = threading.Lock()
         self._session = ""                  # the served session ("" = any sender)
         self.foreign_setpoints = 0          # setpoints of other sessions since the last reset
@@ -113,14 +118,26 @@ class RobotProcess:
                 bridge, self.frames, lambda yaw: task_scene(robot, sim.params, yaw),
                 self.link.now_ns, recorder)
             self._publishers["/tf"] = self.robot_state.tf
+        self._paced: PacedPublisher | None = None
         if config.realtime:
-            LoopDiagnostics(bridge, lambda: self._timing, str(sim.get_parameter("robot").value))
+            # Realtime ticks leave evenly spaced, as the loop ticked (``paced_publisher``).
+            self._paced = PacedPublisher(self._publish_message, priority=publishing)
+            favour_loop_thread()
+            LoopDiagnostics(bridge, lambda: self._timing, robot)
         serve_reset(sim, self)
 
     def start(self) -> Callable[[], None]:
         """Start the loop process; returns the function that stops it."""
         self.link.start()
-        return self.link.stop
+        return self.stop
+
+    def stop(self) -> None:
+        """Stop the loop process, then publish what it sent last."""
+        try:
+            self.link.stop()
+        finally:
+            if self._paced is not None:
+                self._paced.stop()
 
     # --- commands (ROS callbacks) --------------------------------------------------------------
     def submit_setpoint(self, msg: WrenchSetpointMsg) -> None:
@@ -169,12 +186,19 @@ class RobotProcess:
     def _publish(self, records: np.ndarray, publish: np.ndarray, extra: list[TopicRows]) -> None:
         """The ticks on the 1 kHz topics (those ``publish`` marks) and ``/tf`` under the nodes'
         names, tick by tick, each message published serialized (``tick_messages``: the bytes
-        the recorder writes)."""
-        for t_ns, messages in serialized_ticks(records, self.joint_names, publish, extra):
+        the recorder writes); realtime ticks paced, lockstep ones at once with ``/clock``."""
+        ticks = serialized_ticks(records, self.joint_names, publish, extra)
+        if self._paced is not None:
+            self._paced.put(ticks)
+            return
+        for t_ns, messages in ticks:
             for topic, message in messages:
                 self._publishers[topic].publish(message)
-            if self.lockstep:       # rosgraph_msgs/Clock: the stamp alone
-                self.sim.clock.publish(CdrBuffer().stamp(t_ns).message())
+            # rosgraph_msgs/Clock: the stamp alone
+            self.sim.clock.publish(CdrBuffer().stamp(t_ns).message())
+
+    def _publish_message(self, topic: str, message: bytes) -> None:
+        self._publishers[topic].publish(message)
 
     def at_rest(self, event: StepEvent) -> None:
         self.bridge.ee_at_rest.publish(self._at_rest_msg(event))
