@@ -25,6 +25,11 @@ from pathlib import Path
 import numpy as np
 
 
+def _cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="counted wall seconds")
@@ -70,17 +75,21 @@ def main() -> None:
         start = time.monotonic() + args.warmup
         while time.monotonic() < start:
             executor.spin_once(timeout_sec=0.05)
+        pid = launcher.pids()["robot"]
         counting[0] = True
-        end = time.monotonic() + args.seconds
+        cpu0, end = _cpu_seconds(pid), time.monotonic() + args.seconds
         while time.monotonic() < end:
             executor.spin_once(timeout_sec=0.05)
         counting[0] = False
+        robot_cpu = 100.0 * (_cpu_seconds(pid) - cpu0) / args.seconds
         executor.shutdown()
         node.destroy_node()
         rclpy.shutdown()
     finally:
         codes = launcher.stop()
-    result: dict = {"seconds": args.seconds, "set": args.set, "exit_codes": codes, "topics": {}}
+    result: dict = {"seconds": args.seconds, "set": args.set, "exit_codes": codes,
+                    "robot_process_cpu_percent": robot_cpu, "topics": {}}
+    print(f"robot process (its loop process not counted): {robot_cpu:.0f} % of a core")
     for topic, received in arrivals.items():
         if len(received) < 2:
             result["topics"][topic] = {"messages": len(received)}

@@ -30,7 +30,7 @@ import numpy as np
 import rclpy
 from qg_common.conversions import at_rest_msg, setpoint_from_msg, time_msg
 from qg_common.node_parameters import package_defaults
-from qg_common.node_runtime import favour_loop_thread, run_nodes
+from qg_common.node_runtime import run_nodes
 from qg_interfaces.msg import AtRest
 from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
 from qg_recording.cdr import CdrBuffer
@@ -122,7 +122,6 @@ class RobotProcess:
         if config.realtime:
             # Realtime ticks leave evenly spaced, as the loop ticked (``paced_publisher``).
             self._paced = PacedPublisher(self._publish_message, priority=publishing)
-            favour_loop_thread()
             LoopDiagnostics(bridge, lambda: self._timing, robot)
         serve_reset(sim, self)
 

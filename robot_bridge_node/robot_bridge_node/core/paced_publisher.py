@@ -13,12 +13,14 @@ realtime publisher drops what its thread cannot send, so the live topics never t
 by more than that (the bag records every tick apart from this).
 
 On a busy machine the thread must wake on time: it runs at ``SCHED_FIFO`` ``priority`` (the
-robot process gives it and its reader thread the loop's priority less 10) and the process hands
-the GIL over every 0.1 ms (``node_runtime.favour_loop_thread``). Measured with the realtime
-robot up and a subscriber as ``ros2 topic hz`` subscribes (``benchmarks/topic_hz_bench.py``,
-2-core machine at load average 8 from other jobs): the publishing gaps p50 1.00 ms, p99 1.3 ms;
-without the priorities the reader thread handed blocks over up to 17 ms late (p99) and the
-thread published them in bursts again.
+robot process gives it and its reader thread the loop's priority less 10). Measured with the
+realtime robot up and a subscriber as ``ros2 topic hz`` subscribes
+(``benchmarks/topic_hz_bench.py``, 2-core machine at load average 8 from other jobs): the
+publishing gaps p50 1.00 ms, p99 1.3 ms; without the priorities the reader thread handed blocks
+over up to 17 ms late (p99) and the thread published them in bursts again. Handing the GIL over
+every 0.1 ms as well (``node_runtime.favour_loop_thread``) made it worse: 455-905 Hz counted,
+stalls of 190-310 ms and 26-30 % of a core for the robot process, against 938-993 Hz, 26-28 ms
+and 19 % without (8 s each, alternating).
 
 Only realtime ticks are paced: their stamps are the wall clock (``time.time_ns``). A lockstep
 loop's stamps are simulated time, not tied to the wall clock; its ticks are published as they
