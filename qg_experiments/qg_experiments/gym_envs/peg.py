@@ -17,8 +17,8 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from qg_experiments.gym_envs.rendering import (RENDER_FPS, RENDER_MODES, RobotView,
-                                                check_render_mode)
+from qg_experiments.gym_envs.rendering import (RENDER_FPS, RENDER_MODES, RenderedRobot,
+                                                RobotView, check_render_mode)
 from qg_experiments.nextage_peg import NextagePeg
 from qg_learning_node.executor.peg_task import PEG_ACTION_DIM, PEG_STATE_DIM
 
@@ -28,7 +28,7 @@ __all__ = ["NextagePegEnv"]
 _START_RANGE = 2**31 - 1
 
 
-class NextagePegEnv(gymnasium.Env):
+class NextagePegEnv(RenderedRobot, gymnasium.Env):
     """The Nextage peg (see the module docstring).
 
     :param reward: ``dense`` | ``sparse``.
@@ -42,7 +42,6 @@ class NextagePegEnv(gymnasium.Env):
                  config_dir: str | None = None, render_mode: str | None = None) -> None:
         check_render_mode(render_mode)
         self.render_mode = render_mode
-        self._robot_view: RobotView | None = None
         self._last_action = np.zeros(PEG_ACTION_DIM)
         if reward not in ("dense", "sparse"):
             raise ValueError(f"reward must be dense or sparse, got {reward!r}")
@@ -88,14 +87,13 @@ class NextagePegEnv(gymnasium.Env):
             info["start"] = start
         return info
 
-    def render(self) -> np.ndarray | None:
-        """The arm as it is now (``rgb_array``: the frame; ``human``: in the window)."""
-        if self.render_mode is None:
-            gymnasium.logger.warn("render() without a render_mode: make the environment with "
-                                  "render_mode='rgb_array' or 'human'")
-            return None
-        if self._robot_view is None:
-            self._robot_view = RobotView("sim_nextage", self.peg.robot_params, self.render_mode)
+    def _view(self) -> RobotView:
+        return RobotView("sim_nextage", self.peg.robot_params, self.render_mode)
+
+    def _joint_positions(self) -> np.ndarray:
+        return self.peg.loop.hardware.read().q
+
+    def _render_lines(self) -> list[str]:
         observation = self.peg.observation
         scale = 100 * self.peg.task.config.action_scale       # [cm] of a unit action
         lines = [f"QGNextagePeg-v0   step {self.peg.steps}",
@@ -103,10 +101,8 @@ class NextagePegEnv(gymnasium.Env):
                  + " cm"]
         if observation is not None:
             lines.append(f"tip to the hole bottom {observation.position_error * 1e3:5.1f} mm")
-        return self._robot_view.render(self.peg.loop.hardware.read().q, lines)
+        return lines
 
     def close(self) -> None:
-        if self._robot_view is not None:
-            self._robot_view.close()
-            self._robot_view = None
+        self._close_view()
         self.peg.close()

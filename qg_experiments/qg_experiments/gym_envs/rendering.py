@@ -17,13 +17,14 @@ import os
 from collections.abc import Sequence
 from typing import Any
 
+import gymnasium
 import numpy as np
 from robot_bridge_node.core.hardware_interface import robot_plugin
 from robot_bridge_node.core.robot_frames import RobotFrames, task_scene
 
 from qg_learning_node.cli.render import renderer
 
-__all__ = ["RENDER_MODES", "RENDER_FPS", "RobotView", "check_render_mode"]
+__all__ = ["RENDER_MODES", "RENDER_FPS", "RobotView", "RenderedRobot", "check_render_mode"]
 
 RENDER_MODES = ["rgb_array", "human"]
 #: One frame per RL step; a step takes 0.02-0.25 s of the robot's time.
@@ -71,3 +72,38 @@ class RobotView:
 
     def close(self) -> None:
         self._renderer.close()
+
+
+class RenderedRobot:
+    """``render()`` of an environment whose robot a ``RobotView`` draws (a mixin before
+    ``gymnasium.Env``): a subclass says which view (``_view``), where the joints are
+    (``_joint_positions``) and what to write on the frame (``_render_lines``)."""
+
+    render_mode: str | None = None
+    _robot_view: RobotView | None = None
+
+    def _view(self) -> RobotView:
+        raise NotImplementedError(f"{type(self).__name__} has no render modes")
+
+    def _joint_positions(self) -> np.ndarray:
+        """The robot's joints now [rad], in the order of its description."""
+        raise NotImplementedError(f"{type(self).__name__} has no render modes")
+
+    def _render_lines(self) -> list[str]:
+        return []
+
+    def render(self) -> np.ndarray | None:
+        """The robot as it is now (``rgb_array``: the frame; ``human``: in the window)."""
+        if self.render_mode is None:
+            gymnasium.logger.warn("render() without a render_mode: make the environment with "
+                                  "render_mode='rgb_array' or 'human'")
+            return None
+        if self._robot_view is None:
+            self._robot_view = self._view()
+        return self._robot_view.render(self._joint_positions(), self._render_lines())
+
+    def _close_view(self) -> None:
+        """Close the renderer's world, if one was opened."""
+        if self._robot_view is not None:
+            self._robot_view.close()
+            self._robot_view = None

@@ -19,7 +19,8 @@ simulator and are for evaluation only, never part of the observation.
 ``render_mode="rgb_array"`` makes ``render()`` return the picture of the robot as it is now
 (``rendering.RobotView``: the renderer of ``qgl render``) with the step, the residual torques
 and the wrench estimate written on it; ``"human"`` shows it in a window (needs a display).
-A subclass that can be drawn says how (``_view``, ``_joint_positions``).
+A subclass that can be drawn says how (``rendering.RenderedRobot``: ``_view``,
+``_joint_positions``).
 """
 from __future__ import annotations
 
@@ -30,7 +31,7 @@ import numpy as np
 from gymnasium import spaces
 from qg_common.types import N_START_POSES
 
-from qg_experiments.gym_envs.rendering import (RENDER_FPS, RENDER_MODES, RobotView,
+from qg_experiments.gym_envs.rendering import (RENDER_FPS, RENDER_MODES, RenderedRobot,
                                                 check_render_mode)
 from qg_learning_node.executor.episode import Episode
 from qg_learning_node.executor.residual_task import (ACTION_DIM, Observation, ResidualTask,
@@ -39,7 +40,7 @@ from qg_learning_node.executor.residual_task import (ACTION_DIM, Observation, Re
 __all__ = ["ResidualEnv"]
 
 
-class ResidualEnv(gymnasium.Env):
+class ResidualEnv(RenderedRobot, gymnasium.Env):
     """Base of the residual-policy environments; subclasses say how the robot resets and steps.
 
     :param task: the executor's task settings (observation, reward scales, ...).
@@ -53,12 +54,8 @@ class ResidualEnv(gymnasium.Env):
                  render_mode: str | None = None) -> None:
         if max_steps < 1:
             raise ValueError(f"max_steps must be >= 1, got {max_steps}")
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or "
-                             f"None, got {render_mode!r}")
         check_render_mode(render_mode)
         self.render_mode = render_mode
-        self._robot_view: RobotView | None = None
         self._last_action = np.zeros(ACTION_DIM)
         self._last_observation: Observation | None = None
         self.residual = ResidualTask(task)
@@ -84,13 +81,6 @@ class ResidualEnv(gymnasium.Env):
         """Execute the residual ``action`` (actor units) until the tool is at rest."""
         raise NotImplementedError
 
-    def _view(self) -> RobotView:
-        """The renderer of the robot behind the environment (``render_mode`` set)."""
-        raise NotImplementedError(f"{type(self).__name__} has no render modes")
-
-    def _joint_positions(self) -> np.ndarray:
-        """The robot's joints now [rad], in the order of its description."""
-        raise NotImplementedError(f"{type(self).__name__} has no render modes")
 
     # --- gymnasium -----------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None,
@@ -131,16 +121,6 @@ class ResidualEnv(gymnasium.Env):
         return (self._state(record.next_state), float(record.reward), bool(record.terminal),
                 bool(record.timeout), self._info(observation))
 
-    def render(self) -> np.ndarray | None:
-        """The robot as it is now (``rgb_array``: the frame; ``human``: in the window)."""
-        if self.render_mode is None:
-            gymnasium.logger.warn("render() without a render_mode: make the environment with "
-                                  "render_mode='rgb_array' or 'human'")
-            return None
-        if self._robot_view is None:
-            self._robot_view = self._view()
-        return self._robot_view.render(self._joint_positions(), self._render_lines())
-
     def _render_lines(self) -> list[str]:
         """The step, the residual torques of the last action and the wrench estimate."""
         episode = self._episode
@@ -159,9 +139,7 @@ class ResidualEnv(gymnasium.Env):
 
     def close(self) -> None:
         """Close the renderer's world (subclasses release their robot too)."""
-        if self._robot_view is not None:
-            self._robot_view.close()
-            self._robot_view = None
+        self._close_view()
 
     @property
     def episode(self) -> Episode | None:

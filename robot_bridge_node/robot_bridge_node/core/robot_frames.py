@@ -23,7 +23,6 @@ from xml.etree import ElementTree
 
 import numpy as np
 import pinocchio as pin
-from qg_common.frame_tree import FrameTree
 from qg_common.task_scene import TOOL, TaskScene
 from qg_recording.cdr import FixedLayout, tf_layout
 
@@ -179,14 +178,3 @@ class RobotFrames:
         chosen = records[ticks]
         return TopicRows("/tf", ticks, chosen["t_ns"], self.moving_rows(chosen["q"]),
                          fixed_layout=self.tf_layout)
-
-    # --- all of it at once -----------------------------------------------------------------
-    def tree(self, q: np.ndarray, scene: TaskScene = TaskScene()) -> FrameTree:
-        """Every frame at configuration ``q``: the robot's, the tool and the task's."""
-        tree = FrameTree()
-        values = self.moving_rows(q)[0]
-        for k, joint in enumerate(self._moving):
-            tree.set(joint.parent, joint.child, values[7 * k:7 * k + 3], values[7 * k + 3:7 * k + 7])
-        for t in self.static_transforms(scene):
-            tree.set(t.parent, t.child, t.translation, t.rotation)
-        return tree

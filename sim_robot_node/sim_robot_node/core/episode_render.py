@@ -220,7 +220,7 @@ class SceneRenderer:
     def close_up(self) -> Camera:
         """The task up close (the shaft in the bore)."""
         t = self.task_point
-        return Camera((t[0], t[1], t[2] + 0.03), 0.16, yaw=60.0, pitch=-10.0)
+        return Camera((t[0], t[1], t[2] + 0.015), 0.13, yaw=60.0, pitch=-8.0)
 
     def image(self, camera: Camera, width: int | None = None,
               height: int | None = None) -> np.ndarray:
@@ -341,8 +341,12 @@ class _Series:
         self.t.append(t_ns)
         self.values.append(value)
 
+    def index_at(self, t_ns: int) -> int:
+        """How many values came at or before ``t_ns``."""
+        return int(np.searchsorted(self.t, t_ns, side="right"))
+
     def at(self, t_ns: int) -> Any:
-        k = int(np.searchsorted(self.t, t_ns, side="right")) - 1
+        k = self.index_at(t_ns) - 1
         return self.values[k] if k >= 0 else None
 
 
@@ -381,8 +385,9 @@ def _lines(t_ns: int, start: int, series: Mapping[str, _Series], header: str) ->
     """What the frame at ``t_ns`` says: the episode, the time and step, the setpoint, the
     wrench estimate and the tilt of that moment."""
     lines = [header]
-    setpoint = series["/wrench_setpoint"].at(t_ns)
-    step = "start" if setpoint is None else f"step {setpoint.seq}"
+    setpoints = series["/wrench_setpoint"]
+    setpoint = setpoints.at(t_ns)          # the bag's k-th setpoint is the episode's step k
+    step = "start" if setpoint is None else f"step {setpoints.index_at(t_ns)}"
     lines.append(f"{step}   t {(t_ns - start) * 1e-9:6.2f} s")
     if setpoint is not None:
         f, m = setpoint.wrench.force, setpoint.wrench.torque

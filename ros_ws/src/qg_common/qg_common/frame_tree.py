@@ -37,10 +37,6 @@ class FrameTree:
         """``child``'s pose in ``parent``."""
         self._parents[child] = (parent, homogeneous(translation, quaternion_xyzw))
 
-    def set_matrix(self, parent: str, child: str, pose: np.ndarray) -> None:
-        """``child``'s pose in ``parent`` as a 4x4 transform."""
-        self._parents[child] = (parent, np.asarray(pose, float))
-
     def __contains__(self, frame: str) -> bool:
         return frame in self._parents
 
