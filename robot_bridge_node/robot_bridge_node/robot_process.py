@@ -89,11 +89,7 @@ class RobotProcess:
         self.lockstep = not config.realtime
         spec = loop_spec(str(sim.get_parameter("robot").value), sim.params, bridge.params,
                          estimator.params)
-        # Realtime: the reader thread and the paced publisher below the loop's priority, so
-        # the ticks leave on time however busy the machine is (``paced_publisher``).
-        publishing = max(0, config.realtime_priority - 10) if config.realtime else 0
-        self.link = LoopLink(spec, len(self.joint_names), self, forked=forked,
-                             reader_priority=publishing)
+        self.link = LoopLink(spec, len(self.joint_names), self, forked=forked)
         self._lock = threading.Lock()
         self._session = ""                  # the served session ("" = any sender)
         self.foreign_setpoints = 0          # setpoints of other sessions since the last reset
@@ -120,8 +116,10 @@ class RobotProcess:
             self._publishers["/tf"] = self.robot_state.tf
         self._paced: PacedPublisher | None = None
         if config.realtime:
-            # Realtime ticks leave evenly spaced, as the loop ticked (``paced_publisher``).
-            self._paced = PacedPublisher(self._publish_message, priority=publishing)
+            # Realtime ticks leave evenly spaced, as the loop ticked (``paced_publisher``), from
+            # a thread below the loop's priority, so they leave on time on a busy machine.
+            self._paced = PacedPublisher(self._publish_message,
+                                         priority=max(0, config.realtime_priority - 10))
             LoopDiagnostics(bridge, lambda: self._timing, robot)
         serve_reset(sim, self)
 

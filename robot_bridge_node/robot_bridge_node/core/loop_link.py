@@ -22,7 +22,6 @@ from typing import Protocol
 
 import numpy as np
 from qg_common.process_guard import die_with_parent
-from qg_common.realtime_pacer import fifo_priority
 
 from robot_bridge_node.core.loop_process import LoopSpec, serve_forked
 from robot_bridge_node.core.loop_runner import ResetCommand, SetpointCommand, StepEvent
@@ -133,17 +132,12 @@ class LoopLink:
         process spent 2 % of a core on looking.
     :param capacity: [records] of the sample ring.
     :param forked: a loop process forked beforehand, to use instead of starting one.
-    :param reader_priority: ``SCHED_FIFO`` priority of the reader thread (0: the normal
-        scheduler): a realtime loop's records are taken on time however busy the machine is
-        (``reader_priority_error`` says why the system refused it).
     """
 
     def __init__(self, spec: LoopSpec, n_joints: int, listener: LoopListener, *,
                  poll: float = 0.005, idle_poll: float = 0.05, capacity: int = DEFAULT_CAPACITY,
-                 forked: ForkedLoopProcess | None = None, reader_priority: int = 0) -> None:
+                 forked: ForkedLoopProcess | None = None) -> None:
         self.spec = spec
-        self.reader_priority = reader_priority
-        self.reader_priority_error: str | None = None
         self.listener = listener
         self.poll, self.idle_poll = poll, idle_poll
         self.ring = SampleRing.create(n_joints, capacity)
@@ -266,8 +260,6 @@ class LoopLink:
 
     # --- the reader thread ---------------------------------------------------------------------
     def _read(self) -> None:
-        if self.reader_priority > 0:
-            self.reader_priority_error = fifo_priority(self.reader_priority)
         try:
             wait = self.poll
             while True:

@@ -13,18 +13,16 @@ realtime publisher drops what its thread cannot send, so the live topics never t
 by more than that (the bag records every tick apart from this).
 
 On a busy machine the thread must wake on time: it runs at ``SCHED_FIFO`` ``priority`` (the
-robot process gives it and its reader thread the loop's priority less 10). Measured with the
-realtime robot up and a subscriber as ``ros2 topic hz`` subscribes
-(``benchmarks/topic_hz_bench.py``, 2-core machine at load average 8 from other jobs): the
-publishing gaps p50 1.00 ms, p99 1.3 ms; without the priorities the reader thread handed blocks
-over up to 17 ms late (p99) and the thread published them in bursts again. Handing the GIL over
-every 0.1 ms as well (``node_runtime.favour_loop_thread``) made it worse: 455-905 Hz counted,
-stalls of 190-310 ms and 26-30 % of a core for the robot process, against 938-993 Hz, 26-28 ms
-and 19 % without (8 s each, alternating).
-
-Only realtime ticks are paced: their stamps are the wall clock (``time.time_ns``). A lockstep
-loop's stamps are simulated time, not tied to the wall clock; its ticks are published as they
-come.
+robot process gives it the loop's priority less 10; it takes ~1 % of a core). The delay covers
+the reader thread's lateness: at load average 8 from other jobs it handed blocks over up to
+17 ms after their stamps (p99). Measured with ``benchmarks/topic_hz_bench.py`` (a subscriber as
+``ros2 topic hz`` subscribes) on the 2-core machine: publishing gaps p50 1.00 ms, p99 1.3 ms.
+Tried and left out: the reader thread at ``SCHED_FIFO`` too, with the GIL handed over every
+0.1 ms (986-993 Hz counted instead of 980, but a starved test subscriber then stopped receiving
+altogether more often: ``test_recorder_time_base``'s realtime test, four copies at once on the
+loaded machine, failed 6 times in 29 runs, against 1 in 12 now and 3 in 12 before this
+module), and the GIL hand-over alone (``node_runtime.favour_loop_thread``: 455-905 Hz, stalls
+of 190-310 ms).
 """
 from __future__ import annotations
 
@@ -51,7 +49,7 @@ class PacedPublisher:
     :param max_lag: [s] a tick later than this is dropped instead of published.
     """
 
-    def __init__(self, publish: Callable[[str, bytes], None], delay: float = 0.015,
+    def __init__(self, publish: Callable[[str, bytes], None], delay: float = 0.025,
                  clock: Callable[[], int] = time.time_ns, priority: int = 0,
                  max_lag: float = 0.5) -> None:
         self._publish = publish
