@@ -6,10 +6,11 @@
    the loop (goal: at most 2 %). Shown apart: computing the simulation's ground truth every
    10th tick for its topics and the bag (a real robot has none).
 2. Through a real loop process (``LoopLink``, lockstep), the same steps with every tick recorded
-   into an episode bag by the robot process's recording code (``record_ticks``) and with the
-   ticks thrown away: the loop process's CPU time per tick (from /proc) and wall time per tick,
-   the ring's lost records, and the bag's ``/joint_states`` count against the ticks (goal: 0
-   dropped).
+   into an episode bag by the robot process's recording code (``record_ticks``, with the
+   ``/tf`` of ``RobotFrames.tf_rows``) and with the ticks thrown away: the loop process's CPU
+   time per tick (from /proc) and wall time per tick, the reading thread's CPU time per tick
+   for recording, the ring's lost records, and the bag's ``/joint_states`` count against the
+   ticks (goal: 0 dropped).
 
 Usage: python benchmarks/loop_process_bench.py [--steps 40] [--rounds 3]
 (in the stack environment: eval "$(.venv/bin/qgl env)"). The last line is one JSON object.
@@ -34,6 +35,7 @@ from robot_bridge_node.core.interface_kinds import interface_kind
 from robot_bridge_node.core.loop_link import LoopLink
 from robot_bridge_node.core.loop_process import RingOutlet
 from robot_bridge_node.core.loop_runner import SetpointCommand
+from robot_bridge_node.core.robot_frames import RobotFrames
 from robot_bridge_node.core.robot_loop import RobotLoop
 from robot_bridge_node.core.sample_ring import SampleRing
 from robot_bridge_node.core.tick_messages import record_ticks
@@ -103,15 +105,22 @@ def in_process(steps: int, rounds: int) -> dict:
 
 
 class _Keep:
-    """The robot process's part: record every tick (``record_ticks``) or throw them away."""
+    """The robot process's part: record every tick (``record_ticks``), with the ``/tf`` of the
+    robot's frames (``RobotFrames.tf_rows``), or throw them away."""
 
-    def __init__(self, recorder: EpisodeRecorder | None, names: tuple[str, ...]) -> None:
-        self.recorder, self.names, self.ticks, self.events = recorder, names, 0, 0
+    def __init__(self, recorder: EpisodeRecorder | None, names: tuple[str, ...],
+                 frames: RobotFrames) -> None:
+        self.recorder, self.names, self.frames, self.ticks, self.events = \
+            recorder, names, frames, 0, 0
+        self.cpu = 0.0             # [s] of this thread's CPU spent recording
 
     def samples(self, records: np.ndarray) -> None:
         self.ticks += len(records)
         if self.recorder is not None:
-            record_ticks(self.recorder, records, self.names)
+            start = time.thread_time()
+            tf = self.frames.tf_rows(records)
+            record_ticks(self.recorder, records, self.names, [] if tf is None else [tf])
+            self.cpu += time.thread_time() - start
 
     def at_rest(self, event: object) -> None:
         self.events += 1
@@ -134,10 +143,11 @@ def _cpu_seconds(pid: int) -> float:
 def through_process(steps: int, record: bool) -> dict:
     """The loop process running ``steps`` steps, its ticks recorded or not."""
     spec = shipped_loop_spec("sim_panda")
-    names = robot_plugin(spec.robot).describe(spec.sim_params).joint_names
+    description = robot_plugin(spec.robot).describe(spec.sim_params)
+    names = description.joint_names
     folder = Path(tempfile.mkdtemp(prefix="loop_bench_"))
     recorder = EpisodeRecorder(folder) if record else None
-    keep = _Keep(recorder, tuple(names))
+    keep = _Keep(recorder, tuple(names), RobotFrames(description))
     link = LoopLink(spec, len(names), keep)
     link.start()
     if recorder is not None:
@@ -158,11 +168,13 @@ def through_process(steps: int, record: bool) -> dict:
     link.stop()
     result = {"ticks": keep.ticks, "lost": link.ring.lost,
               "loop_cpu_us_per_tick": cpu / keep.ticks * 1e6,
-              "wall_us_per_tick": wall / keep.ticks * 1e6}
+              "wall_us_per_tick": wall / keep.ticks * 1e6,
+              "reader_cpu_us_per_tick": keep.cpu / keep.ticks * 1e6}
     if recorder is not None:
         recorder.stop()
         info = bag_info(folder / "bench_episode")
         result["bag_joint_states"] = info.count("/joint_states")
+        result["bag_tf"] = info.count("/tf")
     return result
 
 
@@ -188,7 +200,10 @@ def main() -> None:
         extra = ""
         if name == "recorded":
             dropped = sum(x["ticks"] - x["bag_joint_states"] for x in results)
-            extra = f", ticks missing from the bags {dropped}"
+            reader = statistics.median(x["reader_cpu_us_per_tick"] for x in results)
+            tf = sum(x["bag_tf"] for x in results)
+            extra = (f", ticks missing from the bags {dropped}, /tf messages {tf}; the reader "
+                     f"thread's recording (with /tf) {reader:.1f} us/tick")
         print(f"loop process, ticks {name.replace('_', ' ')}: loop CPU {cpu:.1f} us/tick, wall "
               f"{wall:.1f} us/tick, ring records lost {lost}{extra}", flush=True)
     result["through_process"] = runs

@@ -83,7 +83,7 @@ def main() -> None:
             pub["/clock"].publish(Clock(clock=stamp))
 
     def serialized(block: np.ndarray) -> None:
-        for t_ns, messages in zip(block["t_ns"].tolist(), serialized_ticks(block, names)):
+        for t_ns, messages in serialized_ticks(block, names):
             for topic, message in messages:
                 pub[topic].publish(message)
             pub["/clock"].publish(CdrBuffer().stamp(t_ns).message())

@@ -80,8 +80,9 @@ sys.exit(qgl.load()())
 EOF
 chmod +x "$VENV/bin/qgl"
 
-# 5. colcon build of the workspace (interface package + the seven ament_python packages).
-src_hash="$(cd "$ROOT" && find ros_ws/src/qg_interfaces "${PY_PACKAGES[@]}" \
+# 5. colcon build of the workspace (the interface packages qg_interfaces and tf2_msgs, which no
+#    wheel ships, + the seven ament_python packages).
+src_hash="$(cd "$ROOT" && find ros_ws/src/qg_interfaces ros_ws/src/tf2_msgs "${PY_PACKAGES[@]}" \
   -type f \( -name '*.msg' -o -name '*.srv' -o -name 'CMakeLists.txt' -o -name 'package.xml' \
   -o -name 'setup.py' -o -name 'setup.cfg' \) -print0 | sort -z | xargs -0 cat | sha256sum | cut -c1-16)"
 if [[ "$(cat "$STAMPS/colcon" 2>/dev/null)" != "$src_hash" || ! -f "$ROOT/ros_ws/install/setup.bash" ]]; then

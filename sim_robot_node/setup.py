@@ -36,6 +36,18 @@ setup(
             'sim_xarm7 = sim_robot_node.plugins:SIM_XARM7',
             'sim_nextage = sim_robot_node.plugins:SIM_NEXTAGE',
         ],
+        # What viewers draw of each robot's task beside its URDF (robot_bridge_node.task_scenes).
+        'robot_bridge_node.task_scenes': [
+            'sim_panda = sim_robot_node.core.task_visuals:shaft_task_scene',
+            'sim_panda_mujoco = sim_robot_node.core.task_visuals:shaft_task_scene',
+            'sim_panda_pybullet = sim_robot_node.core.task_visuals:shaft_task_scene',
+            'sim_xarm7 = sim_robot_node.core.task_visuals:shaft_task_scene',
+            'sim_nextage = sim_robot_node.core.task_visuals:nextage_task_scene',
+        ],
+        # The episode renderer of `qgl render` and the Gymnasium environments' render modes.
+        'qg_learning_node.renderers': [
+            'pybullet = sim_robot_node.core.episode_render',
+        ],
         # Environments of the in-process experiments (qg_experiments.environments).
         'qg_experiments.environments': [
             'peg = sim_robot_node.core.peg_env:make_peg_env',

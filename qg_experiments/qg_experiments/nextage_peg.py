@@ -46,6 +46,7 @@ class NextagePeg:
         def params(name: str) -> dict[str, Any]:
             return load_ros_params(config_file(name, config_dir))
         robot_params = merge_params(params("peg_task.yaml"), params("nextage.yaml"))
+        self.robot_params = robot_params          # the sim_nextage plugin's
         bridge = params("bridge.yaml")
         self.loop: PositionLoop = build_position_loop(
             load_robot("sim_nextage", robot_params),

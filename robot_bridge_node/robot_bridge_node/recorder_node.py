@@ -33,7 +33,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 
-from robot_bridge_node.core.tick_messages import record_ticks
+from robot_bridge_node.core.tick_messages import TopicRows, record_ticks
 
 __all__ = ["RecorderConfig", "RECORDER_SECTION", "RecorderNode"]
 
@@ -94,6 +94,7 @@ class RecorderNode(Node):
         self.transitions = 0
         self.final_steps: int | None = None
         self.ended_at = 0.0
+        self._latched: dict[str, bytes] = {}     # latched topic -> its latest message
         group = MutuallyExclusiveCallbackGroup()
         self._subscribe(EpisodeStatus, topics.EPISODE_STATUS, self._on_status, _STATUS_QOS, group)
         self._subscribe(Transition, topics.TRANSITIONS, self._on_transition, topics.RELIABLE_DEEP, group)
@@ -112,14 +113,28 @@ class RecorderNode(Node):
         self.config = RecorderConfig.from_dict(params)
 
     # --- the 1 kHz data ---------------------------------------------------------------------
-    def record_samples(self, records: np.ndarray, joint_names: Sequence[str]) -> None:
-        """Record the loop's ticks (``sample_ring`` records; nothing between episodes)."""
+    def record_samples(self, records: np.ndarray, joint_names: Sequence[str],
+                       extra: Sequence[TopicRows] = ()) -> None:
+        """Record the loop's ticks (``sample_ring`` records; nothing between episodes) and the
+        ``extra`` rows made of them (``/tf``)."""
         if self.episode_id:
             # The ticks come in blocks, up to a few ms after their stamps: those stamped before
             # the bag opened (its first message) belong to no episode.
-            records = records[records["t_ns"] >= self.opened_ns]
+            opened = self.opened_ns
+            records = records[records["t_ns"] >= opened]
             if len(records):
-                record_ticks(self.recorder, records, joint_names)
+                record_ticks(self.recorder, records, joint_names,
+                             [rows.since(opened) for rows in extra])
+
+    # --- latched topics ---------------------------------------------------------------------
+    def latch(self, topic: str, data: bytes) -> None:
+        """A serialized message of a latched topic (``/robot_description``, ``/tf_static``,
+        ``/scene_markers``): every bag starts with the latest one of each, as a late subscriber
+        of a transient-local topic gets it, and an open bag records a new one at once."""
+        with self.lock:
+            self._latched[topic] = data
+            if self.episode_id:
+                self.recorder.record_raw(topic, self.clock_ns(), data)
 
     def wait_for_episode(self, episode_id: str, timeout: float) -> bool:
         """Wait until the bag of ``episode_id`` is open; False after ``timeout`` s.
@@ -157,6 +172,8 @@ class RecorderNode(Node):
                                                      "reward": msg.reward_type})
                 self.opened_ns = t_ns
                 self.episode_id, self.transitions, self.final_steps = msg.episode_id, 0, None
+                for topic, latched in self._latched.items():
+                    self.recorder.record_raw(topic, t_ns, latched)
                 self._opened.notify_all()
         if msg.episode_id == self.episode_id:
             self.recorder.record_raw("/episode_status", t_ns, data)

@@ -44,13 +44,16 @@ from robot_bridge_node.core.hardware_interface import robot_defaults, robot_plug
 from robot_bridge_node.core.loop_link import ForkedLoopProcess, LoopLink
 from robot_bridge_node.core.loop_process import LoopSpec
 from robot_bridge_node.core.loop_runner import SetpointCommand, StepEvent
+from robot_bridge_node.core.paced_publisher import PacedPublisher
+from robot_bridge_node.core.robot_frames import RobotFrames, task_scene
 from robot_bridge_node.core.robot_loop import LoopConfig
 from robot_bridge_node.core.sample_ring import PUBLISH
-from robot_bridge_node.core.tick_messages import serialized_ticks
+from robot_bridge_node.core.tick_messages import TopicRows, serialized_ticks
 from robot_bridge_node.core.tick_timing import TimingSnapshot
 from robot_bridge_node.estimator_node import WrenchEstimatorNode
 from robot_bridge_node.loop_diagnostics import LoopDiagnostics
 from robot_bridge_node.recorder_node import RecorderNode
+from robot_bridge_node.robot_state import RobotStatePublisher
 from robot_bridge_node.simulation_node import SimConfig, SimulationNode
 from robot_bridge_node.start_service import serve_move_to_start
 
@@ -103,14 +106,38 @@ class RobotProcess:
         bridge.setpoint_handler = self.submit_setpoint
         if recorder is not None:
             recorder.clock_ns = self.link.now_ns
+        # The robot as viewers draw it (robot_description, tf_static, scene_markers, tf).
+        robot = str(sim.get_parameter("robot").value)
+        description = sim.plugin.describe(sim.params)
+        self.frames: RobotFrames | None = None
+        self.robot_state: RobotStatePublisher | None = None
+        if description.urdf and description.tool_frame:
+            self.frames = RobotFrames(description)
+            self.robot_state = RobotStatePublisher(
+                bridge, self.frames, task_scene(robot, sim.params),
+                self.link.now_ns, recorder)
+            self._publishers["/tf"] = self.robot_state.tf
+        self._paced: PacedPublisher | None = None
         if config.realtime:
-            LoopDiagnostics(bridge, lambda: self._timing, str(sim.get_parameter("robot").value))
+            # Realtime ticks leave evenly spaced, as the loop ticked (``paced_publisher``), from
+            # a thread below the loop's priority, so they leave on time on a busy machine.
+            self._paced = PacedPublisher(self._publish_message,
+                                         priority=max(0, config.realtime_priority - 10))
+            LoopDiagnostics(bridge, lambda: self._timing, robot)
         serve_move_to_start(bridge, self)
 
     def start(self) -> Callable[[], None]:
         """Start the loop process; returns the function that stops it."""
         self.link.start()
-        return self.link.stop
+        return self.stop
+
+    def stop(self) -> None:
+        """Stop the loop process, then publish what it sent last."""
+        try:
+            self.link.stop()
+        finally:
+            if self._paced is not None:
+                self._paced.stop()
 
     # --- commands (ROS callbacks) --------------------------------------------------------------
     def submit_setpoint(self, msg: WrenchSetpointMsg) -> None:
@@ -146,21 +173,30 @@ class RobotProcess:
 
     # --- the loop's output (the link's reader thread) ------------------------------------------
     def samples(self, records: np.ndarray) -> None:
-        published = records[(records["flags"] & PUBLISH) != 0]
-        if len(published):
-            self._publish(published)
+        tf = None if self.frames is None else self.frames.tf_rows(records)
+        extra = [] if tf is None else [tf]
+        publish = (records["flags"] & PUBLISH) != 0
+        if publish.any() or extra:
+            self._publish(records, publish, extra)
         if self.recorder is not None:
-            self.recorder.record_samples(records, self.joint_names)
+            self.recorder.record_samples(records, self.joint_names, extra)
 
-    def _publish(self, records: np.ndarray) -> None:
-        """The ticks on the 1 kHz topics under the nodes' names, tick by tick, each message
-        published serialized (``tick_messages``: the bytes the recorder writes)."""
-        ticks = serialized_ticks(records, self.joint_names)
-        for t_ns, messages in zip(records["t_ns"].tolist(), ticks):
+    def _publish(self, records: np.ndarray, publish: np.ndarray, extra: list[TopicRows]) -> None:
+        """The ticks on the 1 kHz topics (those ``publish`` marks) and ``/tf`` under the nodes'
+        names, tick by tick, each message published serialized (``tick_messages``: the bytes
+        the recorder writes); realtime ticks paced, lockstep ones at once with ``/clock``."""
+        ticks = serialized_ticks(records, self.joint_names, publish, extra)
+        if self._paced is not None:
+            self._paced.put(ticks)
+            return
+        for t_ns, messages in ticks:
             for topic, message in messages:
                 self._publishers[topic].publish(message)
-            if self.lockstep:       # rosgraph_msgs/Clock: the stamp alone
-                self.sim.clock.publish(CdrBuffer().stamp(t_ns).message())
+            # rosgraph_msgs/Clock: the stamp alone
+            self.sim.clock.publish(CdrBuffer().stamp(t_ns).message())
+
+    def _publish_message(self, topic: str, message: bytes) -> None:
+        self._publishers[topic].publish(message)
 
     def at_rest(self, event: StepEvent) -> None:
         self.bridge.ee_at_rest.publish(self._at_rest_msg(event))

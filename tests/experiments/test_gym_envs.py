@@ -146,3 +146,43 @@ def test_stable_baselines3_trains_on_the_environment_in_three_lines(monkeypatch,
     action, _ = model.predict(env.observation_space.sample(), deterministic=True)
     assert env.action_space.contains(action)
     env.close()
+
+
+def test_record_video_writes_a_playable_video_of_qginsertion(tmp_path) -> None:
+    """``render_mode="rgb_array"``: gymnasium's own ``RecordVideo`` records an episode
+    unchanged, one frame at the reset and one per step, and the arm moves between them."""
+    import imageio_ffmpeg
+    from gymnasium.wrappers import RecordVideo
+    env = RecordVideo(gymnasium.make("qg_experiments:QGInsertion-v0", render_mode="rgb_array",
+                                     max_steps=len(ACTIONS)),
+                      str(tmp_path), episode_trigger=lambda episode: True, disable_logger=True)
+    env.reset(seed=0)
+    for steps, action in enumerate(ACTIONS, start=1):
+        _, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            break
+    env.close()
+    (video,) = tmp_path.glob("*.mp4")
+    reader = imageio_ffmpeg.read_frames(str(video))
+    width, height = next(reader)["size"]
+    frames = [np.frombuffer(f, np.uint8).reshape(height, width, 3) for f in reader]
+    assert (width, height) == (448, 336) and len(frames) == steps + 1
+    assert np.abs(frames[0].astype(int) - frames[-1]).max(axis=2).mean() > 0.5
+
+
+@pytest.mark.parametrize("env_id", sorted(gym_envs.IN_PROCESS_ENV_IDS))
+def test_in_process_environments_render_rgb_arrays_and_refuse_other_modes(
+        env_id: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    assert gymnasium.spec(env_id).entry_point
+    env = gymnasium.make(env_id, render_mode="rgb_array")
+    assert env.metadata["render_modes"] == ["rgb_array", "human"]
+    env.reset(seed=1)
+    frame = env.render()
+    assert frame.shape == (336, 448, 3) and frame.dtype == np.uint8 and frame.std() > 10
+    env.close()
+    with pytest.raises(ValueError, match="render_mode"):
+        gymnasium.make(env_id, render_mode="ansi")
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    with pytest.raises(ValueError, match="needs a display"):
+        gymnasium.make(env_id, render_mode="human")

@@ -77,6 +77,7 @@ def test_two_robots_train_at_once_into_one_learner_then_robot0_tests(demo_run: D
     assert "on 2 robot(s)" in demo_run.summary and "3 MCAP episodes (robot0 2, robot1 1)" \
         in demo_run.summary, demo_run.summary
     assert (demo_run.run_dir / "learning_curve.png").stat().st_size > 0
+    assert (demo_run.run_dir / "last_test_episode.mp4").stat().st_size > 0    # qgl render
     assert list((demo_run.run_dir / "tensorboard").glob("events.out.tfevents.*"))
     # the progress line showed both robots' steps (r0 ... step k, r1 ... step k)
     assert re.search(r"r0 train 1/3 step \d+, r1 train 2/3 step \d+", demo_run.output)

@@ -16,6 +16,7 @@ import dataclasses
 
 import numpy as np
 
+from qg_experiments.gym_envs.rendering import RobotView
 from qg_experiments.gym_envs.residual_env import ResidualEnv
 from qg_experiments.runner import ARMS, DEFAULT_ROBOT, ESTIMATORS, InsertionRobot, StackSettings
 from qg_learning_node.executor.residual_task import Observation
@@ -38,12 +39,14 @@ class InsertionEnv(ResidualEnv):
     :param housing_yaw: [rad] the housing's rotation about the vertical (start tilts turn with it).
     :param config_dir: the stack's ``config/``; ``None``: the installed files.
     :param robot: the robot plugin (``sim_panda``, ``sim_panda_mujoco``, ...).
+    :param render_mode: ``rgb_array`` | ``human`` | None (``residual_env``).
     """
 
     def __init__(self, observation: str | None = None, reward: str | None = None,
                  max_steps: int = TRAIN_MAX_STEPS, arm: str = "realistic",
                  arm_seed: int | None = None, estimator: str = "ekf", housing_yaw: float = 0.0,
-                 config_dir: str | None = None, robot: str = DEFAULT_ROBOT) -> None:
+                 config_dir: str | None = None, robot: str = DEFAULT_ROBOT,
+                 render_mode: str | None = None) -> None:
         if arm not in ARMS:
             raise ValueError(f"arm must be one of {ARMS}, got {arm!r}")
         if estimator not in ESTIMATORS:
@@ -53,7 +56,7 @@ class InsertionEnv(ResidualEnv):
             settings = settings.with_cell(housing_yaw=float(housing_yaw))
         task = dataclasses.replace(settings.task,
                                    observation=observation or settings.task.observation)
-        super().__init__(task, settings.geometry, reward, max_steps)
+        super().__init__(task, settings.geometry, reward, max_steps, render_mode)
         self.settings = dataclasses.replace(settings, task=task)
         self.arm, self.arm_seed, self.estimator = arm, arm_seed, estimator
         self.robot: InsertionRobot | None = None
@@ -75,8 +78,17 @@ class InsertionEnv(ResidualEnv):
         assert self.robot is not None
         return self.robot.step(action)
 
+    def _view(self) -> RobotView:
+        return RobotView(self.settings.robot_name, self.settings.robot, self.render_mode)
+
+    def _joint_positions(self) -> np.ndarray:
+        if self.robot is None:
+            raise RuntimeError("render() before reset(): there is no robot yet")
+        return self.robot.loop.hardware.read().q
+
     def close(self) -> None:
-        """Release the simulation (its pybullet client)."""
+        """Release the simulation (its pybullet client) and the renderer's."""
+        super().close()
         if self.robot is not None:
             self.robot.close()
             self.robot = None

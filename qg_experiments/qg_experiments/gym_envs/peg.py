@@ -5,6 +5,9 @@ The simulated Nextage under the bridge's task-space position loop and the execut
 read from the stack's ``config/`` files. The start is the ``k``-th seeded free tip position of the
 workspace: ``reset(options={"start": k})`` names it; otherwise it is drawn from the environment's
 generator, so ``reset(seed=s)`` starts the same episode every time.
+
+``render_mode="rgb_array"`` | ``"human"``: the arm, the peg and the block as ``qgl render``
+draws them (``rendering.RobotView``).
 """
 from __future__ import annotations
 
@@ -14,6 +17,8 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
+from qg_experiments.gym_envs.rendering import (RENDER_FPS, RENDER_MODES, RenderedRobot,
+                                                RobotView, check_render_mode)
 from qg_experiments.nextage_peg import NextagePeg
 from qg_learning_node.executor.peg_task import PEG_ACTION_DIM, PEG_STATE_DIM
 
@@ -23,7 +28,7 @@ __all__ = ["NextagePegEnv"]
 _START_RANGE = 2**31 - 1
 
 
-class NextagePegEnv(gymnasium.Env):
+class NextagePegEnv(RenderedRobot, gymnasium.Env):
     """The Nextage peg (see the module docstring).
 
     :param reward: ``dense`` | ``sparse``.
@@ -31,10 +36,13 @@ class NextagePegEnv(gymnasium.Env):
     :param config_dir: the stack's ``config/``; ``None``: the installed files.
     """
 
-    metadata: dict[str, Any] = {"render_modes": []}
+    metadata: dict[str, Any] = {"render_modes": RENDER_MODES, "render_fps": RENDER_FPS}
 
     def __init__(self, reward: str = "dense", max_steps: int = 200,
-                 config_dir: str | None = None) -> None:
+                 config_dir: str | None = None, render_mode: str | None = None) -> None:
+        check_render_mode(render_mode)
+        self.render_mode = render_mode
+        self._last_action = np.zeros(PEG_ACTION_DIM)
         if reward not in ("dense", "sparse"):
             raise ValueError(f"reward must be dense or sparse, got {reward!r}")
         if max_steps < 1:
@@ -63,6 +71,7 @@ class NextagePegEnv(gymnasium.Env):
             raise RuntimeError("the episode has ended: call reset()")
         a = np.asarray(action, dtype=np.float64).reshape(PEG_ACTION_DIM)
         a = np.clip(a, -1.0, 1.0) if np.all(np.isfinite(a)) else np.zeros(PEG_ACTION_DIM)
+        self._last_action = a
         state, reward, terminal = self.peg.step(a)
         truncated = not terminal and self.peg.truncated
         self._running = not (terminal or truncated)
@@ -79,5 +88,22 @@ class NextagePegEnv(gymnasium.Env):
             info["start"] = start
         return info
 
+    def _view(self) -> RobotView:
+        return RobotView("sim_nextage", self.peg.robot_params, self.render_mode)
+
+    def _joint_positions(self) -> np.ndarray:
+        return self.peg.loop.hardware.read().q
+
+    def _render_lines(self) -> list[str]:
+        observation = self.peg.observation
+        scale = 100 * self.peg.task.config.action_scale       # [cm] of a unit action
+        lines = [f"QGNextagePeg-v0   step {self.peg.steps}",
+                 "offset  " + "  ".join(f"{v * scale:+5.2f}" for v in self._last_action)
+                 + " cm"]
+        if observation is not None:
+            lines.append(f"tip to the hole bottom {observation.position_error * 1e3:5.1f} mm")
+        return lines
+
     def close(self) -> None:
+        self._close_view()
         self.peg.close()

@@ -13,8 +13,15 @@ in-process environment and the ROS-backed one cannot drift apart from the runner
   ``reset(options={"pose": k})`` names one; ``options={"max_steps": n}`` sets one episode's cap
   (the test protocol's 200 on an environment made with the training cap).
 
-``info`` carries ``is_success`` (SB3's key) and the ground-truth errors; they come from the
-simulator and are for evaluation only, never part of the observation.
+``info`` carries ``is_success`` (SB3's key) and the task's errors as the task measures them (the
+tool pose of the measured joints against the cell), and ``truly_inserted``, a simulation's truth
+for evaluation only (never part of the observation).
+
+``render_mode="rgb_array"`` makes ``render()`` return the picture of the robot as it is now
+(``rendering.RobotView``: the renderer of ``qgl render``) with the step, the residual torques
+and the wrench estimate written on it; ``"human"`` shows it in a window (needs a display).
+A subclass that can be drawn says how (``rendering.RenderedRobot``: ``_view``,
+``_joint_positions``).
 """
 from __future__ import annotations
 
@@ -25,6 +32,8 @@ import numpy as np
 from gymnasium import spaces
 from qg_common.types import N_START_POSES
 
+from qg_experiments.gym_envs.rendering import (RENDER_FPS, RENDER_MODES, RenderedRobot,
+                                                check_render_mode)
 from qg_learning_node.executor.episode import Episode
 from qg_common.shaft_task import ShaftTaskGeometry
 from qg_learning_node.executor.residual_task import (ACTION_DIM, Observation, ResidualTask,
@@ -33,7 +42,7 @@ from qg_learning_node.executor.residual_task import (ACTION_DIM, Observation, Re
 __all__ = ["ResidualEnv"]
 
 
-class ResidualEnv(gymnasium.Env):
+class ResidualEnv(RenderedRobot, gymnasium.Env):
     """Base of the residual-policy environments; subclasses say how the robot resets and steps.
 
     :param task: the executor's task settings (observation, reward scales, ...).
@@ -42,12 +51,16 @@ class ResidualEnv(gymnasium.Env):
     :param max_steps: step cap of an episode (``truncated`` when it is reached).
     """
 
-    metadata: dict[str, Any] = {"render_modes": []}
+    metadata: dict[str, Any] = {"render_modes": RENDER_MODES, "render_fps": RENDER_FPS}
 
     def __init__(self, task: TaskConfig, geometry: ShaftTaskGeometry, reward: str | None,
-                 max_steps: int) -> None:
+                 max_steps: int, render_mode: str | None = None) -> None:
         if max_steps < 1:
             raise ValueError(f"max_steps must be >= 1, got {max_steps}")
+        check_render_mode(render_mode)
+        self.render_mode = render_mode
+        self._last_action = np.zeros(ACTION_DIM)
+        self._last_observation: Observation | None = None
         self.residual = ResidualTask(task, geometry)
         self.reward_kind = reward or task.reward
         if self.reward_kind not in ("dense", "sparse"):
@@ -70,6 +83,7 @@ class ResidualEnv(gymnasium.Env):
     def _execute(self, action: np.ndarray) -> Observation:
         """Execute the residual ``action`` (actor units) until the tool is at rest."""
         raise NotImplementedError
+
 
     # --- gymnasium -----------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None,
@@ -94,6 +108,7 @@ class ResidualEnv(gymnasium.Env):
         self.episodes += 1
         observation = self._reset_robot(pose)
         self._episode = episode
+        self._last_action, self._last_observation = np.zeros(ACTION_DIM), observation
         return self._state(episode.begin(observation)), self._info(observation)
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
@@ -104,9 +119,30 @@ class ResidualEnv(gymnasium.Env):
         # as the executor does: a non-finite action becomes the zero residual, never a command
         a = np.clip(a, -1.0, 1.0) if np.all(np.isfinite(a)) else np.zeros(ACTION_DIM)
         observation = self._execute(a)
+        self._last_action, self._last_observation = a, observation
         record = episode.observe(a, observation)
         return (self._state(record.next_state), float(record.reward), bool(record.terminal),
                 bool(record.timeout), self._info(observation))
+
+    def _render_lines(self) -> list[str]:
+        """The step, the residual torques of the last action and the wrench estimate."""
+        episode = self._episode
+        lines = [f"{self.spec.id if self.spec else type(self).__name__}   "
+                 f"episode {self.episodes}, start {episode.initial_pose if episode else '-'}, "
+                 f"step {episode.step if episode else 0}"]
+        wrench = self.residual.wrench(self._last_action)
+        lines.append(f"residual  Tx {wrench[3]:+5.2f}  Ty {wrench[4]:+5.2f} Nm   "
+                     f"push Fz {wrench[2]:+6.1f} N")
+        observation = self._last_observation
+        if observation is not None:
+            f = observation.wrench
+            lines.append(f"estimate  Fz {f[2]:+6.1f} N   Tx {f[3]:+5.2f}  Ty {f[4]:+5.2f} Nm   "
+                         f"to go {self.residual.measure(observation).position_error * 1e3:5.1f} mm")
+        return lines
+
+    def close(self) -> None:
+        """Close the renderer's world (subclasses release their robot too)."""
+        self._close_view()
 
     @property
     def episode(self) -> Episode | None:

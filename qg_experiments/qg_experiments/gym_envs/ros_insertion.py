@@ -59,6 +59,9 @@ class RosInsertionEnv(ResidualEnv):
     :param config_dir: the stack's ``config/``; ``None``: the installed files.
     """
 
+    #: Not drawn (yet): its robot is another process's; ``qgl render`` draws its bags.
+    metadata: dict[str, Any] = {"render_modes": []}
+
     def __init__(self, namespace: str = "", domain_id: int | None = None,
                  observation: str | None = None, reward: str | None = None,
                  max_steps: int = TRAIN_MAX_STEPS, step_timeout: float = 10.0,

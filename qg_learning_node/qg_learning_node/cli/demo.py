@@ -2,8 +2,9 @@
 
 Brings the stack up (``config/stack.yaml``), trains QG-DDPG for a few episodes by calling
 ``/executor/start_episode`` like any client would, tests on the 8 initial poses, and saves a
-learning-curve PNG, TensorBoard scalars (``tensorboard/``, Stable-Baselines3's tag names) and
-``episodes.json`` next to the MCAP episodes the stack recorded. The progress bar follows
+learning-curve PNG, TensorBoard scalars (``tensorboard/``, Stable-Baselines3's tag names),
+``episodes.json`` and a video of the last test episode (``last_test_episode.mp4``, ``qgl
+render``) next to the MCAP episodes the stack recorded. The progress bar follows
 ``/transitions``, so it moves at every RL step.
 
 ``--robot NAME`` runs another robot plugin (``sim_xarm7``) in the same stack.
@@ -372,9 +373,27 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     _plot(outcomes, run_dir / "learning_curve.png",
           load_random_bar(args.random_bar or default_random_bar()),
           "the simulated Panda" if args.robot is None else args.robot)
+    _render_last_test(outcomes, run_dir)
     print(_summary(outcomes, run_dir, robots, train_wall, learner_transitions,
                    time.monotonic() - started, codes))
     return 0 if all(c == 0 for c in codes.values()) else 1
+
+
+def _render_last_test(outcomes: list[EpisodeOutcome], run_dir: Path) -> None:
+    """The last test episode as a video beside the learning curve (``qgl render``); a demo
+    without a renderer or that bag says why and goes on."""
+    from qg_learning_node.cli.render import render_episode
+    tests = [o for o in outcomes if o.mode == "test"]
+    if not tests:
+        return
+    bag = run_dir / "episodes" / tests[-1].episode_id
+    try:
+        report = render_episode(bag, run_dir / "last_test_episode.mp4")
+    except (RuntimeError, ValueError, OSError) as exc:
+        print(f"[qgl demo] no video of the last test episode: {exc}", flush=True)
+        return
+    print(f"[qgl demo] the last test episode ({tests[-1].episode_id}, {tests[-1].steps} steps) "
+          f"as a video: {report['out']} ({report['wall_s']:.1f} s to render)", flush=True)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

@@ -148,9 +148,10 @@ def build_parser() -> argparse.ArgumentParser:
     # (answered before qgl enters the stack's environment, see main())
     sub.add_parser("env", help='print the stack\'s environment as exports: eval "$(qgl env)"')
 
-    from qg_learning_node.cli import demo, train
+    from qg_learning_node.cli import demo, render, train
     demo.add_parser(sub)
     train.add_parser(sub)
+    render.add_parser(sub)
     try:
         from qg_learning_node.cli import bag_commands
     except ImportError:

@@ -18,7 +18,7 @@ from qg_common.arm_description import ArmDescription
 
 from robot_bridge_node.core.hardware_interface import RobotDescription
 
-__all__ = ["ArmModel", "JointLimits", "Kinematics"]
+__all__ = ["ArmModel", "JointLimits", "Kinematics", "driven_model"]
 
 
 @dataclass(frozen=True)
@@ -68,19 +68,7 @@ class ArmModel:
                  payload_com: np.ndarray | None = None,
                  torque_limits: tuple[float, ...] | None = None,
                  torque_rate_limits: tuple[float, ...] | None = None) -> None:
-        full = pin.buildModelFromUrdf(str(urdf))
-        missing = [n for n in joint_names if not full.existJointName(n)]
-        if missing:
-            raise ValueError(f"{urdf}: no joints {missing}")
-        lock = [j for j in range(1, full.njoints) if full.names[j] not in joint_names]
-        self.model = pin.buildReducedModel(full, lock, pin.neutral(full)) if lock else full
-        names = tuple(self.model.names[j] for j in range(1, self.model.njoints))
-        if names != tuple(joint_names):
-            raise ValueError(f"{urdf}: joint_names must be the URDF's order {names}, "
-                             f"got {tuple(joint_names)}")
-        if not self.model.nq == self.model.nv == len(joint_names):
-            raise ValueError(f"{urdf}: every driven joint must have one degree of freedom "
-                             f"(nq {self.model.nq}, nv {self.model.nv})")
+        self.model = driven_model(urdf, joint_names)
         if not self.model.existFrame(flange):
             raise ValueError(f"{urdf}: no frame {flange!r}")
         self.joint_names = tuple(joint_names)
@@ -194,6 +182,29 @@ class ArmModel:
     def forward_dynamics(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """Joint accelerations ddq = M^-1 (tau - C dq - g)."""
         return pin.aba(self.model, self.data, q, dq, tau).copy()
+
+
+def driven_model(urdf: str, joint_names: tuple[str, ...]) -> pin.Model:
+    """The URDF's model with only ``joint_names`` moving (every other joint locked at neutral,
+    its frames kept), one degree of freedom each, in the order of ``joint_names``.
+
+    :raises ValueError: if a joint is missing, the joints are out of the URDF's order, or a
+        joint is not a single degree of freedom.
+    """
+    full = pin.buildModelFromUrdf(str(urdf))
+    missing = [n for n in joint_names if not full.existJointName(n)]
+    if missing:
+        raise ValueError(f"{urdf}: no joints {missing}")
+    lock = [j for j in range(1, full.njoints) if full.names[j] not in joint_names]
+    model = pin.buildReducedModel(full, lock, pin.neutral(full)) if lock else full
+    names = tuple(model.names[j] for j in range(1, model.njoints))
+    if names != tuple(joint_names):
+        raise ValueError(f"{urdf}: joint_names must be the URDF's order {names}, "
+                         f"got {tuple(joint_names)}")
+    if not model.nq == model.nv == len(joint_names):
+        raise ValueError(f"{urdf}: every driven joint must have one degree of freedom "
+                         f"(nq {model.nq}, nv {model.nv})")
+    return model
 
 
 def _urdf_limit(values: np.ndarray, name: str, urdf: str) -> np.ndarray:

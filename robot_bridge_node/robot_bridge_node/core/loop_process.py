@@ -33,7 +33,7 @@ from multiprocessing.connection import Connection
 from typing import Any
 
 import numpy as np
-from qg_common.realtime_pacer import DEFAULT_SPIN, FIFO_SPIN, RealtimePacer
+from qg_common.realtime_pacer import DEFAULT_SPIN, FIFO_SPIN, RealtimePacer, fifo_priority
 
 from robot_bridge_node.core.hardware_interface import robot_plugin
 from robot_bridge_node.core.interface_kinds import interface_kind
@@ -248,11 +248,11 @@ def run(conn: Connection, ring: SampleRing) -> int:
     gc.freeze()
     spin = DEFAULT_SPIN
     if spec.realtime and spec.priority > 0:
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(spec.priority))
+        refused = fifo_priority(spec.priority)
+        if refused is None:
             spin = FIFO_SPIN
-        except OSError as exc:
-            conn.send(("log", "warning", f"no realtime priority {spec.priority} ({exc}); "
+        else:
+            conn.send(("log", "warning", f"no realtime priority {spec.priority} ({refused}); "
                                          f"running unprioritised"))
     stop = threading.Event()
     events = EventSender(conn, stop)      # after the priority: its thread has the loop's

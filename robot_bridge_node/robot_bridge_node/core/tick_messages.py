@@ -14,7 +14,7 @@ recorded ones are the same bytes, and no tick costs a Python message object per 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from qg_common.rotations import quaternion_from_matrix
@@ -36,6 +36,8 @@ class TopicRows:
     :param ticks: (n_records,) which of the block's records have a message on this topic.
     :param t_ns: (n,) the messages' stamps; :param values: (n, layout.n_values) their numbers.
     :param names: the joint names of a ``JointState`` (None for the other types).
+    :param fixed_layout: the layout, where neither the topic's type and ``frame_id`` nor
+        ``names`` give it (a ``tf2_msgs/TFMessage``'s: ``cdr.tf_layout``).
     """
     topic: str
     ticks: np.ndarray
@@ -43,12 +45,22 @@ class TopicRows:
     values: np.ndarray
     frame_id: str = ""
     names: tuple[str, ...] | None = None
+    fixed_layout: FixedLayout | None = None
 
     @property
     def layout(self) -> FixedLayout:
+        if self.fixed_layout is not None:
+            return self.fixed_layout
         if self.names is not None:
             return joint_state_layout(self.frame_id, self.names)
         return fixed_layout(TOPICS[self.topic].type_name, self.frame_id)
+
+    def since(self, t_ns: int) -> TopicRows:
+        """The messages stamped ``t_ns`` or later."""
+        keep = self.t_ns >= t_ns
+        ticks = self.ticks.copy()
+        ticks[np.flatnonzero(self.ticks)[~keep]] = False
+        return replace(self, ticks=ticks, t_ns=self.t_ns[keep], values=self.values[keep])
 
     def encode(self) -> list[bytes]:
         """The serialized messages (CDR, as rclpy publishes and subscribes them), in order."""
@@ -88,18 +100,30 @@ def tick_rows(records: np.ndarray, joint_names: Sequence[str]) -> list[TopicRows
     return rows
 
 
-def serialized_ticks(records: np.ndarray, joint_names: Sequence[str]
-                     ) -> list[list[tuple[str, bytes]]]:
-    """The serialized messages of each of ``records``, as (topic, CDR bytes), tick by tick."""
+def serialized_ticks(records: np.ndarray, joint_names: Sequence[str],
+                     publish: np.ndarray | None = None, extra: Sequence[TopicRows] = ()
+                     ) -> list[tuple[int, list[tuple[str, bytes]]]]:
+    """The serialized messages of ``records`` tick by tick, as (stamp, [(topic, CDR bytes)]),
+    for every tick that has any: the 1 kHz topics of the ticks ``publish`` marks (default all)
+    and the ``extra`` rows made of the same records (``/tf``)."""
+    if publish is None:
+        publish = np.ones(len(records), dtype=bool)
     by_tick: list[list[tuple[str, bytes]]] = [[] for _ in range(len(records))]
-    for rows in tick_rows(records, joint_names):
+    published = np.flatnonzero(publish)
+    for rows in tick_rows(records[publish], joint_names):
+        for tick, message in zip(published[rows.ticks].tolist(), rows.encode()):
+            by_tick[tick].append((rows.topic, message))
+    for rows in extra:
         for tick, message in zip(np.flatnonzero(rows.ticks).tolist(), rows.encode()):
             by_tick[tick].append((rows.topic, message))
-    return by_tick
+    stamps = records["t_ns"].tolist()
+    return [(stamps[k], messages) for k, messages in enumerate(by_tick) if messages]
 
 
-def record_ticks(recorder: EpisodeRecorder, records: np.ndarray,
-                 joint_names: Sequence[str]) -> None:
-    """Record ``records`` (``sample_ring.record_dtype``) into ``recorder``'s episode, if any."""
-    for rows in tick_rows(records, joint_names):
-        recorder.record_rows(rows.topic, rows.t_ns, rows.values, rows.frame_id, rows.names)
+def record_ticks(recorder: EpisodeRecorder, records: np.ndarray, joint_names: Sequence[str],
+                 extra: Sequence[TopicRows] = ()) -> None:
+    """Record ``records`` (``sample_ring.record_dtype``) into ``recorder``'s episode, if any,
+    with the ``extra`` rows made of them (the ``/tf`` of ``robot_frames``)."""
+    for rows in (*tick_rows(records, joint_names), *extra):
+        recorder.record_rows(rows.topic, rows.t_ns, rows.values, rows.frame_id, rows.names,
+                             rows.fixed_layout)

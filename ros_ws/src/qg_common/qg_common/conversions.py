@@ -9,14 +9,16 @@ from __future__ import annotations
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Pose, PoseStamped, TwistStamped, Wrench, WrenchStamped
+from geometry_msgs.msg import Point, Pose, PoseStamped, TwistStamped, Wrench, WrenchStamped
 from qg_interfaces.msg import AtRest
 from qg_interfaces.msg import GroundTruth as GroundTruthMsg
 from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
 from qg_interfaces.srv import MoveToStart
 from sensor_msgs.msg import JointState as JointStateMsg
+from visualization_msgs.msg import Marker, MarkerArray
 
 from qg_common.rotations import matrix_from_quaternion, quaternion_from_matrix
+from qg_common.task_scene import TaskScene
 from qg_common.types import (BASE_FRAME, TOOL_FRAME, GroundTruth, JointState, PoseReference,
                              StartPose, StepResult, WrenchSetpoint)
 
@@ -24,7 +26,8 @@ __all__ = ["BASE_FRAME", "TOOL_FRAME", "time_msg", "time_ns", "joint_state_msg",
            "joint_state_from_msg", "wrench_msg", "wrench_from_msg", "wrench_stamped",
            "ground_truth_msg", "ground_truth_from_msg", "quaternion_from_matrix",
            "matrix_from_quaternion", "pose_msg", "pose_stamped", "twist_stamped", "at_rest_msg",
-           "setpoint_from_msg", "setpoint_msg", "start_pose_request", "start_pose_from_request"]
+           "setpoint_from_msg", "setpoint_msg", "start_pose_request", "start_pose_from_request",
+           "marker_array_msg"]
 
 
 # --- time ---------------------------------------------------------------------------------------
@@ -199,3 +202,23 @@ def setpoint_msg(seq: int, setpoint: WrenchSetpoint, stamp: Time,
         msg.pose_reference = pose_msg(setpoint.reference.position, setpoint.reference.rotation)
     msg.header.stamp = stamp
     return msg
+
+
+# --- the task's parts ---------------------------------------------------------------------------
+def marker_array_msg(scene: TaskScene, base_frame: str, stamp: Time) -> MarkerArray:
+    """The parts of ``scene`` as ``visualization_msgs/MarkerArray`` (``ns`` the part's name, ids
+    in order, ``BASE`` as ``base_frame``), each locked to its frame so it moves with it
+    (``task_scene.part_from_marker`` reads one back)."""
+    markers = []
+    for k, part in enumerate(scene.parts):
+        marker = Marker(ns=part.name, id=k, type=part.kind, action=Marker.ADD, frame_locked=True)
+        marker.header.frame_id = part.frame or base_frame      # BASE is ""
+        marker.header.stamp = stamp
+        p, r = marker.pose.position, marker.pose.orientation
+        p.x, p.y, p.z = map(float, part.position)
+        r.x, r.y, r.z, r.w = map(float, part.rotation)
+        marker.scale.x, marker.scale.y, marker.scale.z = map(float, part.scale)
+        marker.color.r, marker.color.g, marker.color.b, marker.color.a = map(float, part.colour)
+        marker.points = [Point(x=x, y=y, z=z) for x, y, z in part.points]
+        markers.append(marker)
+    return MarkerArray(markers=markers)

@@ -2,9 +2,10 @@
 no rclpy; the separate sim and the composed robot process use it too)."""
 from __future__ import annotations
 
+import os
 import time
 
-__all__ = ["RealtimePacer", "DEFAULT_SPIN", "FIFO_SPIN"]
+__all__ = ["RealtimePacer", "DEFAULT_SPIN", "FIFO_SPIN", "fifo_priority"]
 
 #: [s] Busy-wait before each deadline under the normal scheduler: ``time.sleep(0.5 ms)`` woke
 #: 70-100 us late at the median, 100-150 us at p99 (2026-11-27, 2 cores, idle and beside two
@@ -13,6 +14,17 @@ DEFAULT_SPIN = 2e-4
 #: [s] The same at ``SCHED_FIFO`` priority, where the sleep woke 20-30 us late at the median and
 #: 80-85 us at p99: half the spinning, which is 10 % of a core at 1 kHz.
 FIFO_SPIN = 1e-4
+
+
+def fifo_priority(priority: int) -> str | None:
+    """Put the calling thread under ``SCHED_FIFO`` at ``priority`` (1..99); why the system
+    refused (no ``CAP_SYS_NICE``), or None. A thread that runs at it wakes on time whatever
+    else the machine runs, and must never spin without end."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except OSError as exc:
+        return str(exc)
+    return None
 
 
 class RealtimePacer:

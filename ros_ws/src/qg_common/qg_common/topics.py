@@ -13,7 +13,8 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 __all__ = [
     "JOINT_STATES", "JOINT_COMMANDS", "GROUND_TRUTH", "GROUND_TRUTH_WRENCH", "CLOCK",
     "SIM_RESTARTED", "MOVE_TO_START", "WRENCH_ESTIMATE", "WRENCH_SETPOINT", "EE_POSE", "EE_TWIST",
-    "EE_AT_REST", "DIAGNOSTICS", "EPISODE_STATUS", "TRANSITIONS", "ACTOR_PARAMETERS", "LEARNER_DIAGNOSTICS",
+    "EE_AT_REST", "DIAGNOSTICS", "ROBOT_DESCRIPTION", "TF", "TF_STATIC", "SCENE_MARKERS", "TF_QOS",
+    "EPISODE_STATUS", "TRANSITIONS", "ACTOR_PARAMETERS", "LEARNER_DIAGNOSTICS",
     "START_EPISODE", "STOP_EPISODE", "TASK_SPEC", "LEARNER_NODE", "SENSOR_QOS", "COMMAND_QOS", "RESTARTED_QOS",
     "RELIABLE_DEEP", "LATCHED", "robot_topic"]
 
@@ -33,6 +34,10 @@ EE_POSE = "ee_pose"
 EE_TWIST = "ee_twist"
 EE_AT_REST = "ee_at_rest"                      # RL step
 DIAGNOSTICS = "diagnostics"                    # 1 Hz: the realtime loop's timing
+ROBOT_DESCRIPTION = "robot_description"        # latched: the robot's URDF
+TF = "tf"                                      # 100 Hz: the driven joints' transforms
+TF_STATIC = "tf_static"                        # latched: fixed joints, the tool, the task's frames
+SCENE_MARKERS = "scene_markers"                # latched: the task's parts (visualization_msgs)
 
 # --- learning ------------------------------------------------------------------------------
 EPISODE_STATUS = "episode_status"
@@ -68,7 +73,10 @@ SENSOR_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 COMMAND_QOS = 10
 #: Transitions: none may be lost, even while the learner is busy training.
 RELIABLE_DEEP = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-#: The latest value is what a late joiner needs (episode status, actor parameters).
+#: ``tf``: reliable and 100 deep, as tf2's ``TransformBroadcaster`` offers it.
+TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+#: The latest value is what a late joiner needs (episode status, actor parameters; the robot's
+#: description, static transforms and markers, as robot_state_publisher and tf2 offer them).
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: The separate sim's last restart, latched: a bridge or estimator that discovers the sim after

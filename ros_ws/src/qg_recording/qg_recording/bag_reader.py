@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import heapq
 import struct
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -186,12 +186,20 @@ def read_raw(path: Path, topics: Iterable[str] | None = None) -> Iterator[RawMes
             yield RawMessage(channel.topic, schema.name if schema else "", message.log_time, message.data)
 
 
-def read_bag(path: Path, topics: Iterable[str] | None = None) -> Iterator[tuple[str, str, int, Any]]:
-    """(topic, type_name, t_ns, decoded message) in log-time order; fields are attributes."""
+def read_bag(path: Path, topics: Iterable[str] | None = None,
+             select: Callable[[str, int], bool] | None = None) -> Iterator[tuple[str, str, int, Any]]:
+    """(topic, type_name, t_ns, decoded message) in log-time order; fields are attributes.
+
+    :param select: decode and yield only the messages for which ``select(topic, t_ns)`` is true,
+        asked in log-time order (decoding is most of the reading: a video's frames need one
+        joint state in forty).
+    """
     wanted = None if topics is None else set(topics)
     factory = DecoderFactory()
     for file in bag_files(path):
         for schema, channel, message in _iter_file(file, wanted):
+            if select is not None and not select(channel.topic, message.log_time):
+                continue
             decode = factory.decoder_for(channel.message_encoding, schema)
             if decode is None:
                 raise McapError(f"cannot decode {channel.topic}: no ros2msg schema with cdr encoding")

@@ -35,6 +35,7 @@ __all__ = [
     "joint_state_layout",
     "fixed_layout",
     "split_stamp",
+    "tf_layout",
 ]
 
 ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR_LE, options 0
@@ -116,14 +117,17 @@ class FixedLayout:
     """A fixed-size message type: template bytes, and where its numbers go.
 
     The numbers of one message form one row of floats, in the order of `blocks`; each block is
-    (offset in the message, numpy dtype, count). The header stamp is always at offset 4.
-    `columns` names the row's columns by top-level field.
+    (offset in the message, numpy dtype, count). Every `builtin_interfaces/Time` at an offset of
+    `stamps` is the message's time: the header's stamp at offset 4, or the stamp of each
+    transform of a `tf2_msgs/TFMessage` (`tf_layout`). `columns` names the row's columns by
+    top-level field.
     """
 
     type_name: str
     template: bytes
     blocks: tuple[tuple[int, str, int], ...]
     columns: tuple[tuple[str, int, int], ...] = ()  # top-level field name, first, end column
+    stamps: tuple[int, ...] = (4,)
 
     @functools.cached_property
     def slices(self) -> dict[str, slice]:
@@ -140,7 +144,11 @@ class FixedLayout:
 
     @functools.cached_property
     def _dtype(self) -> np.dtype:
-        names, formats, offsets = ["sec", "nanosec"], ["<i4", "<u4"], [4, 8]
+        names, formats, offsets = [], [], []
+        for j, offset in enumerate(self.stamps):
+            names += [f"sec{j}", f"nanosec{j}"]
+            formats += ["<i4", "<u4"]
+            offsets += [offset, offset + 4]
         for j, (offset, dtype, count) in enumerate(self.blocks):
             names.append(f"b{j}")
             formats.append(dtype if count == 1 else (dtype, (count,)))
@@ -152,7 +160,9 @@ class FixedLayout:
         n = len(t_ns)
         data = bytearray(self.template * n)  # a structured copy would not keep the constant bytes
         rows = np.frombuffer(data, dtype=self._dtype)
-        rows["sec"], rows["nanosec"] = np.divmod(t_ns, _NS_PER_S)
+        sec, nanosec = np.divmod(t_ns, _NS_PER_S)
+        for j in range(len(self.stamps)):
+            rows[f"sec{j}"], rows[f"nanosec{j}"] = sec, nanosec
         column = 0
         for j, (_, _, count) in enumerate(self.blocks):
             rows[f"b{j}"] = values[:, column] if count == 1 else values[:, column:column + count]
@@ -228,6 +238,24 @@ def joint_state_layout(frame_id: str, names: tuple[str, ...]) -> FixedLayout:
         blocks.append((buffer.reserve("<f8", n), "<f8", n))
         columns.append((field, k * n, (k + 1) * n))
     return FixedLayout("sensor_msgs/msg/JointState", buffer.message(), tuple(blocks), tuple(columns))
+
+
+@functools.lru_cache(maxsize=64)
+def tf_layout(frames: tuple[tuple[str, str], ...]) -> FixedLayout:
+    """Layout of a `tf2_msgs/msg/TFMessage` of one transform per `(parent, child)` frame pair,
+    all stamped with the message's time: its row is each transform's translation (x, y, z) and
+    rotation (x, y, z, w), transform after transform."""
+    if not frames:
+        raise ValueError("a tf layout needs at least one transform")
+    buffer = CdrBuffer().uint32(len(frames))
+    blocks, columns, stamps = [], [], []
+    for k, (parent, child) in enumerate(frames):
+        stamps.append(buffer.reserve("<i4", 2))            # header.stamp: sec, nanosec
+        buffer.string(parent).string(child)
+        blocks.append((buffer.reserve("<f8", 7), "<f8", 7))
+        columns.append((child, 7 * k, 7 * (k + 1)))
+    return FixedLayout("tf2_msgs/msg/TFMessage", buffer.message(), tuple(blocks),
+                       tuple(columns), tuple(stamps))
 
 
 def _row(*parts: Vector | float) -> np.ndarray:

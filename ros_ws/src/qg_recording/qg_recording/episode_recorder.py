@@ -53,6 +53,11 @@ TOPICS: dict[str, TopicSpec] = {
     "/ee_at_rest": TopicSpec("qg_interfaces/msg/AtRest", "reliable", 10),
     "/transitions": TopicSpec("qg_interfaces/msg/Transition", "reliable", 1000),
     "/episode_status": TopicSpec("qg_interfaces/msg/EpisodeStatus", "reliable", 1, "transient_local"),
+    "/robot_description": TopicSpec("std_msgs/msg/String", "reliable", 1, "transient_local"),
+    "/tf_static": TopicSpec("tf2_msgs/msg/TFMessage", "reliable", 1, "transient_local"),
+    "/scene_markers": TopicSpec("visualization_msgs/msg/MarkerArray", "reliable", 1,
+                                "transient_local"),
+    "/tf": TopicSpec("tf2_msgs/msg/TFMessage", "reliable", 100),
 }
 _EPISODE_ID = re.compile(r"^[A-Za-z0-9_.\-]+$")
 ROWS = 200  # messages of a 1 kHz topic handed to the writer thread at once (0.2 s)
@@ -285,21 +290,27 @@ class EpisodeRecorder:
                 self._stamped_row(topic, writer.topic_type(topic), frame_id, t_ns)[:] = values
 
     def record_rows(self, topic: str, t_ns: np.ndarray, values: np.ndarray, frame_id: str = "",
-                    names: Sequence[str] | None = None) -> None:
+                    names: Sequence[str] | None = None,
+                    layout: cdr.FixedLayout | None = None) -> None:
         """Many messages of a fixed-layout topic at once, one row of numbers each (as
         `record_fixed` takes them; a JointState's rows are position, velocity, effort of
         `names`): the loop's ticks as its sample ring hands them over, encoded by the writer
         thread in one block.
 
         :param t_ns: (n,) stamps; :param values: (n, layout.n_values).
+        :param layout: the messages' layout where the type, `frame_id` and `names` do not give
+            it (`cdr.tf_layout`).
         """
         with self._lock:
             if self._writer is None or len(t_ns) == 0:
                 return
             writer = self._ensure_topic(topic, None)
             type_name = writer.topic_type(topic)
-            layout = (cdr.joint_state_layout(frame_id, tuple(names)) if names is not None
-                      else cdr.fixed_layout(type_name, frame_id))
+            if layout is None:
+                layout = (cdr.joint_state_layout(frame_id, tuple(names)) if names is not None
+                          else cdr.fixed_layout(type_name, frame_id))
+            elif layout.type_name != type_name:
+                raise ValueError(f"{topic} is recorded as {type_name}, not {layout.type_name}")
             rows = self._pending.pop(topic, None)
             if rows is not None:             # single messages of this topic go first
                 rows.hand_off()
