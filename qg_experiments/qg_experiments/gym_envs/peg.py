@@ -101,7 +101,8 @@ class NextagePegEnv(RenderedRobot, gymnasium.Env):
                  "offset  " + "  ".join(f"{v * scale:+5.2f}" for v in self._last_action)
                  + " cm"]
         if observation is not None:
-            lines.append(f"tip to the hole bottom {observation.position_error * 1e3:5.1f} mm")
+            distance = self.peg.task.distance(observation)
+            lines.append(f"tip to the hole bottom {distance * 1e3:5.1f} mm")
         return lines
 
     def close(self) -> None:
