@@ -35,10 +35,10 @@ from robot_bridge_node.core.interface_kinds import interface_kind
 from robot_bridge_node.core.loop_link import LoopLink
 from robot_bridge_node.core.loop_process import RingOutlet
 from robot_bridge_node.core.loop_runner import SetpointCommand
-from robot_bridge_node.core.robot_frames import RobotFrames
+from robot_bridge_node.core.robot_frames import RobotFrames, base_frame
 from robot_bridge_node.core.robot_loop import RobotLoop
 from robot_bridge_node.core.sample_ring import SampleRing
-from robot_bridge_node.core.tick_messages import record_ticks
+from robot_bridge_node.core.tick_messages import TickNames, record_ticks
 from robot_bridge_node.robot_process import shipped_loop_spec
 
 
@@ -65,8 +65,8 @@ def in_process(steps: int, rounds: int) -> dict:
     spec = shipped_loop_spec("sim_panda")
     plugin = robot_plugin(spec.robot)
     loop = interface_kind(plugin.interface).build_loop(
-        plugin.create(spec.sim_params), spec.bridge_params, spec.estimator_params)
-    ring = SampleRing.create(len(plugin.describe(spec.sim_params).joint_names))
+        plugin.create(spec.robot_params), spec.bridge_params, spec.estimator_params)
+    ring = SampleRing.create(len(plugin.describe(spec.robot_params).joint_names))
     outlets = {"none": _NoOutput(), "ring": RingOutlet(ring, _NoSocket(), 10**9),
                "ring_and_truth": RingOutlet(ring, _NoSocket(),
                                              spec.truth_every // spec.publish_every)}
@@ -108,7 +108,7 @@ class _Keep:
     """The robot process's part: record every tick (``record_ticks``), with the ``/tf`` of the
     robot's frames (``RobotFrames.tf_rows``), or throw them away."""
 
-    def __init__(self, recorder: EpisodeRecorder | None, names: tuple[str, ...],
+    def __init__(self, recorder: EpisodeRecorder | None, names: TickNames,
                  frames: RobotFrames) -> None:
         self.recorder, self.names, self.frames, self.ticks, self.events = \
             recorder, names, frames, 0, 0
@@ -143,11 +143,12 @@ def _cpu_seconds(pid: int) -> float:
 def through_process(steps: int, record: bool) -> dict:
     """The loop process running ``steps`` steps, its ticks recorded or not."""
     spec = shipped_loop_spec("sim_panda")
-    description = robot_plugin(spec.robot).describe(spec.sim_params)
+    description = robot_plugin(spec.robot).describe(spec.robot_params)
     names = description.joint_names
     folder = Path(tempfile.mkdtemp(prefix="loop_bench_"))
     recorder = EpisodeRecorder(folder) if record else None
-    keep = _Keep(recorder, tuple(names), RobotFrames(description))
+    keep = _Keep(recorder, TickNames(tuple(names), base_frame(description)),
+                 RobotFrames(description))
     link = LoopLink(spec, len(names), keep)
     link.start()
     if recorder is not None:

@@ -48,7 +48,7 @@ def main() -> None:
 
     from robot_bridge_node.core.sample_ring import (HAS_TOOL, HAS_TRUTH, HAS_WRENCH, PUBLISH,
                                                     record_dtype, truth_from_array)
-    from robot_bridge_node.core.tick_messages import serialized_ticks
+    from robot_bridge_node.core.tick_messages import TickNames, serialized_ticks
 
     rclpy.init()
     node = rclpy.create_node("publish_bench")
@@ -57,13 +57,14 @@ def main() -> None:
              "/ee_pose": PoseStamped, "/ee_twist": TwistStamped, "/clock": Clock}
     pub = {topic: node.create_publisher(t, topic, 10) for topic, t in types.items()}
     names = tuple(f"joint{i}" for i in range(1, 8))
+    base = "link0"
 
     rng = np.random.default_rng(0)
     records = np.zeros(args.ticks, record_dtype(len(names)))
     records["t_ns"] = 10**9 + np.arange(args.ticks) * 10**6
     records["flags"] = PUBLISH | HAS_WRENCH | HAS_TOOL
     records["flags"][::args.truth_every] |= HAS_TRUTH
-    for field in ("q", "dq", "tau", "wrench", "tool_position", "tool_twist", "truth"):
+    for field in ("q", "dq", "tau", "tau_cmd", "wrench", "tool_position", "tool_twist", "truth"):
         records[field] = rng.normal(size=records[field].shape)
     records["tool_rotation"] = np.eye(3)
 
@@ -78,12 +79,12 @@ def main() -> None:
                 pub["/sim/ground_truth_wrench"].publish(wrench_stamped(truth.wrench, stamp))
             pub["/wrench_estimate"].publish(wrench_stamped(record["wrench"], stamp))
             pub["/ee_pose"].publish(pose_stamped(record["tool_position"],
-                                                 record["tool_rotation"], stamp))
-            pub["/ee_twist"].publish(twist_stamped(record["tool_twist"], stamp))
+                                                 record["tool_rotation"], stamp, base))
+            pub["/ee_twist"].publish(twist_stamped(record["tool_twist"], stamp, base))
             pub["/clock"].publish(Clock(clock=stamp))
 
     def serialized(block: np.ndarray) -> None:
-        for t_ns, messages in serialized_ticks(block, names):
+        for t_ns, messages in serialized_ticks(block, TickNames(names, base)):
             for topic, message in messages:
                 pub[topic].publish(message)
             pub["/clock"].publish(CdrBuffer().stamp(t_ns).message())

@@ -49,4 +49,5 @@ def _create(params: dict[str, Any]) -> Robot:
 
 #: ``robot:=franka`` (config/franka.yaml).
 FRANKA = RobotPlugin(interface="torque", config_files=(("franka_robot_node", "franka.yaml"),),
-                     parameters=(FRANKA_SECTION,), describe=describe_franka, create=_create)
+                     parameters=(FRANKA_SECTION,), describe=describe_franka, create=_create,
+                     simulated=False)

@@ -66,7 +66,9 @@ def node_settings() -> list[NodeSettings]:
     from qg_learning_node.executor.parameters import (EXECUTOR_SECTIONS, TASK_CHOICE_SECTION,
                                                       TASK_SECTIONS)
     from qg_learning_node.learner.learner_params import LEARNER_SECTIONS
+    from robot_bridge_node.hardware_node import HARDWARE_SECTION
     panda, nextage = robot_plugin("sim_panda"), robot_plugin("sim_nextage")
+    franka = robot_plugin("franka")
     cells = (SHAFT_TASK_FILE, PEG_TASK_FILE)     # the tasks' cells: the robot's and the task's
     robots = tuple((name, tuple(f for f in plugin.config_files if f not in cells))
                    for name, plugin in (("sim_panda", panda), ("sim_nextage", nextage)))
@@ -76,6 +78,7 @@ def node_settings() -> list[NodeSettings]:
     return [
         NodeSettings("sim", (ROBOT_SECTION, SIM_SECTION, SHAFT_TASK_SECTION, PEG_TASK_SECTION,
                              *own), (("robot_bridge_node", "sim.yaml"), *cells), robots),
+        NodeSettings("hardware", (HARDWARE_SECTION, *franka.parameters), franka.config_files),
         NodeSettings("bridge", (ROBOT_SECTION, *TORQUE.controller_sections,
                                 POSITION.controller_sections[0]),
                      (("robot_bridge_node", "bridge.yaml"),), robots),

@@ -40,6 +40,7 @@ from robot_bridge_node.core.impedance import ToolState
 from robot_bridge_node.core.interface_kinds import interface_kind
 from robot_bridge_node.core.loop_runner import (LoopRunner, ResetCommand, SetpointCommand,
                                                 StepEvent, ThreadMailbox)
+from robot_bridge_node.core.robot_frames import base_frame
 from robot_bridge_node.core.robot_loop import MAX_STATE_GAP, RobotLoop, StateClock
 
 __all__ = ["BridgeNode", "RosOutlet", "log_at", "RemoteRobot", "LatestWrench",
@@ -65,9 +66,16 @@ class BridgeNode(Node):
         self.params = declare_parameters(self, self.kind.controller_sections,
                                          (("robot_bridge_node", "bridge.yaml"),
                                           *plugin.config_files))
+        #: The frame of the tool's pose and twist: the root link of the robot's URDF.
+        self.base_frame = base_frame(plugin.describe(package_defaults("bridge",
+                                                                      plugin.config_files)))
         self.ee_pose = self.create_publisher(PoseStamped, topics.EE_POSE, topics.SENSOR_QOS)
         self.ee_twist = self.create_publisher(TwistStamped, topics.EE_TWIST, topics.SENSOR_QOS)
         self.ee_at_rest = self.create_publisher(AtRest, topics.EE_AT_REST, topics.COMMAND_QOS)
+        #: The loop's commands (a torque robot's torques in ``effort``): the separate sim's input,
+        #: and in the composed process the commanded torques beside the measured ones.
+        self.joint_commands = self.create_publisher(JointStateMsg, topics.JOINT_COMMANDS,
+                                                    topics.SENSOR_QOS)
         self.setpoint_handler: Callable[[WrenchSetpointMsg], None] | None = None
         self.create_subscription(WrenchSetpointMsg, topics.WRENCH_SETPOINT, self._on_setpoint,
                                  topics.COMMAND_QOS)
@@ -80,8 +88,8 @@ class BridgeNode(Node):
 
     def publish_tool(self, stamp: Time, tool: ToolState) -> None:
         """``/ee_pose`` and ``/ee_twist`` (base frame)."""
-        self.ee_pose.publish(pose_stamped(tool.position, tool.rotation, stamp))
-        self.ee_twist.publish(twist_stamped(tool.twist, stamp))
+        self.ee_pose.publish(pose_stamped(tool.position, tool.rotation, stamp, self.base_frame))
+        self.ee_twist.publish(twist_stamped(tool.twist, stamp, self.base_frame))
 
 
 class RosOutlet:
@@ -98,7 +106,8 @@ class RosOutlet:
 
     def at_rest(self, event: StepEvent) -> None:
         self.bridge.ee_at_rest.publish(at_rest_msg(event.seq, event.result, event.position,
-                                                   event.rotation, time_msg(event.t_ns)))
+                                                   event.rotation, time_msg(event.t_ns),
+                                                   self.bridge.base_frame))
 
     def reset_done(self, job: int, event: StepEvent | None, error: str | None) -> None:
         del job, event, error     # the sim restarted on its own: nobody waits for an answer
@@ -152,7 +161,7 @@ class RemoteRobot:
     once came 1.1 s after the first state, and the sim warned of stale commands meanwhile).
     """
 
-    def __init__(self, node: Node, n_joints: int, command_field: str,
+    def __init__(self, node: BridgeNode, n_joints: int, command_field: str,
                  on_restart: Callable[[], None], timeout: float = 0.05) -> None:
         self.node = node
         self.n_joints = n_joints
@@ -168,8 +177,7 @@ class RemoteRobot:
         self._fresh = threading.Condition()
         self._received = 0
         self._used = 0
-        self.commands = node.create_publisher(JointStateMsg, topics.JOINT_COMMANDS,
-                                              topics.SENSOR_QOS)
+        self.commands = node.joint_commands
         node.create_subscription(JointStateMsg, topics.JOINT_STATES, self._on_state,
                                  topics.SENSOR_QOS)
         node.create_subscription(GroundTruthMsg, topics.GROUND_TRUTH, self._on_truth,

@@ -33,7 +33,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 
-from robot_bridge_node.core.tick_messages import TopicRows, record_ticks
+from robot_bridge_node.core.tick_messages import TickNames, TopicRows, record_ticks
 
 __all__ = ["RecorderConfig", "RECORDER_SECTION", "RecorderNode"]
 
@@ -113,7 +113,7 @@ class RecorderNode(Node):
         self.config = RecorderConfig.from_dict(params)
 
     # --- the 1 kHz data ---------------------------------------------------------------------
-    def record_samples(self, records: np.ndarray, joint_names: Sequence[str],
+    def record_samples(self, records: np.ndarray, names: TickNames,
                        extra: Sequence[TopicRows] = ()) -> None:
         """Record the loop's ticks (``sample_ring`` records; nothing between episodes) and the
         ``extra`` rows made of them (``/tf``)."""
@@ -123,7 +123,7 @@ class RecorderNode(Node):
             opened = self.opened_ns
             records = records[records["t_ns"] >= opened]
             if len(records):
-                record_ticks(self.recorder, records, joint_names,
+                record_ticks(self.recorder, records, names,
                              [rows.since(opened) for rows in extra])
 
     # --- latched topics ---------------------------------------------------------------------

@@ -45,12 +45,13 @@ from robot_bridge_node.core.loop_link import ForkedLoopProcess, LoopLink
 from robot_bridge_node.core.loop_process import LoopSpec
 from robot_bridge_node.core.loop_runner import SetpointCommand, StepEvent
 from robot_bridge_node.core.paced_publisher import PacedPublisher
-from robot_bridge_node.core.robot_frames import RobotFrames, task_scene
+from robot_bridge_node.core.robot_frames import RobotFrames, base_frame, task_scene
 from robot_bridge_node.core.robot_loop import LoopConfig
 from robot_bridge_node.core.sample_ring import PUBLISH
-from robot_bridge_node.core.tick_messages import TopicRows, serialized_ticks
+from robot_bridge_node.core.tick_messages import TickNames, TopicRows, serialized_ticks
 from robot_bridge_node.core.tick_timing import TimingSnapshot
 from robot_bridge_node.estimator_node import WrenchEstimatorNode
+from robot_bridge_node.hardware_node import HardwareConfig, HardwareNode
 from robot_bridge_node.loop_diagnostics import LoopDiagnostics
 from robot_bridge_node.recorder_node import RecorderNode
 from robot_bridge_node.robot_state import RobotStatePublisher
@@ -80,41 +81,43 @@ class RobotProcess:
         does so); None starts a new interpreter for it.
     """
 
-    def __init__(self, sim: SimulationNode, bridge: BridgeNode, estimator: WrenchEstimatorNode,
-                 recorder: RecorderNode | None = None,
+    def __init__(self, state: SimulationNode | HardwareNode, bridge: BridgeNode,
+                 estimator: WrenchEstimatorNode, recorder: RecorderNode | None = None,
                  forked: ForkedLoopProcess | None = None) -> None:
-        self.sim = sim
+        self.state = state
         self.bridge = bridge
         self.estimator = estimator
         self.recorder = recorder
-        config = sim.config
-        self.joint_names = tuple(sim.joint_names)
+        config = state.config
+        robot = str(bridge.get_parameter("robot").value)
+        description = state.plugin.describe(state.params)
+        self.names = TickNames(tuple(state.joint_names), base_frame(description))
         self.lockstep = not config.realtime
-        spec = loop_spec(str(sim.get_parameter("robot").value), sim.params, bridge.params,
-                         estimator.params)
-        self.link = LoopLink(spec, len(self.joint_names), self, forked=forked)
+        spec = loop_spec(robot, config, state.params, bridge.params, estimator.params)
+        self.link = LoopLink(spec, len(self.names.joint_names), self, forked=forked)
         self._lock = threading.Lock()
         self._session = ""                  # the served session ("" = any sender)
         self.foreign_setpoints = 0          # setpoints of other sessions since the last reset
         self._timing: TimingSnapshot | None = None
-        # The 1 kHz topics' publishers, by the topic names of ``tick_messages``.
-        self._publishers = {"/joint_states": sim.joint_states,
-                            "/sim/ground_truth": sim.ground_truth,
-                            "/sim/ground_truth_wrench": sim.ground_truth_wrench,
+        # The 1 kHz topics' publishers, by the topic names of ``tick_messages``; the truth's
+        # only where there is a simulation.
+        self._publishers = {"/joint_states": state.joint_states,
+                            "/joint_commands": bridge.joint_commands,
                             "/wrench_estimate": estimator.wrench,
                             "/ee_pose": bridge.ee_pose, "/ee_twist": bridge.ee_twist}
+        if isinstance(state, SimulationNode):
+            self._publishers.update({"/sim/ground_truth": state.ground_truth,
+                                     "/sim/ground_truth_wrench": state.ground_truth_wrench})
         bridge.setpoint_handler = self.submit_setpoint
         if recorder is not None:
             recorder.clock_ns = self.link.now_ns
         # The robot as viewers draw it (robot_description, tf_static, scene_markers, tf).
-        robot = str(sim.get_parameter("robot").value)
-        description = sim.plugin.describe(sim.params)
         self.frames: RobotFrames | None = None
         self.robot_state: RobotStatePublisher | None = None
         if description.urdf and description.tool_frame:
             self.frames = RobotFrames(description)
             self.robot_state = RobotStatePublisher(
-                bridge, self.frames, task_scene(robot, sim.params),
+                bridge, self.frames, task_scene(robot, state.params),
                 self.link.now_ns, recorder)
             self._publishers["/tf"] = self.robot_state.tf
         self._paced: PacedPublisher | None = None
@@ -179,13 +182,13 @@ class RobotProcess:
         if publish.any() or extra:
             self._publish(records, publish, extra)
         if self.recorder is not None:
-            self.recorder.record_samples(records, self.joint_names, extra)
+            self.recorder.record_samples(records, self.names, extra)
 
     def _publish(self, records: np.ndarray, publish: np.ndarray, extra: list[TopicRows]) -> None:
         """The ticks on the 1 kHz topics (those ``publish`` marks) and ``/tf`` under the nodes'
         names, tick by tick, each message published serialized (``tick_messages``: the bytes
         the recorder writes); realtime ticks paced, lockstep ones at once with ``/clock``."""
-        ticks = serialized_ticks(records, self.joint_names, publish, extra)
+        ticks = serialized_ticks(records, self.names, publish, extra)
         if self._paced is not None:
             self._paced.put(ticks)
             return
@@ -193,7 +196,7 @@ class RobotProcess:
             for topic, message in messages:
                 self._publishers[topic].publish(message)
             # rosgraph_msgs/Clock: the stamp alone
-            self.sim.clock.publish(CdrBuffer().stamp(t_ns).message())
+            self.state.clock.publish(CdrBuffer().stamp(t_ns).message())
 
     def _publish_message(self, topic: str, message: bytes) -> None:
         self._publishers[topic].publish(message)
@@ -203,7 +206,7 @@ class RobotProcess:
 
     def _at_rest_msg(self, event: StepEvent) -> AtRest:
         return at_rest_msg(event.seq, event.result, event.position, event.rotation,
-                           time_msg(event.t_ns), self.foreign_setpoints)
+                           time_msg(event.t_ns), self.names.base_frame, self.foreign_setpoints)
 
     def timing(self, snapshot: TimingSnapshot) -> None:
         self._timing = snapshot
@@ -216,26 +219,33 @@ class RobotProcess:
         rclpy.try_shutdown()      # the process ends; run_nodes reports the exit
 
 
-def loop_spec(robot: str, sim_params: dict[str, Any], bridge_params: dict[str, Any],
-              estimator_params: dict[str, Any]) -> LoopSpec:
+def loop_spec(robot: str, clock: SimConfig | HardwareConfig, robot_params: dict[str, Any],
+              bridge_params: dict[str, Any], estimator_params: dict[str, Any]) -> LoopSpec:
     """What the robot process sends its loop process, from the nodes' parameters: the clock
-    mode, priority and rates are the ``sim`` node's, the tick the bridge's."""
-    config = SimConfig.from_dict(sim_params["sim"])
+    mode, priority and rates are the ``sim`` node's (``hardware``'s for a real robot), the tick
+    the bridge's."""
     dt = LoopConfig.from_dict(bridge_params.get("loop", {})).dt
     return LoopSpec(
-        robot=robot, sim_params=sim_params, bridge_params=bridge_params,
-        estimator_params=estimator_params, realtime=config.realtime,
-        priority=config.realtime_priority,
-        publish_every=config.publish_every(dt), truth_every=config.ground_truth_every(dt))
+        robot=robot, robot_params=robot_params, bridge_params=bridge_params,
+        estimator_params=estimator_params, realtime=clock.realtime,
+        priority=clock.realtime_priority,
+        publish_every=clock.publish_every(dt), truth_every=clock.ground_truth_every(dt))
 
 
 def shipped_loop_spec(robot: str) -> LoopSpec:
     """The ``loop_spec`` of ``ros2 run robot_bridge_node robot`` with no overrides: ``robot``'s
-    plugin and the installed config files (the shipped ``sim.yaml``: lockstep).
+    plugin and the installed config files (a simulation: the shipped ``sim.yaml``, lockstep).
     Tests and benchmarks start a loop process with it."""
     plugin = robot_plugin(robot)
+    if plugin.simulated:
+        params = package_defaults("sim", (("robot_bridge_node", "sim.yaml"),
+                                          *plugin.config_files))
+        clock: SimConfig | HardwareConfig = SimConfig.from_dict(params["sim"])
+    else:
+        params = package_defaults("hardware", plugin.config_files)
+        clock = HardwareConfig.from_dict(params.get("hardware", {}))
     return loop_spec(
-        robot, package_defaults("sim", (("robot_bridge_node", "sim.yaml"), *plugin.config_files)),
+        robot, clock, params,
         robot_defaults(plugin, (("robot_bridge_node", "bridge.yaml"),), "bridge"),
         package_defaults("wrench_estimator", (("robot_bridge_node", "wrench_estimator.yaml"),)))
 
@@ -243,21 +253,26 @@ def shipped_loop_spec(robot: str) -> LoopSpec:
 def main(args: list[str] | None = None) -> int:
     # The loop process is forked first, while this process has no threads (ROS starts some).
     forked = ForkedLoopProcess()
-    sim: list[SimulationNode] = []   # the sim node loads the plugin its `robot` names
+    bridge: list[BridgeNode] = []   # the bridge loads the plugin its `robot` names
 
-    def make_sim() -> SimulationNode:
-        sim.append(SimulationNode())
-        return sim[0]
+    def make_bridge() -> BridgeNode:
+        bridge.append(BridgeNode())
+        return bridge[0]
+
+    def make_state() -> SimulationNode | HardwareNode:
+        """The robot's state node: ``sim`` for a simulated robot, ``hardware`` for a real one
+        (no truth, no simulated clock)."""
+        plugin = bridge[0].plugin
+        return SimulationNode(plugin) if plugin.simulated else HardwareNode(plugin)
 
     def start(nodes: list[Node]) -> Callable[[], None]:
-        sim_node, bridge, estimator, recorder = nodes
-        assert isinstance(sim_node, SimulationNode) and isinstance(bridge, BridgeNode) \
-            and isinstance(estimator, WrenchEstimatorNode) and isinstance(recorder, RecorderNode)
-        return RobotProcess(sim_node, bridge, estimator, recorder, forked).start()
+        bridge_node, state, estimator, recorder = nodes
+        assert isinstance(bridge_node, BridgeNode) and isinstance(estimator, WrenchEstimatorNode) \
+            and isinstance(recorder, RecorderNode)
+        return RobotProcess(state, bridge_node, estimator, recorder, forked).start()
 
-    return run_nodes([make_sim, lambda: BridgeNode(sim[0].plugin),
-                      lambda: WrenchEstimatorNode(sim[0].plugin), RecorderNode], args,
-                     background=start)
+    return run_nodes([make_bridge, make_state, lambda: WrenchEstimatorNode(bridge[0].plugin),
+                      RecorderNode], args, background=start)
 
 
 if __name__ == "__main__":

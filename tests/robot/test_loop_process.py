@@ -97,7 +97,7 @@ def test_every_tick_arrives_in_order_and_the_loop_computes_what_it_does_in_proce
     s = shipped_loop_spec(ROBOT)
     plugin = robot_plugin(s.robot)
     loop = interface_kind(plugin.interface).build_loop(
-        plugin.create(s.sim_params), s.bridge_params, s.estimator_params)
+        plugin.create(s.robot_params), s.bridge_params, s.estimator_params)
     loop.begin()
     loop.reset(start(3))
     result = loop.execute(SETPOINT)

@@ -68,7 +68,9 @@ def test_at_rest_and_joint_state_messages_carry_the_numbers():
                         ground_truth=truth, wrench_estimate=-np.arange(6.0))
     stamp = time_msg(3_000_000_123)
     assert (stamp.sec, stamp.nanosec) == (3, 123) and time_ns(stamp) == 3_000_000_123
-    event = at_rest_msg(42, result, np.array([0.45, 0.0, 0.31]), np.diag([1.0, -1.0, -1.0]), stamp)
+    event = at_rest_msg(42, result, np.array([0.45, 0.0, 0.31]), np.diag([1.0, -1.0, -1.0]), stamp,
+                        "panda_link0")
+    assert event.header.frame_id == "panda_link0"
     assert (event.seq, event.duration, event.timed_out) == (42, 0.123, True)
     np.testing.assert_array_equal(wrench_from_msg(event.wrench_estimate), -np.arange(6.0))
     np.testing.assert_array_equal(wrench_from_msg(event.ground_truth.contact_wrench), np.arange(6.0))

@@ -81,6 +81,7 @@ def test_ticks_stamped_before_the_bag_opened_are_not_recorded(tmp_path: Path) ->
     from rclpy.serialization import serialize_message
 
     from robot_bridge_node.core.sample_ring import record_dtype
+    from robot_bridge_node.core.tick_messages import TickNames
     from robot_bridge_node.recorder_node import RecorderNode
 
     rclpy.init(domain_id=232)          # no test's processes use it; nothing is published
@@ -92,7 +93,7 @@ def test_ticks_stamped_before_the_bag_opened_are_not_recorded(tmp_path: Path) ->
         node._on_status(opened, serialize_message(msg), msg)
         ticks = np.zeros(10, dtype=record_dtype(7))
         ticks["t_ns"] = opened + np.arange(-5, 5) * 1_000_000     # 5 before, 5 from the opening
-        node.record_samples(ticks, [f"j{i}" for i in range(7)])
+        node.record_samples(ticks, TickNames(tuple(f"j{i}" for i in range(7)), "base"))
         node._close()
         node.destroy_node()
     finally:

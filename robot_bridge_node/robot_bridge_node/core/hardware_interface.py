@@ -193,16 +193,20 @@ class RobotPlugin:
         ``position``: task-space IK and the wrist sensor).
     :param config_files: ``(package, file)`` in ``share/<package>/config`` with the defaults of
         the robot's own parameters and of its controller's gains for this robot.
-    :param parameters: the robot's own parameters, declared by the ``sim`` node.
+    :param parameters: the robot's own parameters, declared by the ``sim`` node (a real
+        robot's by the ``hardware`` node).
     :param describe: the description from those parameters (nested dict), without building the
         robot (the separate bridge and estimator processes need only this).
     :param create: builds the robot from those parameters.
+    :param simulated: a simulation (its robot process has a ``sim`` node: ground truth, a
+        simulated clock); False for a real robot (a ``hardware`` node instead).
     """
     interface: str
     config_files: tuple[tuple[str, str], ...]
     parameters: tuple[ParameterSection, ...]
     describe: Callable[[dict[str, Any]], RobotDescription]
     create: Callable[[dict[str, Any]], Robot]
+    simulated: bool = True
 
 
 @dataclass(frozen=True)

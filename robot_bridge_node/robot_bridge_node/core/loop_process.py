@@ -57,17 +57,17 @@ class LoopSpec:
     """What the loop process builds: the robot plugin and the nodes' parameters.
 
     :param robot: the robot plugin's registered name.
-    :param sim_params: the ``sim`` node's parameters (the robot's own sections).
+    :param robot_params: the robot's own sections (the ``sim`` or ``hardware`` node's parameters).
     :param bridge_params: the bridge's (the interface kind's controller sections).
     :param estimator_params: the wrench estimator's.
     :param realtime: wall-clock 1 kHz with the watchdog; otherwise lockstep.
     :param priority: realtime: ``SCHED_FIFO`` priority of the loop (0: the normal scheduler).
     :param publish_every: a sample every this many ticks is marked for publishing.
     :param truth_every: the ground truth is computed every this many ticks (a multiple of
-        ``publish_every``: on every so many published samples).
+        ``publish_every``: on every so many published samples); 0 never (a real robot).
     """
     robot: str
-    sim_params: dict[str, Any]
+    robot_params: dict[str, Any]
     bridge_params: dict[str, Any]
     estimator_params: dict[str, Any]
     realtime: bool
@@ -79,13 +79,14 @@ class LoopSpec:
 class RingOutlet:
     """The runner's output: every tick into the ring, events onto the socket.
 
-    :param truth_every: compute the ground truth on every this many published samples.
+    :param truth_every: compute the ground truth on every this many published samples (0:
+        never).
     """
 
     def __init__(self, ring: SampleRing, events: EventSender, truth_every: int) -> None:
         self.ring = ring
         self.events = events
-        self.truth_every = max(1, truth_every)
+        self.truth_every = truth_every
         self.ticks = 0
         self.published = 0
 
@@ -103,10 +104,11 @@ class RingOutlet:
         else:
             position, rotation, twist = tool.position, tool.rotation, tool.twist
             flags |= HAS_TOOL
-        truth = publish and self.published % self.truth_every == 0
+        truth = publish and self.truth_every > 0 and self.published % self.truth_every == 0
         self.published += publish
         values = self.ring.write(t_ns, self.ticks, flags | HAS_TRUTH if truth else flags,
-                                 state.q, state.dq, state.tau, wrench, position, rotation, twist)
+                                 state.q, state.dq, state.tau, loop.commanded, wrench, position,
+                                 rotation, twist)
         if truth:
             truth_to_array(loop.ground_truth(), values)
         self.ring.commit()
@@ -190,7 +192,7 @@ def _build(spec: LoopSpec) -> tuple[RobotLoop, bool]:
     """The robot's loop, and whether the robot paces it (``Robot.paced_by_hardware``: its loop
     ticks on its states' clock)."""
     plugin = robot_plugin(spec.robot)
-    robot = plugin.create(spec.sim_params)
+    robot = plugin.create(spec.robot_params)
     bridge_params = {**spec.bridge_params,
                      "loop": {**spec.bridge_params.get("loop", {}), "realtime": spec.realtime}}
     clock = StateClock(robot.hardware, MAX_STATE_GAP) if robot.paced_by_hardware else None

@@ -31,7 +31,8 @@ from robot_bridge_node.core.hardware_interface import (RobotDescription, load_re
                                                        registered_names)
 from robot_bridge_node.core.tick_messages import TopicRows
 
-__all__ = ["TF_RATE", "TASK_SCENE_GROUP", "Transform", "RobotFrames", "urdf_root_link",
+__all__ = ["TF_RATE", "TASK_SCENE_GROUP", "Transform", "RobotFrames", "base_frame",
+           "urdf_root_link",
            "task_scene"]
 
 #: [Hz] of ``/tf`` (of the loop's clock: simulated time in lockstep).
@@ -79,6 +80,12 @@ class _Joint:
 def _urdf_joints(urdf: ElementTree.Element) -> list[_Joint]:
     return [_Joint(j.get("name", ""), j.get("type", ""), j.find("parent").get("link", ""),
                    j.find("child").get("link", "")) for j in urdf.findall("joint")]
+
+
+def base_frame(description: RobotDescription) -> str:
+    """The robot's base frame: the root link of its URDF (``panda_link0``, the FR3's ``base``,
+    the Nextage's ``CHEST``), the frame its poses and twists are given in."""
+    return urdf_root_link(Path(description.urdf).read_text())
 
 
 def urdf_root_link(urdf_text: str) -> str:

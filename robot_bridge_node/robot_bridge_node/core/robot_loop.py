@@ -199,6 +199,8 @@ class RobotLoop:
         self.holding = False
         self.ticks = 0             # since the last reset
         self.ticks_run = 0         # since the loop was built (a reset's motion included)
+        #: (n,) the torques last written (a position robot's loop writes targets: zeros)
+        self.commanded = np.zeros(controller.model.nv)
         self.recovered = ""        # what the last recovery from a fault did
 
     @property
@@ -289,8 +291,9 @@ class RobotLoop:
         still apply); the state it acted on."""
         state = self.hardware.read()
         dt = self.clock.period()
-        self.hardware.write(self.safety.limit_torques(law.torque(state.q, state.dq, q_target,
-                                                                dq_target), dt, state.dq))
+        self.commanded = self.safety.limit_torques(law.torque(state.q, state.dq, q_target,
+                                                             dq_target), dt, state.dq)
+        self.hardware.write(self.commanded)
         self.ticks += 1
         self.ticks_run += 1
         self.clock.advance(dt)
@@ -350,6 +353,7 @@ class RobotLoop:
         tau = self.safety.limit_torques(self.controller.step(state.q, state.dq, setpoint, dt), dt,
                                         state.dq)
         self.hardware.write(tau)
+        self.commanded = tau
         self.ticks += 1
         self.ticks_run += 1
         self.clock.advance(dt)

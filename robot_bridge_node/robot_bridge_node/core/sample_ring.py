@@ -35,10 +35,13 @@ TRUTH_SIZE = 14
 
 
 def record_dtype(n_joints: int) -> np.dtype:
-    """One tick's record for an arm of ``n_joints`` joints."""
+    """One tick's record for an arm of ``n_joints`` joints: ``tau`` the measured joint torques,
+    ``tau_cmd`` the torques the loop commanded (on a simulated arm the first is the second as
+    its sensors read it; a real arm's sensors read what the links got)."""
     return np.dtype([("t_ns", np.int64), ("tick", np.int64), ("flags", np.int64),
                      ("q", np.float64, n_joints), ("dq", np.float64, n_joints),
-                     ("tau", np.float64, n_joints), ("wrench", np.float64, 6),
+                     ("tau", np.float64, n_joints), ("tau_cmd", np.float64, n_joints),
+                     ("wrench", np.float64, 6),
                      ("tool_position", np.float64, 3), ("tool_rotation", np.float64, (3, 3)),
                      ("tool_twist", np.float64, 6), ("truth", np.float64, TRUTH_SIZE)])
 
@@ -116,13 +119,13 @@ class SampleRing:
 
     # --- the writer (the loop) ---------------------------------------------------------------
     def write(self, t_ns: int, tick: int, flags: int, q: np.ndarray, dq: np.ndarray,
-              tau: np.ndarray, wrench: np.ndarray, position: np.ndarray, rotation: np.ndarray,
-              twist: np.ndarray) -> np.ndarray:
+              tau: np.ndarray, tau_cmd: np.ndarray, wrench: np.ndarray, position: np.ndarray,
+              rotation: np.ndarray, twist: np.ndarray) -> np.ndarray:
         """Fill the next record in two copies (the loop's per-tick write: ~1.5 us, where a
         field-by-field fill took 3.7 us); returns its ``truth`` numbers, to fill before
         ``commit`` on a tick that has them."""
         i = int(self._header[0]) % self.capacity
-        np.concatenate((q, dq, tau, wrench, position, rotation.ravel(), twist),
+        np.concatenate((q, dq, tau, tau_cmd, wrench, position, rotation.ravel(), twist),
                        out=self._floats[i, 3:self._truth_at])
         words = self._ints[i]
         words[0], words[1], words[2] = t_ns, tick, flags

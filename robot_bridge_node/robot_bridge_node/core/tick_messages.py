@@ -1,7 +1,9 @@
 """The loop's ticks as the 1 kHz topics' messages, for the episode bag and for the live topics.
 
-Every tick is a message on ``/joint_states``, ``/wrench_estimate`` (when the loop has an
-estimate), ``/ee_pose`` and ``/ee_twist`` (once the controller has a tool pose), and the ticks
+Every tick is a message on ``/joint_states`` (the measured joint torques as ``effort``),
+``/joint_commands`` (the commanded ones), ``/wrench_estimate`` (when the loop has an estimate),
+``/ee_pose`` and ``/ee_twist`` (once the controller has a tool pose, in the robot's base frame:
+its URDF's root link), and the ticks
 the loop computed the ground truth for are messages on ``/sim/ground_truth`` and
 ``/sim/ground_truth_wrench``, each stamped with its tick's stamp. A block of the sample ring's
 records becomes one row of numbers per message (a few numpy operations and one quaternion per
@@ -18,15 +20,23 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from qg_common.rotations import quaternion_from_matrix
-from qg_common.types import BASE_FRAME, TOOL_FRAME
+from qg_common.types import TOOL_FRAME
 from qg_recording.cdr import FixedLayout, fixed_layout, joint_state_layout
 from qg_recording.episode_recorder import TOPICS, EpisodeRecorder, ground_truth_columns
 
 from robot_bridge_node.core.sample_ring import HAS_TOOL, HAS_TRUTH, HAS_WRENCH
 
-__all__ = ["TopicRows", "tick_rows", "serialized_ticks", "record_ticks"]
+__all__ = ["TickNames", "TopicRows", "tick_rows", "serialized_ticks", "record_ticks"]
 
 _GROUND_TRUTH = fixed_layout("qg_interfaces/msg/GroundTruth", TOOL_FRAME)
+
+
+@dataclass(frozen=True)
+class TickNames:
+    """The names a robot's 1 kHz messages carry: its joints (in the order of every joint
+    vector) and its base frame (its URDF's root link: ``robot_frames.urdf_root_link``)."""
+    joint_names: tuple[str, ...]
+    base_frame: str
 
 
 @dataclass(frozen=True)
@@ -69,13 +79,16 @@ class TopicRows:
         return [data[k:k + layout.size] for k in range(0, len(data), layout.size)]
 
 
-def tick_rows(records: np.ndarray, joint_names: Sequence[str]) -> list[TopicRows]:
+def tick_rows(records: np.ndarray, names: TickNames) -> list[TopicRows]:
     """The messages of ``records`` (``sample_ring.record_dtype``), topic by topic."""
     flags = records["flags"]
     every = np.ones(len(records), dtype=bool)
     rows = [TopicRows("/joint_states", every, records["t_ns"],
                       np.hstack([records["q"], records["dq"], records["tau"]]),
-                      names=tuple(joint_names))]
+                      names=names.joint_names),
+            TopicRows("/joint_commands", every, records["t_ns"],
+                      np.hstack([np.zeros_like(records["q"]), np.zeros_like(records["dq"]),
+                                 records["tau_cmd"]]), names=names.joint_names)]
     has_wrench = (flags & HAS_WRENCH) != 0
     wrench = records[has_wrench]
     rows.append(TopicRows("/wrench_estimate", has_wrench, wrench["t_ns"], wrench["wrench"],
@@ -84,8 +97,9 @@ def tick_rows(records: np.ndarray, joint_names: Sequence[str]) -> list[TopicRows
     tool = records[has_tool]
     quaternions = np.reshape([quaternion_from_matrix(r) for r in tool["tool_rotation"]], (-1, 4))
     rows.append(TopicRows("/ee_pose", has_tool, tool["t_ns"],
-                          np.hstack([tool["tool_position"], quaternions]), BASE_FRAME))
-    rows.append(TopicRows("/ee_twist", has_tool, tool["t_ns"], tool["tool_twist"], BASE_FRAME))
+                          np.hstack([tool["tool_position"], quaternions]), names.base_frame))
+    rows.append(TopicRows("/ee_twist", has_tool, tool["t_ns"], tool["tool_twist"],
+                          names.base_frame))
     has_truth = (flags & HAS_TRUTH) != 0
     if has_truth.any():
         truth = records[has_truth]
@@ -100,7 +114,7 @@ def tick_rows(records: np.ndarray, joint_names: Sequence[str]) -> list[TopicRows
     return rows
 
 
-def serialized_ticks(records: np.ndarray, joint_names: Sequence[str],
+def serialized_ticks(records: np.ndarray, names: TickNames,
                      publish: np.ndarray | None = None, extra: Sequence[TopicRows] = ()
                      ) -> list[tuple[int, list[tuple[str, bytes]]]]:
     """The serialized messages of ``records`` tick by tick, as (stamp, [(topic, CDR bytes)]),
@@ -110,7 +124,7 @@ def serialized_ticks(records: np.ndarray, joint_names: Sequence[str],
         publish = np.ones(len(records), dtype=bool)
     by_tick: list[list[tuple[str, bytes]]] = [[] for _ in range(len(records))]
     published = np.flatnonzero(publish)
-    for rows in tick_rows(records[publish], joint_names):
+    for rows in tick_rows(records[publish], names):
         for tick, message in zip(published[rows.ticks].tolist(), rows.encode()):
             by_tick[tick].append((rows.topic, message))
     for rows in extra:
@@ -120,10 +134,10 @@ def serialized_ticks(records: np.ndarray, joint_names: Sequence[str],
     return [(stamps[k], messages) for k, messages in enumerate(by_tick) if messages]
 
 
-def record_ticks(recorder: EpisodeRecorder, records: np.ndarray, joint_names: Sequence[str],
+def record_ticks(recorder: EpisodeRecorder, records: np.ndarray, names: TickNames,
                  extra: Sequence[TopicRows] = ()) -> None:
     """Record ``records`` (``sample_ring.record_dtype``) into ``recorder``'s episode, if any,
     with the ``extra`` rows made of them (the ``/tf`` of ``robot_frames``)."""
-    for rows in (*tick_rows(records, joint_names), *extra):
+    for rows in (*tick_rows(records, names), *extra):
         recorder.record_rows(rows.topic, rows.t_ns, rows.values, rows.frame_id, rows.names,
                              rows.fixed_layout)

@@ -2,8 +2,9 @@
 
 Message types stay at the edge: the loop, controller and estimator only see numpy and the core
 dataclasses, and every node converts through these functions, so a frame or a field order is
-decided once. Frames: poses and twists are in the robot base frame (``panda_link0``), wrenches in
-the tool frame (``tool``, see ``qg_common/types.py`` for the sign convention).
+decided once. Frames: poses and twists are in the robot's base frame (its URDF's root link, which
+the caller names: ``panda_link0`` for the Panda), wrenches in the tool frame (``tool``, see
+``qg_common/types.py`` for the sign convention).
 """
 from __future__ import annotations
 
@@ -19,10 +20,10 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from qg_common.rotations import matrix_from_quaternion, quaternion_from_matrix
 from qg_common.task_scene import TaskScene
-from qg_common.types import (BASE_FRAME, TOOL_FRAME, GroundTruth, JointState, PoseReference,
+from qg_common.types import (TOOL_FRAME, GroundTruth, JointState, PoseReference,
                              StartPose, StepResult, WrenchSetpoint)
 
-__all__ = ["BASE_FRAME", "TOOL_FRAME", "time_msg", "time_ns", "joint_state_msg",
+__all__ = ["TOOL_FRAME", "time_msg", "time_ns", "joint_state_msg",
            "joint_state_from_msg", "wrench_msg", "wrench_from_msg", "wrench_stamped",
            "ground_truth_msg", "ground_truth_from_msg", "quaternion_from_matrix",
            "matrix_from_quaternion", "pose_msg", "pose_stamped", "twist_stamped", "at_rest_msg",
@@ -120,31 +121,33 @@ def pose_msg(position: np.ndarray, rotation: np.ndarray) -> Pose:
     return msg
 
 
-def pose_stamped(position: np.ndarray, rotation: np.ndarray, stamp: Time) -> PoseStamped:
+def pose_stamped(position: np.ndarray, rotation: np.ndarray, stamp: Time,
+                 base_frame: str) -> PoseStamped:
     """The tool pose in the base frame, with its header."""
     msg = PoseStamped(pose=pose_msg(position, rotation))
     msg.header.stamp = stamp
-    msg.header.frame_id = BASE_FRAME
+    msg.header.frame_id = base_frame
     return msg
 
 
-def twist_stamped(twist: np.ndarray, stamp: Time) -> TwistStamped:
+def twist_stamped(twist: np.ndarray, stamp: Time, base_frame: str) -> TwistStamped:
     """The tool twist ``[v; w]`` in the base frame, with its header."""
     msg = TwistStamped()
     v = [float(x) for x in twist]
     msg.twist.linear.x, msg.twist.linear.y, msg.twist.linear.z = v[0], v[1], v[2]
     msg.twist.angular.x, msg.twist.angular.y, msg.twist.angular.z = v[3], v[4], v[5]
     msg.header.stamp = stamp
-    msg.header.frame_id = BASE_FRAME
+    msg.header.frame_id = base_frame
     return msg
 
 
 # --- RL step ------------------------------------------------------------------------------------
 def at_rest_msg(seq: int, result: StepResult, position: np.ndarray, rotation: np.ndarray,
-                stamp: Time, foreign_setpoints: int = 0) -> AtRest:
+                stamp: Time, base_frame: str, foreign_setpoints: int = 0) -> AtRest:
     """The ``AtRest`` event completing setpoint ``seq`` (0 after a reset).
 
     A run without an estimator reports a zero wrench estimate.
+    :param base_frame: the frame of its pose (the robot's base).
     :param foreign_setpoints: setpoints of other sessions ignored since the last reset.
     """
     wrench = np.zeros(6) if result.wrench_estimate is None else result.wrench_estimate
@@ -155,7 +158,7 @@ def at_rest_msg(seq: int, result: StepResult, position: np.ndarray, rotation: np
                  ground_truth=ground_truth_msg(result.ground_truth, stamp),
                  foreign_setpoints=int(foreign_setpoints), fault=result.fault)
     msg.header.stamp = stamp
-    msg.header.frame_id = BASE_FRAME
+    msg.header.frame_id = base_frame
     return msg
 
 

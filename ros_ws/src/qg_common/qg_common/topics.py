@@ -20,7 +20,7 @@ __all__ = [
 
 # --- the robot process (1 kHz unless said otherwise) -------------------------------------------
 JOINT_STATES = "joint_states"
-JOINT_COMMANDS = "joint_commands"              # separate processes only
+JOINT_COMMANDS = "joint_commands"              # the loop's commands (separate sim's input)
 GROUND_TRUTH = "sim/ground_truth"
 GROUND_TRUTH_WRENCH = "sim/ground_truth_wrench"
 CLOCK = "clock"                                # lockstep

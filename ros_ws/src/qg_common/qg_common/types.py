@@ -18,13 +18,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["N_START_POSES", "BASE_FRAME", "TOOL_FRAME", "JointState", "GroundTruth",
+__all__ = ["N_START_POSES", "TOOL_FRAME", "JointState", "GroundTruth",
            "NO_GROUND_TRUTH", "StepResult", "PoseReference", "WrenchSetpoint", "StartPose"]
 
 #: The task's initial poses, used in a fixed rotating order (SPEC 1).
 N_START_POSES = 8
-#: Frames: poses and twists are in the robot base frame, wrenches in the tool frame.
-BASE_FRAME = "panda_link0"
+#: Wrenches are in the tool frame (poses and twists in the robot's base frame: its URDF's root
+#: link, ``robot_frames.base_frame``).
 TOOL_FRAME = "tool"
 
 

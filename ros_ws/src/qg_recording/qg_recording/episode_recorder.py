@@ -44,6 +44,7 @@ class TopicSpec:
 
 TOPICS: dict[str, TopicSpec] = {
     "/joint_states": TopicSpec("sensor_msgs/msg/JointState", "best_effort", 1),
+    "/joint_commands": TopicSpec("sensor_msgs/msg/JointState", "best_effort", 1),
     "/wrench_estimate": TopicSpec("geometry_msgs/msg/WrenchStamped", "best_effort", 1),
     "/ee_pose": TopicSpec("geometry_msgs/msg/PoseStamped", "best_effort", 1),
     "/ee_twist": TopicSpec("geometry_msgs/msg/TwistStamped", "best_effort", 1),
