@@ -32,8 +32,7 @@ from qg_learning_node.cli.ros_client import CliNode
 from qg_learning_node.cli.ros_env import stack_env
 from robot_bridge_node.core.tick_timing import TimingSnapshot
 
-REALTIME = {("robot_bridge_node", "robot"): ("-p", "sim.clock_mode:=realtime"),
-            ("qg_learning_node", "executor"): ("-p", "keepalive_period:=0.005")}
+REALTIME = {("robot_bridge_node", "robot"): ("-p", "sim.clock_mode:=realtime")}
 
 
 def realtime_specs(robots: int, robot_args: tuple[str, ...]) -> list:

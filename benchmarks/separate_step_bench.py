@@ -1,7 +1,7 @@
 """RL step time with sim, bridge and estimator as separate processes (``ros2 run`` each).
 
 Starts ``sim``, ``bridge`` and ``wrench_estimator`` as three processes, resets, and runs RL steps
-the way the executor does (a new setpoint, repeated every 4 ms until ``ee_at_rest``). Per step:
+the way the executor does (a new setpoint, then waiting for its ``ee_at_rest``). Per step:
 the wall time from the setpoint to its event, and the step's duration on the bridge loop's clock
 (the states' stamps; at most ``rest.max_time``, 0.25 s, plus one state's gap). Measured on
 2 cores (docs/design.md, the 1 kHz path): median 0.25 s idle and loaded; 0.7-1.7 s idle
@@ -25,13 +25,14 @@ import numpy as np
 #: The residual setpoints the steps alternate between (tool-frame wrench).
 WRENCHES = ((0.0, 0.0, -8.0, 0.0, 0.3, 0.0), (0.0, 0.0, -8.0, 0.3, 0.0, 0.0),
             (0.0, 0.0, -8.0, 0.0, -0.3, 0.0), (0.0, 0.0, -8.0, -0.3, 0.0, 0.0))
-RESEND = 0.004   # [s] the executor's keepalive period
 
 
 def run(steps: int, domain_id: str) -> dict:
     from qg_interfaces.msg import AtRest, WrenchSetpoint
-    from qg_interfaces.srv import ResetSim
-    from qg_common.conversions import setpoint_msg, time_msg
+    from qg_interfaces.srv import MoveToStart
+    from qg_common.conversions import setpoint_msg, start_pose_request, time_msg
+    from qg_common.params import config_file, load_ros_params
+    from qg_common.shaft_task import ShaftTaskGeometry
     from qg_common.types import WrenchSetpoint as Setpoint
     from qg_learning_node.cli.launcher import Launcher, ProcessSpec
     from qg_learning_node.cli.ros_client import CliNode, call_service
@@ -51,25 +52,22 @@ def run(steps: int, domain_id: str) -> dict:
             events: list[AtRest] = []
             cli.node.create_subscription(AtRest, "/ee_at_rest", events.append, 100)
             publisher = cli.node.create_publisher(WrenchSetpoint, "/wrench_setpoint", 10)
-            reply = call_service(cli, ResetSim, "/sim/reset", ResetSim.Request(initial_pose=1),
-                                 timeout=60.0)
+            geometry = ShaftTaskGeometry.from_dict(
+                load_ros_params(config_file("shaft_task.yaml"))["shaft_task"])
+            reply = call_service(cli, MoveToStart, "/move_to_start",
+                                 start_pose_request(geometry.start_pose(1)), timeout=60.0)
             if not reply.success:
                 raise RuntimeError(f"reset failed: {reply.message}")
             cli.spin_until(lambda: publisher.get_subscription_count() > 0, 30.0)
             for seq in range(1, steps + 1):
                 msg = setpoint_msg(seq, Setpoint(np.array(WRENCHES[seq % len(WRENCHES)])),
                                    time_msg(0))
-                start = sent = time.monotonic()
+                start = time.monotonic()
                 publisher.publish(msg)
                 while not any(e.seq == seq for e in events):
-                    # Short spins: the resend keeps its period (spin_until waits up to 10 ms).
                     cli.executor.spin_once(timeout_sec=0.001)
-                    now = time.monotonic()
-                    if now - start > 30.0:
+                    if time.monotonic() - start > 30.0:
                         raise TimeoutError(f"step {seq}: no ee_at_rest within 30 s")
-                    if now - sent >= RESEND:
-                        publisher.publish(msg)
-                        sent = now
                 walls.append(time.monotonic() - start)
                 event = next(e for e in events if e.seq == seq)
                 durations.append(event.duration)

@@ -353,10 +353,10 @@ class ExecutorNode(Node):
     def _execute(self, setpoint: Setpoint) -> AtRest:
         """Send one setpoint and wait for its at-rest event.
 
-        With ``keepalive_period > 0`` the setpoint is re-sent that often while waiting: a
-        realtime robot's watchdog holds the pose when setpoints stop coming. A lockstep robot
-        needs no keep-alive, and every re-sent message costs its process rclpy callbacks that
-        compete with the 1 kHz loop for the GIL (0.8 instead of 19 RL steps per second at 5 ms).
+        With ``keepalive_period > 0`` the setpoint is re-sent that often while waiting. No robot
+        needs it (a step's setpoint holds until the step ends), and every re-sent message costs
+        the robot process rclpy callbacks that compete with the 1 kHz loop for the GIL (0.8
+        instead of 19 RL steps per second at 5 ms).
         """
         self.seq += 1
         deadline = time.monotonic() + self.config.step_timeout

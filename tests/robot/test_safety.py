@@ -40,7 +40,7 @@ def test_force_norm_and_torques_are_clamped() -> None:
 
 
 @pytest.mark.parametrize("name,value", [("tilt_max", 1.0), ("force_max", 25.0),
-                                        ("torque_max", 3.5), ("watchdog_timeout", 0.05),
+                                        ("torque_max", 3.5), ("watchdog_timeout", 0.6),
                                         ("force_max", 0.0)])
 def test_limits_cannot_be_loosened_or_disabled(name: str, value: float) -> None:
     with pytest.raises(ValueError, match=name):
@@ -120,7 +120,7 @@ def test_watchdog_fires_after_the_timeout_only() -> None:
     safety = SafetyFilter()
     assert not safety.watchdog_expired(1.0)  # no setpoint yet: nothing to hold against
     safety.feed_watchdog(1.0)
-    assert not safety.watchdog_expired(1.009)
-    assert safety.watchdog_expired(1.011)
-    safety.feed_watchdog(1.011)
-    assert not safety.watchdog_expired(1.02)
+    assert not safety.watchdog_expired(1.099)
+    assert safety.watchdog_expired(1.101)
+    safety.feed_watchdog(1.101)
+    assert not safety.watchdog_expired(1.2)

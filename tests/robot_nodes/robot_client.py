@@ -1,7 +1,6 @@
 """A test client for the robot-side nodes: resets, setpoints and at-rest events, like the executor."""
 from __future__ import annotations
 
-import time
 import uuid
 
 import numpy as np
@@ -69,19 +68,11 @@ class RobotClient:
         return next((e for e in self.events if e.seq == seq), None)
 
     def step(self, seq: int, wrench: tuple[float, ...], timeout: float = 20.0,
-             resend: float | None = None, session: str = "") -> AtRest | None:
-        """Send setpoint ``seq`` and wait for its ``AtRest`` (None on timeout).
-
-        :param resend: [s] repeat the setpoint this often while waiting (the realtime watchdog
-            holds the pose after 10 ms without one).
-        """
+             session: str = "") -> AtRest | None:
+        """Send setpoint ``seq`` once (it holds until its step ends) and wait for its
+        ``AtRest`` (None on timeout)."""
         self.send(seq, wrench, session)
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if self.cli.spin_until(lambda: self.event(seq) is not None,
-                                   min(resend or timeout, deadline - time.monotonic())):
-                break
-            self.send(seq, wrench, session)
+        self.cli.spin_until(lambda: self.event(seq) is not None, timeout)
         return self.event(seq)
 
 

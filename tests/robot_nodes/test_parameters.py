@@ -17,8 +17,11 @@ def test_each_robot_node_declares_only_its_own_parameters_read_only(stack):
     with stack.client() as cli:
         bridge, sim = listed(cli, "/bridge"), listed(cli, "/sim")
         estimator, recorder = listed(cli, "/wrench_estimator"), listed(cli, "/recorder")
-        assert {"impedance.k_null", "safety.force_max", "rest.max_time", "loop.dt"} <= bridge
-        assert {"robot", "sim.clock_mode", "panda_scene.shaft_mass"} <= sim
+        # The bridge loads the robot's plugin; the sim node is the plugin's (a real robot's
+        # would be `hardware`).
+        assert {"robot", "impedance.k_null", "safety.force_max", "rest.max_time",
+                "loop.dt"} <= bridge
+        assert {"sim.clock_mode", "panda_scene.shaft_mass"} <= sim and "robot" not in sim
         assert {"ekf.process_noise_force"} <= estimator
         assert {"record", "episodes_dir", "close_timeout"} <= recorder
         assert not any(n.startswith(("panda_scene.", "sim.", "ekf.")) for n in bridge)
@@ -30,7 +33,7 @@ def test_each_robot_node_declares_only_its_own_parameters_read_only(stack):
         assert (force.floating_point_range[0].from_value,
                 force.floating_point_range[0].to_value) == (0.0, 20.0)
         assert get(cli, "/bridge", "impedance.k_null", "rest.max_time") == [10.0, 0.25]
-        assert get(cli, "/sim", "robot") == ["sim_panda"]
+        assert get(cli, "/bridge", "robot") == ["sim_panda"]
 
         refused = set_double(cli, "/bridge", "impedance.k_null", 20.0)
         assert not refused.successful and "read-only" in refused.reason

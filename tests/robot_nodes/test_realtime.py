@@ -52,8 +52,7 @@ def test_composed_realtime_is_paced_by_the_wall_clock_and_completes_steps(stack,
             JointState, "/joint_states",
             lambda m: states.append((time.monotonic(), conversions.time_ns(m.header.stamp))),
             DEEP)
-        # The executor repeats the running setpoint every few ms to feed the 10 ms watchdog.
-        event = robot.step(1, (0.0, 0.0, -8.0, 0.3, 0.0, 0.0), timeout=10.0, resend=0.004)
+        event = robot.step(1, (0.0, 0.0, -8.0, 0.3, 0.0, 0.0), timeout=10.0)
         assert event is not None, stack.logs()
         stepped = time.monotonic()
         # At least the rest detector's 20 ms; a sum of 1 ms periods, 20 of them came to
@@ -117,7 +116,7 @@ def test_separate_sim_bridge_and_estimator_processes_complete_a_step(stack, robo
         reply = robot.reset(1, timeout=30.0)
         assert reply.success, reply.message
         t0 = time.monotonic()
-        event = robot.step(1, (0.0, 0.0, -8.0, 0.0, 0.3, 0.0), timeout=20.0, resend=0.004)
+        event = robot.step(1, (0.0, 0.0, -8.0, 0.0, 0.3, 0.0), timeout=20.0)
         assert event is not None, stack.logs()
         # The step's length in wall time is a speed figure, not a property: 0.21-0.35 s here
         # with the machine idle or one core busy, 2.0 s once with both cores busy (its
@@ -193,7 +192,7 @@ def test_a_position_robot_runs_as_separate_sim_and_bridge_processes(nextage: Sta
         assert cli.spin_until(lambda: restarts and restarts[-1] > asked, 5.0), restarts
         # The reply is the bridge's report of settling from this reset, not from the start.
         assert conversions.time_ns(reply.observation.header.stamp) > restarts[-1]
-        event = robot.step(1, (0.0,) * 6, timeout=20.0, resend=0.004)
+        event = robot.step(1, (0.0,) * 6, timeout=20.0)
         assert event is not None, stack.logs()
         assert event.duration <= 0.25 + 0.02
         assert sensed and np.all(np.isfinite(wrench(sensed[-1].wrench)))
@@ -233,7 +232,7 @@ def test_a_bridge_started_after_a_reset_takes_control_of_the_separate_sim(nextag
         log = stack.log_dir / "bridge2.log"
         assert cli.spin_until(lambda: log.exists() and "the sim restarted" in log.read_text(),
                               30.0), stack.logs()
-        event = robot.step(1, (0.0,) * 6, timeout=20.0, resend=0.004)
+        event = robot.step(1, (0.0,) * 6, timeout=20.0)
         assert event is not None, stack.logs()
         cli.spin_for(1.5)                       # past the sim's 1 s before it warns
     assert "follow an earlier restart" not in stack.logs(), stack.logs()

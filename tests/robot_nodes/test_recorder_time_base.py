@@ -44,7 +44,7 @@ def test_realtime_bag_is_stamped_like_the_live_messages(stack) -> None:
         statuses.publish(status("resetting"))
         assert cli.spin_until(bag.exists, 30.0), stack.logs()
         assert robot.reset(2).success
-        assert robot.step(1, (0.0, 0.0, -8.0, 0.2, 0.0, 0.0), timeout=10.0, resend=0.004) is not None
+        assert robot.step(1, (0.0, 0.0, -8.0, 0.2, 0.0, 0.0), timeout=10.0) is not None
         statuses.publish(status("done"))
         assert cli.spin_until(lambda: bag_info(bag).complete, 30.0), stack.logs()
     with AnyReader([bag]) as reader:

@@ -12,8 +12,8 @@ executor's cores (:class:`~.residual_env.ResidualEnv`), so this is the node's ta
 ``/robot<N-1>``, and N environments, one per namespace, step them side by side (in one process
 or in N). The arm (realistic or ideal, its seed) is the robot process's: start it with
 ``--params-file config/panda_ideal.yaml`` or ``-p panda_scene.imperfections.seed:=N``. The robot
-must run in ``lockstep`` (the default): a ``realtime`` robot's watchdog needs setpoints re-sent,
-which this environment does not do. ``reset(seed=...)`` seeds gymnasium's generator only: the
+runs in ``lockstep`` by default; a ``realtime`` one works too, its watchdog holding the pose
+whenever the agent takes longer than ``safety.watchdog_timeout`` (0.1 s) between steps. ``reset(seed=...)`` seeds gymnasium's generator only: the
 robot process's noise streams are its own, so the environment is registered ``nondeterministic``.
 
 The environment owns its rclpy context and spins its executor itself until what it waits for has

@@ -29,8 +29,9 @@ class ExecutorConfig:
 
     :param step_timeout: [s] wall time to wait for the at-rest event of one step.
     :param reset_timeout: [s] wall time to wait for ``move_to_start`` (a motion takes seconds).
-    :param keepalive_period: [s] re-send the running setpoint this often; 0 = never (a lockstep
-        robot). A realtime robot needs 0.005: its watchdog holds the pose after 10 ms.
+    :param keepalive_period: [s] re-send the running setpoint this often; 0 = never. No robot
+        needs it (a step's setpoint holds until the step ends; the realtime watchdog counts from
+        a step's end); a commander whose messages may be lost can use it.
     :param learner_timeout: [s] no word from the learner this long -> degraded (zero residual).
     :param robot_grace: [s] an episode start waits this long for a robot (``move_to_start``) not
         discovered yet before it refuses.

@@ -3,13 +3,14 @@
 The same driver runs the loop in its own process (``loop_process``: the composed robot) and on
 a thread of the separate bridge (``bridge_node``); what differs is where its commands come from
 (a ``Mailbox``) and where its output goes (a ``LoopOutlet``). A setpoint with a new ``seq``
-starts a step; one with the ``seq`` of the running step only feeds the watchdog (a realtime
-commander repeats its setpoint every few ms). A rejected setpoint (NaN/inf) is reported and the
+starts a step; one with the ``seq`` of the running step is a repeat (a commander's keep-alive)
+and changes nothing. A rejected setpoint (NaN/inf) is reported and the
 previous command stays.
 
 Clock modes: ``lockstep`` ticks only while a step runs, as fast as it can, stamped with simulated
 time (deterministic); otherwise the loop ticks whenever ``pace`` says a tick is due, stamped with
-the wall clock, and the watchdog holds the pose when setpoints stop coming.
+the wall clock, and the watchdog holds the pose when no setpoint follows a step's end in time
+(``safety.watchdog_timeout``; each such hold is logged).
 
 A robot that stops by itself (``HardwareFault``: a Franka's reflex, a missed signal timeout)
 ends the step under way: its at-rest event carries the reason (``StepResult.fault``), the loop
@@ -152,6 +153,7 @@ class LoopRunner:
         self.clock_ns = 0          # simulated time: ticks run since start, resets included
         self.ticks = 0
         self._seq: int | None = None            # the running step's setpoint
+        self._holds = 0                         # the loop's watchdog holds reported
         self._step_start: float | None = None   # loop time of the running step's start
         self.fault = ""                         # why the robot stopped, until a reset
 
@@ -261,6 +263,12 @@ class LoopRunner:
             event = self._event(self._seq or 0, self._step_start, t_ns)
             self._step_start = None
             self.outlet.at_rest(event)
+        if self.loop.watchdog_holds != self._holds:
+            self._holds = self.loop.watchdog_holds
+            timeout = self.loop.safety.limits.watchdog_timeout
+            self.outlet.log("warning", f"no setpoint within {timeout * 1e3:.0f} ms of step "
+                                       f"{self._seq}'s end: holding the pose ({self._holds} "
+                                       f"holds so far)")
 
     def now_ns(self) -> int:
         """The loop's clock [ns]: simulated time in lockstep (it stands still between steps),

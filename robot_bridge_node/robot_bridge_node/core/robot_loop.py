@@ -66,7 +66,7 @@ class LoopConfig:
     """Loop timing."""
     dt: float = 0.001              # [s] tick period (= the simulator step)
     settle_time: float = 0.1       # [s] holding the start pose after a reset
-    realtime: bool = False         # watchdog on: hold the pose when setpoints stop coming
+    realtime: bool = False         # watchdog on: hold the pose when no step follows a step
 
     def __post_init__(self) -> None:
         if not 0.0 < self.dt <= 0.01:
@@ -197,6 +197,8 @@ class RobotLoop:
         self.setpoint = _HOLD
         self.wrench_estimate: np.ndarray | None = None
         self.holding = False
+        self.stepping = False      # a step is under way (commanded, not yet at rest)
+        self.watchdog_holds = 0    # holds the watchdog began (the commander was late)
         self.ticks = 0             # since the last reset
         self.ticks_run = 0         # since the loop was built (a reset's motion included)
         #: (n,) the torques last written (a position robot's loop writes targets: zeros)
@@ -223,6 +225,7 @@ class RobotLoop:
         self.setpoint = _HOLD
         self.controller.hold(state.q)
         self.holding = True
+        self.stepping = False
 
     def reset(self, start: StartPose) -> None:
         """New episode: the arm at ``start``, settled there holding that pose.
@@ -327,6 +330,7 @@ class RobotLoop:
             self.holding = False
         self.safety.feed_watchdog(self.time)
         self.rest.reset()
+        self.stepping = True
 
     def feed_watchdog(self) -> None:
         """The running setpoint was repeated: the realtime watchdog keeps it (no new step)."""
@@ -338,13 +342,15 @@ class RobotLoop:
         dt = self.clock.period()
         if self.estimator is not None and dt > 0.0:   # (0: the same state read again)
             self.wrench_estimate = self.estimator.update(state.q, state.dq, state.tau, dt)
-        if (self.config.realtime and not self.holding
+        if (self.config.realtime and not self.holding and not self.stepping
                 and self.safety.watchdog_expired(self.time)):
-            # The commander fell silent: hold the pose, stiff along every axis (the task's
-            # force-controlled z included; see HybridImpedanceController.hold).
+            # No step followed the last one in time: the commander is late or gone. Hold the
+            # pose, stiff along every axis (the task's force-controlled z included; see
+            # HybridImpedanceController.hold) until its next setpoint.
             self.controller.hold(state.q)
             self.setpoint = _HOLD
             self.holding = True
+            self.watchdog_holds += 1
         setpoint = self.setpoint
         tool = self.controller.tool
         if tool is not None:
@@ -358,7 +364,14 @@ class RobotLoop:
         self.ticks_run += 1
         self.clock.advance(dt)
         tool = self.controller.tool
-        return self.rest.update(tool.linear_speed, tool.angular_speed, dt)
+        done = self.rest.update(tool.linear_speed, tool.angular_speed, dt)
+        if done and self.stepping:
+            # The step is over: the watchdog's window for the next setpoint opens now. During a
+            # step its setpoint holds (the rest detector's time limit bounds it), so a
+            # commander sends one message per RL step, not a keep-alive stream.
+            self.stepping = False
+            self.safety.feed_watchdog(self.time)
+        return done
 
     def execute(self, setpoint: WrenchSetpoint) -> StepResult:
         """Run one RL step: command ``setpoint`` and tick until at rest or the step times out."""

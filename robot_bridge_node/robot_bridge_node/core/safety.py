@@ -25,9 +25,10 @@ from robot_bridge_node.core.arm_model import JointLimits
 __all__ = ["SafetyLimits", "SafetyFilter", "SetpointRejected", "HARD_LIMITS",
            "VELOCITY_BRAKE_DAMPING"]
 
-#: Ceilings no configuration may exceed (SPEC section 1 and the Franka datasheet).
+#: Ceilings no configuration may exceed (SPEC section 1 and the Franka datasheet; the
+#: watchdog's: a commander silent for half a second after a step is gone, not late).
 HARD_LIMITS = {"tilt_max": math.pi / 4, "force_max": 20.0, "torque_max": 3.0,
-               "watchdog_timeout": 0.01}
+               "watchdog_timeout": 0.5}
 #: [Nms/rad] Braking torque per rad/s by which a joint exceeds its velocity limit (then clipped
 #: to the torque limits like any command). The task moves the joints at a few tenths of their
 #: limits, so the brake never acts in it; it stops a runaway within ~0.1 s of a Panda link.
@@ -46,7 +47,8 @@ class SafetyLimits:
     tilt_stiffness: float = 20.0         # [Nm/rad] restoring torque per rad inside the margin
     force_max: float = 20.0              # [N] norm of the feed-forward force
     torque_max: float = 3.0              # [Nm] each feed-forward torque component
-    watchdog_timeout: float = 0.01       # [s] realtime: hold pose if no setpoint for this long
+    watchdog_timeout: float = 0.1        # [s] realtime: hold the pose if no step follows a
+                                         # step's end within this long
 
     def __post_init__(self) -> None:
         for name, ceiling in HARD_LIMITS.items():
@@ -151,7 +153,7 @@ class SafetyFilter:
 
     # --- watchdog -----------------------------------------------------------------------
     def feed_watchdog(self, now: float) -> None:
-        """A setpoint arrived at ``now`` [s]."""
+        """A setpoint arrived, or a step ended, at ``now`` [s]: the watchdog's window opens."""
         self._last_setpoint_time = now
 
     def watchdog_expired(self, now: float) -> bool:

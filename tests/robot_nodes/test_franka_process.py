@@ -1,0 +1,85 @@
+"""The composed ``robot`` process driving franky-sim's FR3 through libfranka (``robot:=franka``),
+as ``qgl up --config config/stack_franka.yaml`` runs it: a real robot's node is ``hardware``
+(no ``sim``, no ground truth, no simulated clock), the arm moves to a start by ``move_to_start``,
+steps end at rest in the robot's own base frame, and the commanded torques are on
+``/joint_commands`` beside the measured ones on ``/joint_states``."""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+from conftest import Stack
+from robot_client import DEEP, RobotClient, shaft_start
+
+from qg_common.rotations import matrix_from_quaternion
+
+pytestmark = pytest.mark.ros
+
+#: A loopback address of this test's own (franky-sim binds libfranka's fixed port 1337).
+ADDRESS = f"127.0.{35 + os.getpid() % 200}.{201 + os.getpid() % 50}"
+
+
+def test_the_robot_process_drives_franky_sim_through_libfranka(tmp_path):
+    stack = Stack(tmp_path)
+    try:
+        stack.start(("franka_sim", "franka_robot_node", "franka_sim",
+                     ("--address", ADDRESS, "--realtime-priority", "40")),
+                    ("robot", "robot_bridge_node", "robot",
+                     ("--ros-args", "-p", "robot:=franka", "-p", f"franka.address:={ADDRESS}")))
+        with stack.client() as cli:
+            robot = RobotClient(cli)
+            start = shaft_start(2)
+            reply = robot.reset(start, timeout=90.0)
+            assert reply.success, reply.message + stack.logs()
+            obs = reply.observation
+            # The FR3's URDF root (``base``, fixed to ``fr3_link0``), not the Panda's link0.
+            assert obs.header.frame_id == "base"
+            assert obs.fault == ""
+            position = np.array([obs.ee_pose.position.x, obs.ee_pose.position.y,
+                                 obs.ee_pose.position.z])
+            assert np.linalg.norm(position - start.position) < 1e-3, (position, start.position)
+            q = obs.ee_pose.orientation
+            rotation = matrix_from_quaternion(q.x, q.y, q.z, q.w)
+            angle = np.arccos(np.clip((np.trace(start.rotation.T @ rotation) - 1) / 2, -1, 1))
+            assert angle < np.radians(0.5)
+            # A real robot has no truth: the event's ground truth is zeros.
+            assert obs.ground_truth.insertion_depth == 0.0 and obs.ground_truth.tilt == 0.0
+
+            # A step in free air, its setpoint sent once (it holds until the step ends): a pull
+            # (a positive Fz, against the task's push) draws the tool back along its axis, away
+            # from whatever the scene has below it.
+            event = robot.step(1, (0.0, 0.0, 8.0, 0.0, 0.0, 0.0))
+            assert event is not None, stack.logs()
+            assert event.fault == "" and event.header.frame_id == "base"
+            moved = np.array([event.ee_pose.position.x, event.ee_pose.position.y,
+                              event.ee_pose.position.z]) - position
+            back = -float(np.dot(moved, start.rotation[:, 2]))
+            assert back > 2e-3 and np.linalg.norm(moved + back * start.rotation[:, 2]) \
+                < 0.5 * back, (moved, event.duration)
+
+            # The 1 kHz topics, the arm held still (the watchdog holds it 0.1 s after the step):
+            # the loop's torque (gravity included; the plugin takes it out for libfranka, which
+            # adds it back) and franky-sim's measured one, two fields that agree at rest.
+            from sensor_msgs.msg import JointState
+            measured: list[JointState] = []
+            commanded: list[JointState] = []
+            cli.spin_for(0.5)
+            cli.node.create_subscription(JointState, "/joint_states", measured.append, DEEP)
+            cli.node.create_subscription(JointState, "/joint_commands", commanded.append, DEEP)
+            assert cli.spin_until(lambda: min(len(commanded), len(measured)) >= 20, 20.0), \
+                (len(commanded), len(measured), stack.logs())
+            names = [f"fr3_joint{i}" for i in range(1, 8)]
+            assert list(measured[-1].name) == names and list(commanded[-1].name) == names
+            tau = np.median([m.effort for m in measured], axis=0)
+            tau_cmd = np.median([m.effort for m in commanded], axis=0)
+            assert np.all(np.isfinite(tau_cmd)) and np.abs(tau_cmd).max() > 5.0   # gravity
+            assert np.abs(tau - tau_cmd).max() < 0.05, (tau, tau_cmd)
+
+            nodes = set(cli.node.get_node_names())
+            assert {"hardware", "bridge", "wrench_estimator", "recorder"} <= nodes, nodes
+            assert "sim" not in nodes
+            topics = dict(cli.node.get_topic_names_and_types())
+            assert "/sim/ground_truth" not in topics and "/clock" not in topics
+    finally:
+        stack.stop(grace=5.0)
