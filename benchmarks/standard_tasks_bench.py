@@ -20,12 +20,14 @@ from qg_experiments.peers import REPORT_SEEDS
 from qg_experiments.standard_tasks import ALGORITHMS, TASKS, StandardSpec, standard_table
 from qg_experiments.stats import Interval, format_interval
 from qg_experiments.tasks import load_results, run_specs
+from qg_learning_node.learner.algorithms import keys
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tasks", nargs="+", choices=sorted(TASKS), default=list(TASKS))
-    parser.add_argument("--algorithms", nargs="+", choices=ALGORITHMS, default=list(ALGORITHMS))
+    parser.add_argument("--algorithms", nargs="+", choices=keys(), default=list(ALGORITHMS),
+                        help="the registry's keys (learner/algorithms.py)")
     parser.add_argument("--seeds", nargs="+", type=int, default=list(REPORT_SEEDS))
     parser.add_argument("--steps", type=int, default=None, help="default: the task's budget")
     parser.add_argument("--out", type=Path, default=Path("runs/experiments/thesis"))

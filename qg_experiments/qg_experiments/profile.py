@@ -15,6 +15,7 @@ from typing import Any
 from qg_common.params import config_file, load_yaml
 
 from qg_learning_node.executor.residual_task import state_dim
+from qg_learning_node.learner.algorithms import COMPARED
 from qg_experiments.runner import ALGORITHMS, ARMS, ESTIMATORS
 
 __all__ = ["RandomBudget", "GridBudget", "VariantBudget", "PegBudget", "Profile", "Seeds",
@@ -75,7 +76,7 @@ class GridBudget:
         ``executor.yaml``'s.
     """
     cells: tuple[tuple[float, int], ...]
-    algorithms: tuple[str, ...] = ALGORITHMS
+    algorithms: tuple[str, ...] = COMPARED
     seeds: tuple[int, ...] = (0,)
     train_episodes: int = 40
     test_episodes: int = 8
@@ -129,7 +130,7 @@ class PegBudget:
         Panda task's, whose ``learner.yaml`` discount is tuned to them.
     """
     lrs: tuple[float, ...]
-    algorithms: tuple[str, ...] = ALGORITHMS
+    algorithms: tuple[str, ...] = COMPARED
     seeds: tuple[int, ...] = (0, 1, 2)
     episodes: int = 100
     train_iterations: int = 750

@@ -25,7 +25,9 @@ import gymnasium
 import numpy as np
 import torch
 
+from qg_experiments.sb3_models import sb3_model
 from qg_experiments.stats import mean_interval
+from qg_learning_node.learner import algorithms
 from qg_learning_node.learner.gym_agent import QGDDPG, SB3_DDPG_SETTINGS
 
 __all__ = ["TASKS", "ALGORITHMS", "HIDDEN", "StandardSpec", "run_standard", "standard_table"]
@@ -39,12 +41,11 @@ TASKS: dict[str, dict[str, Any]] = {
     "MountainCarContinuous-v0": {"steps": 20_000, "eval_every": 2_500, "eval_episodes": 3,
                                  "noise": ("ou", 0.5, 0.15), "reward_range": (-0.1, 100.0)},
 }
-#: ``sb3_*``: Stable-Baselines3's; ``qgddpg`` / ``ddpg``: ours (``gym_agent.QGDDPG``).
+#: The algorithms a sweep runs by default (the registry's keys, ``learner/algorithms.py``): ours
+#: (``gym_agent.QGDDPG``) and Stable-Baselines3's. Any registered algorithm can run.
 ALGORITHMS = ("qgddpg", "ddpg", "sb3_ddpg", "sb3_td3")
 #: Hidden layers of every actor and critic here.
 HIDDEN = (64, 64)
-#: SB3's OU noise step (``OrnsteinUhlenbeckActionNoise``'s default dt; ``NoiseConfig``'s too).
-OU_DT = 0.01
 
 
 @dataclass(frozen=True)
@@ -60,8 +61,7 @@ class StandardSpec:
     def __post_init__(self) -> None:
         if self.task not in TASKS:
             raise ValueError(f"task must be one of {sorted(TASKS)}, got {self.task!r}")
-        if self.algorithm not in ALGORITHMS:
-            raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {self.algorithm!r}")
+        algorithms.algorithm(self.algorithm)
 
     @property
     def name(self) -> str:
@@ -103,28 +103,19 @@ def _episode_recorder(episodes: list[dict[str, float]]) -> Any:
 
 
 def _sb3(spec: StandardSpec, env: gymnasium.Env) -> Any:
-    from stable_baselines3 import DDPG, TD3
     from stable_baselines3.common.logger import Logger
-    from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
-    kind, sigma, theta = TASKS[spec.task]["noise"]
-    dim = env.action_space.shape[0]
-    noise = (NormalActionNoise(np.zeros(dim), sigma * np.ones(dim)) if kind == "gaussian" else
-             OrnsteinUhlenbeckActionNoise(np.zeros(dim), sigma * np.ones(dim), theta=theta,
-                                          dt=OU_DT))
-    cls = {"sb3_ddpg": DDPG, "sb3_td3": TD3}[spec.algorithm]
-    model = cls("MlpPolicy", env, action_noise=noise, seed=spec.seed, device="cpu",
-                policy_kwargs={"net_arch": list(HIDDEN)})
+    model = sb3_model(spec.algorithm, env, spec.seed, TASKS[spec.task]["noise"],
+                      policy_kwargs={"net_arch": list(HIDDEN)})
     model.set_logger(Logger(None, []))   # SB3's own would be an empty /tmp/SB3-<time> folder
     return model
 
 
 def _ours(spec: StandardSpec, env: gymnasium.Env) -> QGDDPG:
     kind, sigma, theta = TASKS[spec.task]["noise"]
-    qg = spec.algorithm == "qgddpg"
     return QGDDPG(env, algorithm=spec.algorithm, seed=spec.seed,
                   **{**SB3_DDPG_SETTINGS, "actor_hidden": HIDDEN, "critic_hidden": HIDDEN,
                      "noise": kind, "noise_sigma": sigma, "noise_theta": theta,
-                     "reward_range": TASKS[spec.task]["reward_range"] if qg else None})
+                     "reward_range": TASKS[spec.task]["reward_range"]})
 
 
 def run_standard(spec: StandardSpec) -> dict[str, Any]:
@@ -134,7 +125,7 @@ def run_standard(spec: StandardSpec) -> dict[str, Any]:
     task = TASKS[spec.task]
     steps, every = spec.steps or task["steps"], task["eval_every"]
     env, eval_env = gymnasium.make(spec.task), gymnasium.make(spec.task)
-    ours = not spec.algorithm.startswith("sb3")
+    ours = algorithms.REGISTRY[spec.algorithm].ours
     agent = _ours(spec, env) if ours else _sb3(spec, env)
     evaluations: list[dict[str, float]] = []
     episodes: list[dict[str, float]] = []     # training episodes: did exploration find the goal?
