@@ -20,7 +20,7 @@ from qg_experiments.profile import GridBudget, VariantBudget
 from qg_experiments.runner import RunSpec
 
 __all__ = ["grid_specs", "pair_key", "paired_values", "variant_specs", "cell_table",
-           "test_steps", "seed_means", "pairs", "variant_name", "graph_diagnostics"]
+           "test_steps", "seed_means", "pairs", "variant_name", "by_variant", "graph_diagnostics"]
 
 #: A per-run value compared between the two algorithms' runs of a pair.
 T = TypeVar("T")
@@ -61,6 +61,15 @@ def variant_name(spec: dict[str, Any], default_gamma: float) -> str:
     if spec.get("observation"):
         parts.append(f"state {spec['observation']}")
     return ", ".join(parts) or "the grid's settings"
+
+
+def by_variant(results: list[dict[str, Any]], default_gamma: float
+               ) -> dict[str, list[dict[str, Any]]]:
+    """``results`` grouped by the setting they changed (:func:`variant_name`), by name."""
+    groups: dict[str, list[dict[str, Any]]] = {}
+    for r in results:
+        groups.setdefault(variant_name(r["spec"], default_gamma), []).append(r)
+    return dict(sorted(groups.items()))
 
 
 def test_steps(result: dict[str, Any]) -> list[int]:
