@@ -56,9 +56,9 @@ def graph_section(settings: dict[str, list[dict[str, Any]]], bar: Bar | None,
              "the critic's mean |Q - Monte-Carlo return| on the goal-reaching training "
              "episodes at the end of training (QG-DDPG / DDPG).", ""]
     lines += table(["setting", "pairs", "QG / DDPG / ties", "DDPG - QG [95 % CI]",
-                     "Wilcoxon p", "QG-DDPG beats random", "DDPG beats random",
-                     "QG-DDPG diverged", "DDPG diverged", "targets raised",
-                     "critic error vs MC"], rows_text)
+                    "Wilcoxon p", "QG-DDPG beats random", "DDPG beats random",
+                    "QG-DDPG diverged", "DDPG diverged", "targets raised",
+                    "critic error vs MC"], rows_text)
     divergence = _divergence_pairs([r for results in settings.values() for r in results], gamma)
     return lines + ([""] + [divergence] if divergence else []) + [""]
 

@@ -9,6 +9,7 @@ from typing import Any
 from qg_experiments import grid
 from qg_experiments.profile import Profile
 from qg_experiments.random_baselines import random_bar_of, summarize_baselines
+from qg_experiments.report.aggregate_section import aggregate_section
 from qg_experiments.report.comparison import comparison, graph_section
 from qg_experiments.report.grid_sections import (grid_section, learning_curves_section,
                                                  q_section, random_section, variant_section)
@@ -98,7 +99,10 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
              "10,000 resamples) over the per-seed means of a cell, over episodes for the random "
              "baselines; a cell beats random only when its whole interval lies below the random "
              "bar; QG-DDPG against DDPG is a paired comparison over the same (cell, seed) runs "
-             "with the Wilcoxon signed-rank test and the sign test.", "",
+             "with the Wilcoxon signed-rank test and the sign test; over all cells of a setting, "
+             "the interquartile mean, the probability of improvement and performance profiles "
+             "with stratified-bootstrap intervals (Agarwal et al. 2021), and a verdict per "
+             "setting with Holm's correction and an equivalence test (section 7b).", "",
              "| step | command | wall time | finished |", "|---|---|---|---|"]
     lines += [f"| {k} | `{v['command']}` | {v['wall_time'] / 60:.1f} min | {v['finished']} |"
               for k, v in timing.items()]
@@ -125,8 +129,8 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
                              peg_budget(profile.nextage))
     planned = planned or {}
     lines += table(["experiment", "thesis", f"profile {profile.name}", "runs finished"],
-                    [[*row, f"{len(results_by[k])} of {planned.get(k, '?')}"]
-                     for k, row in budget.items()])
+                   [[*row, f"{len(results_by[k])} of {planned.get(k, '?')}"]
+                    for k, row in budget.items()])
     noise = settings.noise
     lines += ["", "How the runs were made: each run builds the simulated Panda, the bridge's 1 kHz "
               "loop and the wrench estimator (`RobotLoop`), and drives it with the executor's "
@@ -142,11 +146,11 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
               "deterministic per seed (tested in `tests/experiments/test_runner.py`).", ""]
     lines += random_section(random_rows, random_results, test_cap, bar, figures)
     lines += grid_section("## 2. The grid: mean test steps per cell", grid_rows, grid_results,
-                           bar)
+                          bar)
     lines += learning_curves_section(grid_results, grid_rows, figures, bar)
     if profile.state_grid is not None or state_results:
         lines += grid_section("## 2b. The grid with the thesis's 4-D wrench state", state_rows,
-                               state_results, bar)
+                              state_results, bar)
     lines += q_section(grid_results, grid_rows, figures, q_range, gamma)
     lines += variant_section(variant_results, bar, gamma)
     peg_data = []
@@ -161,7 +165,9 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
         peg_data.append(data)
     grids = {f"grid (`{pg.observation or settings.task.observation}`, the default)": grid_results,
              "grid with the thesis's 4-D state": state_results}
-    lines += graph_section({**grids, **grid.by_variant(variant_results, gamma)}, bar, gamma)
+    settings_runs = {**grids, **grid.by_variant(variant_results, gamma)}
+    lines += graph_section(settings_runs, bar, gamma)
+    lines += aggregate_section(settings_runs, bar, profile.statistics, figures)
     lines += comparison(random_rows, bar, grids, variant_results, peg_data, gamma)
     path = docs / "results.md"
     path.write_text("\n".join(lines))

@@ -13,7 +13,7 @@ from qg_experiments.random_baselines import Bar
 from qg_learning_node.learner.algorithms import label
 
 __all__ = ["COLORS", "random_steps", "learning_curves", "mean_q", "peg_learning", "q_spread",
-           "smooth"]
+           "smooth", "performance_profiles", "cell_means"]
 
 #: One colour per algorithm in every figure.
 COLORS = {"ddpg": "tab:orange", "qgddpg": "tab:blue"}
@@ -126,4 +126,47 @@ def q_spread(spread: dict[tuple[str, float], np.ndarray], path: Path) -> None:
     ax.set_yscale("log")
     ax.set_ylabel("std of Q across seeds")
     ax.set_title("Spread of predicted Q on 27 states x 11 actions")
+    _save(fig, path)
+
+
+def performance_profiles(profiles: dict[str, dict[str, tuple[np.ndarray, ...]]],
+                         taus: np.ndarray, path: Path) -> None:
+    """One panel per setting: the fraction of runs needing at most tau test steps per episode,
+    each algorithm with its pointwise 95 % band.
+
+    :param profiles: setting -> algorithm -> (profile, low, high) over ``taus``.
+    """
+    fig, axes = pyplot().subplots(1, len(profiles), figsize=(3.2 * len(profiles), 3.2),
+                                  sharey=True, squeeze=False)
+    for ax, (setting, curves) in zip(axes[0], profiles.items()):
+        for a, (profile, low, high) in curves.items():
+            ax.plot(taus, profile, color=COLORS[a], label=label(a))
+            ax.fill_between(taus, low, high, color=COLORS[a], alpha=0.2)
+        ax.set_title(setting, fontsize=8)
+        ax.set_xlabel("tau [test steps per episode]")
+    axes[0][0].set_ylabel("fraction of runs with\nmean test steps <= tau")
+    axes[0][0].legend(fontsize=7)
+    _save(fig, path)
+
+
+def cell_means(means: dict[str, dict[str, np.ndarray]], bar: Bar | None, path: Path) -> None:
+    """Robustness as the thesis frames it: each cell's mean test steps, per setting and
+    algorithm (a dot per cell, a bar at their mean), against the random bar.
+
+    :param means: setting -> algorithm -> the cells' mean test steps.
+    """
+    fig, ax = pyplot().subplots(figsize=(1.6 + 1.4 * len(means), 3.6))
+    offsets = {"qgddpg": -0.18, "ddpg": 0.18}
+    for i, (setting, by_algorithm) in enumerate(means.items()):
+        for a, values in by_algorithm.items():
+            x = i + offsets.get(a, 0.0)
+            ax.scatter(np.full(len(values), x), values, s=14, color=COLORS[a], alpha=0.8,
+                       label=label(a) if i == 0 else None, zorder=3)
+            ax.hlines(float(np.mean(values)), x - 0.12, x + 0.12, color=COLORS[a], lw=2)
+    if bar is not None:
+        ax.axhline(bar.mean, color="gray", ls="--", lw=1, label=f"random bar ({bar.label})")
+    ax.set_xticks(range(len(means)), list(means), fontsize=7, rotation=15)
+    ax.set_ylabel("mean test steps of a cell")
+    ax.set_title("Mean test steps over the cells (dot: a cell; line: their mean)", fontsize=9)
+    ax.legend(fontsize=7)
     _save(fig, path)
