@@ -1,11 +1,15 @@
-"""QG-DDPG beside SB3's DDPG and TD3 on standard Gymnasium tasks: where do the graph's bounds help?
+"""QG-DDPG beside SB3's DDPG, TD3 and SAC on standard Gymnasium tasks: where do the graph's
+bounds help?
 
-Two tasks, one dense and one sparse: ``Pendulum-v1`` (reward every step, no terminal state, every
-episode truncated at 200 steps) and ``MountainCarContinuous-v0`` (+100 once, at the goal, which
-is terminal; a small action cost otherwise). The Q-Graph bounds a transition only if a terminal
-or a loop is reachable from it in the data, so on Pendulum it can bound nothing (QG-DDPG then
-differs from our DDPG only by the a-priori bounds of the known reward range), while on
-MountainCar every episode that reached the goal bounds its whole chain.
+Three tasks: ``Pendulum-v1`` (dense: reward every step, no terminal state, every episode
+truncated at 200 steps), ``MountainCarContinuous-v0`` (+100 once, at the goal, which is
+terminal; a small action cost otherwise) and ``QGSparseMountainCar-v0`` (the same car with the
+thesis's sparse reward, -1 per step and 0 at the goal: ``gym_envs.sparse_mountain_car``). The
+Q-Graph bounds a transition only if a terminal or a loop is reachable from it in the data, so on
+Pendulum it can bound nothing (QG-DDPG then differs from our DDPG only by the a-priori bounds of
+the known reward range), while on the mountain cars every episode that reached the goal bounds
+its whole chain, and the left wall, where the car stops at exactly (-1.2, 0), joins the chains
+of different episodes.
 
 Same budget and settings for every algorithm: SB3 DDPG's defaults (``SB3_DDPG_SETTINGS``) with
 the networks of :data:`HIDDEN` (smaller than SB3's 400-300, so that 5 seeds of 4 algorithms fit
@@ -30,20 +34,24 @@ from qg_experiments.stats import mean_interval
 from qg_learning_node.learner import algorithms
 from qg_learning_node.learner.gym_agent import QGDDPG, SB3_DDPG_SETTINGS
 
-__all__ = ["TASKS", "ALGORITHMS", "HIDDEN", "StandardSpec", "run_standard", "standard_table"]
+__all__ = ["TASKS", "HIDDEN", "StandardSpec", "run_standard", "standard_table"]
 
-#: Per task: steps, evaluation period and episodes, exploration noise, and the known reward
-#: range QG-DDPG takes a priori (Pendulum: -(pi^2 + 0.1 * 8^2 + 0.001 * 2^2) .. 0; MountainCar:
-#: -0.1 * 1^2 per step .. +100 at the goal).
+#: Per task: steps, evaluation period and episodes, exploration noise, the known reward range
+#: QG-DDPG takes a priori (Pendulum: -(pi^2 + 0.1 * 8^2 + 0.001 * 2^2) .. 0; MountainCar:
+#: -0.1 * 1^2 per step .. +100 at the goal; the sparse car: -1 .. 0), and the algorithms a sweep
+#: runs by default (the registry's keys, ``learner/algorithms.py``; any registered one can run).
 TASKS: dict[str, dict[str, Any]] = {
     "Pendulum-v1": {"steps": 10_000, "eval_every": 1_000, "eval_episodes": 5,
-                    "noise": ("gaussian", 0.1, 0.0), "reward_range": (-16.2736044, 0.0)},
+                    "noise": ("gaussian", 0.1, 0.0), "reward_range": (-16.2736044, 0.0),
+                    "algorithms": ("qgddpg", "ddpg", "sb3_ddpg", "sb3_td3")},
     "MountainCarContinuous-v0": {"steps": 20_000, "eval_every": 2_500, "eval_episodes": 3,
-                                 "noise": ("ou", 0.5, 0.15), "reward_range": (-0.1, 100.0)},
+                                 "noise": ("ou", 0.5, 0.15), "reward_range": (-0.1, 100.0),
+                                 "algorithms": ("qgddpg", "ddpg", "sb3_ddpg", "sb3_td3")},
+    "qg_experiments:QGSparseMountainCar-v0": {
+        "steps": 20_000, "eval_every": 2_500, "eval_episodes": 3, "noise": ("ou", 0.5, 0.15),
+        "reward_range": (-1.0, 0.0),
+        "algorithms": ("qgddpg", "ddpg", "sb3_ddpg", "sb3_td3", "sb3_sac")},
 }
-#: The algorithms a sweep runs by default (the registry's keys, ``learner/algorithms.py``): ours
-#: (``gym_agent.QGDDPG``) and Stable-Baselines3's. Any registered algorithm can run.
-ALGORITHMS = ("qgddpg", "ddpg", "sb3_ddpg", "sb3_td3")
 #: Hidden layers of every actor and critic here.
 HIDDEN = (64, 64)
 
@@ -66,7 +74,8 @@ class StandardSpec:
     @property
     def name(self) -> str:
         steps = f"_{self.steps}" if self.steps else ""
-        return f"{self.task.split('-')[0]}_{self.algorithm}{steps}_s{self.seed}"
+        task = self.task.split(":")[-1].split("-")[0]
+        return f"{task}_{self.algorithm}{steps}_s{self.seed}"
 
     def run(self) -> dict[str, Any]:
         return run_standard(self)

@@ -146,3 +146,18 @@ def test_stable_baselines3_trains_on_the_environment_in_three_lines(monkeypatch,
     action, _ = model.predict(env.observation_space.sample(), deterministic=True)
     assert env.action_space.contains(action)
     env.close()
+
+
+def test_the_sparse_mountain_car_pays_minus_one_per_step_and_zero_at_the_goal() -> None:
+    env = gymnasium.make("qg_experiments:QGSparseMountainCar-v0")
+    obs, _ = env.reset(seed=0)
+    rewards = []
+    while True:           # push with the velocity: the swing reaches the goal
+        obs, reward, terminated, truncated, info = env.step(
+            np.array([1.0 if obs[1] >= 0 else -1.0], np.float32))
+        rewards.append(reward)
+        if terminated or truncated:
+            break
+    assert terminated and info["is_success"] and rewards[-1] == 0.0
+    assert rewards[:-1] == [-1.0] * (len(rewards) - 1) and 50 < len(rewards) < 300
+    env.close()

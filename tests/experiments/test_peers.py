@@ -71,3 +71,16 @@ def test_a_standard_task_run_evaluates_along_the_way(tmp_path) -> None:
     assert [e["steps"] for e in result["evaluations"]] == [250]
     assert [e["steps"] for e in result["train_episodes"]] == [200]     # one finished episode
     assert -2000 < result["final_return"] <= 0
+
+
+def test_sb3_models_take_action_noise_where_the_registry_says_and_the_sparse_car_is_named(
+        ) -> None:
+    import gymnasium
+    from qg_experiments.sb3_models import sb3_model
+    env = gymnasium.make("qg_experiments:QGSparseMountainCar-v0")
+    sac = sb3_model("sb3_sac", env, 0, ("ou", 0.5, 0.15))
+    td3 = sb3_model("sb3_td3", env, 0, ("ou", 0.5, 0.15))
+    assert type(sac).__name__ == "SAC" and sac.action_noise is None       # its policy explores
+    assert type(td3.action_noise).__name__ == "OrnsteinUhlenbeckActionNoise"
+    spec = StandardSpec("qg_experiments:QGSparseMountainCar-v0", "sb3_sac", 100, steps=250)
+    assert spec.name == "QGSparseMountainCar_sb3_sac_250_s100"
