@@ -15,7 +15,11 @@ Same budget and settings for every algorithm: SB3 DDPG's defaults (``SB3_DDPG_SE
 the networks of :data:`HIDDEN` (smaller than SB3's 400-300, so that 5 seeds of 4 algorithms fit
 on the 2 shared cores), the task's exploration noise of RL Zoo (Gaussian 0.1 on Pendulum,
 Ornstein-Uhlenbeck 0.5 on MountainCar, as ``rl-zoo3``'s hyperparameters set them), the same
-steps. Every ``eval_every`` steps the deterministic policy plays ``eval_episodes`` episodes on a
+steps. One difference, ours: our agents see the observation box scaled to [-1, 1] (their own
+default, the thesis's state scaling), SB3's the raw observation. With the raw one, QG-DDPG's
+actor saturates on MountainCar the moment the graph bounds the first goal-reaching chain and
+never recovers: the car's velocity (+-0.07) is too small beside its position for the critic to
+tell the two directions of motion apart (docs/learning.md, section 13). Every ``eval_every`` steps the deterministic policy plays ``eval_episodes`` episodes on a
 second environment seeded apart from training (SB3's ``EvalCallback`` protocol).
 """
 from __future__ import annotations
@@ -124,7 +128,8 @@ def _ours(spec: StandardSpec, env: gymnasium.Env) -> QGDDPG:
     return QGDDPG(env, algorithm=spec.algorithm, seed=spec.seed,
                   **{**SB3_DDPG_SETTINGS, "actor_hidden": HIDDEN, "critic_hidden": HIDDEN,
                      "noise": kind, "noise_sigma": sigma, "noise_theta": theta,
-                     "reward_range": TASKS[spec.task]["reward_range"]})
+                     "reward_range": TASKS[spec.task]["reward_range"],
+                     "normalize_observations": True})
 
 
 def run_standard(spec: StandardSpec) -> dict[str, Any]:
