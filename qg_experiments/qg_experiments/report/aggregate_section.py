@@ -107,6 +107,8 @@ def aggregate_section(settings: dict[str, list[dict[str, Any]]], bar: Bar | None
                 f"{stats.format_interval(aggregates.count_below(m, bar.mean), 0)} of {len(cells)} "
                 f"({sum(r['beats_random'] for r in cell_rows if r['algorithm'] == a)})"
                 for a, m in both.items()]])
+    if not rows:
+        return lines + ["No setting has a seed complete on every cell for both algorithms.", ""]
     plots.performance_profiles(profiles, taus, figures / "exp7_profiles.png")
     plots.cell_means(means, bar, figures / "exp7_cell_means.png")
     lines += [f"Per setting, every run of both algorithms on the cells and seeds both completed "
