@@ -16,10 +16,11 @@ the networks of :data:`HIDDEN` (smaller than SB3's 400-300, so that 5 seeds of 4
 on the 2 shared cores), the task's exploration noise of RL Zoo (Gaussian 0.1 on Pendulum,
 Ornstein-Uhlenbeck 0.5 on MountainCar, as ``rl-zoo3``'s hyperparameters set them), the same
 steps. One difference, ours: our agents see the observation box scaled to [-1, 1] (their own
-default, the thesis's state scaling), SB3's the raw observation. With the raw one, QG-DDPG's
-actor saturates on MountainCar the moment the graph bounds the first goal-reaching chain and
-never recovers: the car's velocity (+-0.07) is too small beside its position for the critic to
-tell the two directions of motion apart (docs/learning.md, section 13). Every ``eval_every`` steps the deterministic policy plays ``eval_episodes`` episodes on a
+default, the thesis's state scaling), SB3's the raw observation. On MountainCar QG-DDPG's actor
+saturates the moment the graph bounds the first goal-reaching chain; with the raw observation
+(velocity within +-0.07) the critic cannot tell the directions of motion apart and the actor
+need never come back, scaled it can (docs/learning.md, section 13, where this is measured and
+where it is also shown not to be enough). Every ``eval_every`` steps the deterministic policy plays ``eval_episodes`` episodes on a
 second environment seeded apart from training (SB3's ``EvalCallback`` protocol).
 """
 from __future__ import annotations
