@@ -1,7 +1,8 @@
 """QG-DDPG, our DDPG, SB3's DDPG, TD3 (and SAC) on Pendulum-v1, MountainCarContinuous-v0 and the
 sparse-reward mountain car, same budget, the report's seeds (``qg_experiments.standard_tasks``).
 
-Usage (a run is 1-3 min on a free core; the 40 runs about an hour):
+Usage (measured: a Pendulum run of ours 22-75 s, a MountainCar run 1-5 min, at 25-100 % of a
+shared core; the 65 runs of the three tasks x 5 seeds, each task's algorithms, 1.5-3 hours):
 
     nice -n 10 .venv/bin/python benchmarks/standard_tasks_bench.py
     .venv/bin/python benchmarks/standard_tasks_bench.py --tasks Pendulum-v1 --seeds 100 --steps 2000

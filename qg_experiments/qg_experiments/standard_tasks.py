@@ -20,8 +20,9 @@ default, the thesis's state scaling), SB3's the raw observation. On MountainCar 
 saturates the moment the graph bounds the first goal-reaching chain; with the raw observation
 (velocity within +-0.07) the critic cannot tell the directions of motion apart and the actor
 need never come back, scaled it can (docs/learning.md, section 13, where this is measured and
-where it is also shown not to be enough). Every ``eval_every`` steps the deterministic policy plays ``eval_episodes`` episodes on a
-second environment seeded apart from training (SB3's ``EvalCallback`` protocol).
+where it is also shown not to be enough). Every ``eval_every`` steps the deterministic policy
+plays ``eval_episodes`` episodes on a second environment seeded apart from training (SB3's
+``EvalCallback`` protocol).
 """
 from __future__ import annotations
 

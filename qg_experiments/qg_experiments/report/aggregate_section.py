@@ -65,7 +65,7 @@ def verdict_sentence(j: Judged, statistics: Statistics) -> str:
     """The verdict of one setting in one sentence, with the numbers it rests on."""
     c, margin = j.comparison, statistics.equivalence_margin
     numbers = (f"DDPG minus QG-DDPG {stats.format_interval(c.difference)} test steps per episode "
-               f"over {c.n} (cell, seed) pairs; Holm-adjusted Wilcoxon p = {j.difference_p:.2g}, "
+               f"over {c.n} (cell, seed) pairs; Holm-adjusted: Wilcoxon p = {j.difference_p:.2g}, "
                f"TOST p = {j.equivalence_p:.2g} at ±{margin:g} steps")
     if j.verdict == stats.VERDICTS[0]:
         return f"- {j.setting}: **QG-DDPG needs fewer test steps** ({numbers})."
