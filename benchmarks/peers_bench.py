@@ -5,7 +5,7 @@ test episodes run to the cap):
 
     eval "$(.venv/bin/qgl env)"
     nice -n 10 .venv/bin/python benchmarks/peers_bench.py --setting defaults
-    .venv/bin/python benchmarks/peers_bench.py --setting grid --algorithms td3 --cells 1e-3,50
+    .venv/bin/python benchmarks/peers_bench.py --setting grid --algorithms sb3_td3 --cells 1e-3,50
     .venv/bin/python benchmarks/peers_bench.py --ours --cells 1e-3,50   # our DDPG, QG-DDPG
     .venv/bin/python benchmarks/peers_bench.py --table-only          # print what is saved
 
@@ -28,6 +28,8 @@ from qg_experiments.grid import grid_specs
 from qg_experiments.peers import (PEER_ALGORITHMS, REPORT_SEEDS, SETTINGS, peer_specs,
                                   peer_table)
 from qg_experiments.profile import GridBudget
+from qg_experiments.runner import ALGORITHMS
+from qg_learning_node.learner.algorithms import COMPARED
 from qg_experiments.stats import Interval, format_interval
 from qg_experiments.tasks import load_results, run_specs
 from qg_experiments.tensorboard_log import export_runs
@@ -46,7 +48,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--setting", choices=SETTINGS, default="defaults")
     parser.add_argument("--algorithms", nargs="+", choices=PEER_ALGORITHMS,
-                        default=["ddpg", "ours_ddpg", "td3", "sac"])
+                        default=["sb3_ddpg", "ddpg", "sb3_td3", "sb3_sac"])
     parser.add_argument("--seeds", nargs="+", type=int, default=list(REPORT_SEEDS))
     parser.add_argument("--cells", nargs="+", type=_cell, default=list(GRID_CELLS),
                         help="grid setting: lr,iterations ...")
@@ -55,8 +57,8 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--ours", action="store_true",
                         help="run our DDPG and QG-DDPG at --cells instead (the runner's grid)")
-    parser.add_argument("--ours-algorithms", nargs="+", choices=("qgddpg", "ddpg"),
-                        default=["qgddpg", "ddpg"], help="with --ours")
+    parser.add_argument("--ours-algorithms", nargs="+", choices=ALGORITHMS,
+                        default=list(COMPARED), help="with --ours")
     parser.add_argument("--table-only", action="store_true")
     args = parser.parse_args()
     if args.ours:

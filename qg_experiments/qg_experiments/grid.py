@@ -20,7 +20,8 @@ from qg_experiments.profile import GridBudget, VariantBudget
 from qg_experiments.runner import RunSpec
 
 __all__ = ["grid_specs", "pair_key", "paired_values", "variant_specs", "cell_table",
-           "test_steps", "seed_means", "pairs", "variant_name", "graph_diagnostics"]
+           "test_steps", "seed_means", "pairs", "variant_name", "by_variant", "score_matrices",
+           "graph_diagnostics"]
 
 #: A per-run value compared between the two algorithms' runs of a pair.
 T = TypeVar("T")
@@ -63,6 +64,15 @@ def variant_name(spec: dict[str, Any], default_gamma: float) -> str:
     return ", ".join(parts) or "the grid's settings"
 
 
+def by_variant(results: list[dict[str, Any]], default_gamma: float
+               ) -> dict[str, list[dict[str, Any]]]:
+    """``results`` grouped by the setting they changed (:func:`variant_name`), by name."""
+    groups: dict[str, list[dict[str, Any]]] = {}
+    for r in results:
+        groups.setdefault(variant_name(r["spec"], default_gamma), []).append(r)
+    return dict(sorted(groups.items()))
+
+
 def test_steps(result: dict[str, Any]) -> list[int]:
     """Steps of the test episodes of one run (a failed episode counts its cap)."""
     return [e["steps"] for e in result["episodes"] if e["mode"] == "test"]
@@ -98,6 +108,27 @@ def pairs(results: list[dict[str, Any]], a: str = "qgddpg", b: str = "ddpg"
     the pairs of the paired comparison, and their keys."""
     return paired_values(
         results, lambda r: float(np.mean(test_steps(r))) if test_steps(r) else None, a, b)
+
+
+def score_matrices(results: list[dict[str, Any]], a: str = "qgddpg", b: str = "ddpg"
+                   ) -> tuple[np.ndarray, np.ndarray, list[tuple[float, int]], list[int]]:
+    """Per-run mean test steps of ``a`` and ``b`` as seeds x cells matrices (the aggregates'
+    runs x tasks), over the cells both ran and the seeds every one of those cells has for both;
+    an unfinished profile's complete part. Also the cells and seeds, in the matrices' order."""
+    steps: dict[tuple[str, tuple[float, int], int], float] = {}
+    for r in results:
+        s = r["spec"]
+        if test_steps(r):
+            steps[(s["algorithm"], (s["critic_lr"], s["iterations"]), s["seed"])] = float(
+                np.mean(test_steps(r)))
+    ran = {(x, c) for (x, c, _) in steps}
+    cells = sorted({c for (_, c, _) in steps if (a, c) in ran and (b, c) in ran})
+    seeds = sorted(seed for seed in {k[2] for k in steps}
+                   if all((x, c, seed) in steps for x in (a, b) for c in cells))
+
+    def matrix(x: str) -> np.ndarray:
+        return np.array([[steps[(x, c, seed)] for c in cells] for seed in seeds], dtype=float)
+    return matrix(a), matrix(b), cells, seeds
 
 
 def graph_diagnostics(group: list[dict[str, Any]]) -> dict[str, float]:

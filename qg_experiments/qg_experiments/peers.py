@@ -30,16 +30,19 @@ import torch
 
 from qg_experiments.gym_envs.insertion import TRAIN_MAX_STEPS, InsertionEnv
 from qg_experiments.runner import config_digest
+from qg_experiments.sb3_models import sb3_model
 from qg_experiments.stats import Interval, mean_interval
+from qg_learning_node.learner.algorithms import COMPARED, REGISTRY, keys
 from qg_learning_node.learner.gym_agent import QGDDPG, SB3_DDPG_SETTINGS
 
-__all__ = ["PEER_ALGORITHMS", "SETTINGS", "REPORT_SEEDS", "PeerSpec", "EpisodeLog", "run_peer", "peer_specs",
-           "peer_table"]
+__all__ = ["PEER_ALGORITHMS", "SETTINGS", "REPORT_SEEDS", "PeerSpec", "EpisodeLog", "run_peer",
+           "peer_specs", "peer_table"]
 
 #: The report's seeds: no tuning used them (tuning used 0-4).
 REPORT_SEEDS = (100, 101, 102, 103, 104)
-#: SB3's algorithms, and ours through the Gymnasium API at SB3 DDPG's settings.
-PEER_ALGORITHMS = ("sac", "td3", "ddpg", "ours_ddpg", "ours_qgddpg")
+#: SB3's algorithms, and our DDPG and QG-DDPG through the Gymnasium API at SB3 DDPG's settings
+#: (the registry's keys, ``learner/algorithms.py``).
+PEER_ALGORITHMS = (*keys("sb3"), *COMPARED)
 SETTINGS = ("defaults", "grid")
 #: [steps] the grid's training cycle: a grid cell trains after every this many robot steps.
 CYCLE_STEPS = 20
@@ -78,7 +81,7 @@ class PeerSpec:
             raise ValueError(f"setting must be one of {SETTINGS}, got {self.setting!r}")
         if (self.setting == "grid") != (self.critic_lr is not None and self.iterations is not None):
             raise ValueError("critic_lr and iterations are given for the grid setting only")
-        if self.setting == "grid" and self.algorithm.startswith("ours"):
+        if self.setting == "grid" and REGISTRY[self.algorithm].ours:
             raise ValueError("our algorithms' grid cells are the runner's (RunSpec)")
 
     @property
@@ -117,23 +120,16 @@ class EpisodeLog(gymnasium.Wrapper):
 
 def _sb3_model(spec: PeerSpec, env: gymnasium.Env) -> Any:
     """The SB3 algorithm of ``spec`` at its setting (see the module docstring)."""
-    from stable_baselines3 import DDPG, SAC, TD3
-    from stable_baselines3.common.noise import NormalActionNoise
-    kwargs: dict[str, Any] = {"seed": spec.seed, "device": "cpu"}
-    if spec.algorithm in ("td3", "ddpg"):
-        dim = env.action_space.shape[0]
-        kwargs["action_noise"] = NormalActionNoise(np.zeros(dim), NOISE_SIGMA * np.ones(dim))
+    kwargs: dict[str, Any] = {}
     if spec.setting == "grid":
         kwargs.update(learning_rate=spec.critic_lr, train_freq=(CYCLE_STEPS, "step"),
                       gradient_steps=spec.iterations)
-    cls = {"sac": SAC, "td3": TD3, "ddpg": DDPG}[spec.algorithm]
-    return cls("MlpPolicy", env, **kwargs)
+    return sb3_model(spec.algorithm, env, spec.seed, ("gaussian", NOISE_SIGMA, 0.0), **kwargs)
 
 
 def _ours(spec: PeerSpec, env: gymnasium.Env) -> QGDDPG:
     """Our DDPG or QG-DDPG through the Gymnasium API, at SB3 DDPG's defaults (+ noise 0.1)."""
-    algorithm = spec.algorithm.removeprefix("ours_")
-    return QGDDPG(env, algorithm=algorithm, seed=spec.seed,
+    return QGDDPG(env, algorithm=spec.algorithm, seed=spec.seed,
                   **{**SB3_DDPG_SETTINGS, "noise_sigma": NOISE_SIGMA})
 
 
@@ -147,7 +143,7 @@ def run_peer(spec: PeerSpec) -> dict[str, Any]:
                                   config_dir=spec.config_dir))
     budget = spec.train_episodes * spec.train_max_steps
     folder = None if spec.tensorboard_dir is None else Path(spec.tensorboard_dir) / spec.name
-    ours = spec.algorithm.startswith("ours")
+    ours = REGISTRY[spec.algorithm].ours
     if ours:
         agent: Any = _ours(spec, env)
         agent.learn(budget, max_episodes=spec.train_episodes, tensorboard_log=folder)

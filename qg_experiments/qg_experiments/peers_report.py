@@ -21,18 +21,27 @@ from qg_experiments.runner import config_digest
 from qg_experiments.standard_tasks import standard_table
 from qg_experiments.stats import Interval, format_interval, paired_comparison
 from qg_experiments.tasks import load_results
+from qg_learning_node.learner.algorithms import REGISTRY, label
 
 __all__ = ["BEGIN", "END", "ours_rows", "peers_section", "write_section"]
 
 BEGIN = "<!-- peers: written by qg_experiments.peers_report -->"
 END = "<!-- /peers -->"
-#: Names in the tables: the peers' runs (``peers.PEER_ALGORITHMS``) and the standard tasks'
-#: (``standard_tasks.ALGORITHMS``, where ``ddpg`` is ours).
-PEER_NAMES = {"sac": "SB3 SAC", "td3": "SB3 TD3", "ddpg": "SB3 DDPG",
-              "ours_ddpg": "our DDPG at SB3 DDPG's settings",
-              "ours_qgddpg": "our QG-DDPG at SB3 DDPG's settings"}
-STANDARD_NAMES = {"qgddpg": "QG-DDPG (ours)", "ddpg": "DDPG (ours)", "sb3_ddpg": "SB3 DDPG",
-                  "sb3_td3": "SB3 TD3"}
+#: The prefix :func:`ours_rows` gives our runner's runs in the peers' table.
+RUNNER = "runner_"
+
+
+def _peer_name(key: str) -> str:
+    """A peers' table row: SB3's algorithm, ours at SB3 DDPG's settings, or our runner's."""
+    if key.startswith(RUNNER):
+        return f"{label(key.removeprefix(RUNNER))} (ours, the runner)"
+    ours = key in REGISTRY and REGISTRY[key].ours
+    return f"our {label(key)} at SB3 DDPG's settings" if ours else label(key)
+
+
+def _standard_name(key: str) -> str:
+    """A standard tasks' table row: ``QG-DDPG (ours)``, ``SB3 TD3``."""
+    return f"{label(key)} (ours)" if key in REGISTRY and REGISTRY[key].ours else label(key)
 
 
 def _train_steps(result: dict[str, Any]) -> int:
@@ -47,7 +56,7 @@ def ours_rows(grid_results: list[dict[str, Any]], seeds: set[int]) -> list[dict[
     """Our runner's grid runs on ``seeds`` as rows of the peers' table (one per algorithm and
     cell), counted like :func:`peers.peer_table`."""
     peers_like = [{**r, "train_steps": _train_steps(r),
-                   "spec": {**r["spec"], "algorithm": f"runner_{r['spec']['algorithm']}",
+                   "spec": {**r["spec"], "algorithm": RUNNER + r["spec"]["algorithm"],
                             "setting": "grid"}}
                   for r in grid_results if r["spec"]["seed"] in seeds
                   and r["spec"].get("reward", "dense") == "dense"
@@ -56,9 +65,7 @@ def ours_rows(grid_results: list[dict[str, Any]], seeds: set[int]) -> list[dict[
 
 
 def _row_line(row: dict[str, Any]) -> str:
-    algorithm = row["algorithm"]
-    name = (f"{'QG-DDPG' if algorithm.endswith('qgddpg') else 'DDPG'} (ours, the runner)"
-            if algorithm.startswith("runner_") else PEER_NAMES.get(algorithm, algorithm))
+    name = _peer_name(row["algorithm"])
     cell = ("defaults" if row["setting"] == "defaults"
             else f"lr {row['critic_lr']:g}, {row['iterations']} it/20 steps")
     steps, train = Interval(**row["mean_test_steps"]), Interval(**row["train_steps"])
@@ -106,7 +113,7 @@ def _shaft(out: Path) -> list[str]:
     lines += [_row_line(row) for row in rows]
     by = {(r["algorithm"], r["setting"]): r for r in rows}
     lines += [""]
-    ours, sb3 = by.get(("ours_ddpg", "defaults")), by.get(("ddpg", "defaults"))
+    ours, sb3 = by.get(("ddpg", "defaults")), by.get(("sb3_ddpg", "defaults"))
     if ours and sb3:
         def per_seed(row: dict[str, Any], key: str) -> dict[int, float]:
             return {int(s): float(v[key]) for s, v in row["per_seed"].items()}
@@ -131,15 +138,18 @@ def _standard(out: Path) -> list[str]:
              "TD3's final*: the first evaluation at which a seed reached SB3 TD3's mean final "
              "return (inf: never). Where the graph can help, by construction: Pendulum has no "
              "terminal state and its states never repeat, so the graph bounds nothing and QG-DDPG "
-             "differs from our DDPG only where the a-priori bounds clip a target; on MountainCar "
-             "every episode that reached the goal bounds its whole chain, none before the first "
-             "success.", "",
+             "differs from our DDPG only where the a-priori bounds clip a target; on the mountain "
+             "cars every episode that reached the goal bounds its whole chain, none before the "
+             "first success. `QGSparseMountainCar-v0` is the same car with the thesis's sparse "
+             "reward (-1 per step, 0 at the goal; its return is minus the steps to the goal), "
+             "where SB3's SAC runs too. Why ours lose Pendulum seeds and QG-DDPG MountainCar "
+             "seeds: [learning.md](learning.md), section 13.", "",
              "| task | algorithm | steps | seeds | final return [95 % CI] | steps to TD3's final "
              "return, per seed |", "|---|---|---|---|---|---|"]
     steps = {r["spec"]["task"]: r["evaluations"][-1]["steps"] for r in results}
     for row in standard_table(results):
         reach = row["steps_to_td3"] or {}
-        lines.append(f"| {row['task']} | {STANDARD_NAMES[row['algorithm']]} | "
+        lines.append(f"| {row['task']} | {_standard_name(row['algorithm'])} | "
                      f"{steps[row['task']]} | {len(row['seeds'])} | "
                      f"{format_interval(Interval(**row['final_return']))} | "
                      + ", ".join("inf" if math.isinf(v) else str(int(v))
@@ -151,10 +161,11 @@ def _standard(out: Path) -> list[str]:
         def of(algorithm: str) -> dict[int, float]:
             return {s: v for (t, a, s), v in final.items() if t == task and a == algorithm}
         lines += [f"{task}, final return (positive: A returns more):"]
-        lines += [_paired_line(f"{STANDARD_NAMES[a]} (A) vs {STANDARD_NAMES[b]} (B)", of(a),
+        lines += [_paired_line(f"{_standard_name(a)} (A) vs {_standard_name(b)} (B)", of(a),
                                of(b), higher_is_better=True)
                   for a, b in (("ddpg", "sb3_ddpg"), ("qgddpg", "ddpg"), ("qgddpg", "sb3_ddpg"),
-                               ("qgddpg", "sb3_td3"))] + [""]
+                               ("qgddpg", "sb3_td3"), ("qgddpg", "sb3_sac"))
+                  if of(a) and of(b)] + [""]
     return lines
 
 

@@ -15,10 +15,11 @@ from typing import Any
 from qg_common.params import config_file, load_yaml
 
 from qg_learning_node.executor.residual_task import state_dim
+from qg_learning_node.learner.algorithms import COMPARED
 from qg_experiments.runner import ALGORITHMS, ARMS, ESTIMATORS
 
 __all__ = ["RandomBudget", "GridBudget", "VariantBudget", "PegBudget", "Profile", "Seeds",
-           "load_profile", "VARIANT_KEYS"]
+           "Statistics", "load_profile", "VARIANT_KEYS"]
 
 #: What a variant may change in a grid run (``RunSpec`` fields).
 VARIANT_KEYS = ("reward", "replay_capacity", "gamma", "observation")
@@ -43,6 +44,24 @@ class Seeds:
                 isinstance(v, int) and not isinstance(v, bool) for v in value):
             return tuple(value)
         raise ValueError(f"seeds must be 'report', 'tuning' or a list of integers, got {value!r}")
+
+
+@dataclass(frozen=True)
+class Statistics:
+    """How the report decides (``config/experiments.yaml``, ``statistics``).
+
+    :param level: the significance level of every test, after Holm's correction over the
+        settings judged together.
+    :param equivalence_margin: [test steps per episode] the difference in mean test steps that
+        counts as no difference: two algorithms are equivalent when the paired difference lies
+        inside (-margin, margin) beyond doubt (TOST).
+    """
+    level: float = 0.05
+    equivalence_margin: float = 10.0
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.level < 1.0 or not self.equivalence_margin > 0:
+            raise ValueError("statistics: level must lie in (0, 1) and equivalence_margin be > 0")
 
 
 def _fields(cls: type, values: dict[str, Any]) -> dict[str, Any]:
@@ -75,7 +94,7 @@ class GridBudget:
         ``executor.yaml``'s.
     """
     cells: tuple[tuple[float, int], ...]
-    algorithms: tuple[str, ...] = ALGORITHMS
+    algorithms: tuple[str, ...] = COMPARED
     seeds: tuple[int, ...] = (0,)
     train_episodes: int = 40
     test_episodes: int = 8
@@ -97,8 +116,8 @@ class GridBudget:
 class VariantBudget:
     """Experiment 4: the grid's protocol with one setting changed, at fixed cells.
 
-    :param cells: ``((critic_lr, iterations), ...)``, chosen before the report (on the tuning
-        seeds), the same for both algorithms so each (cell, seed) is a pair.
+    :param cells: ``((critic_lr, iterations), ...)``, the same for both algorithms so each
+        (cell, seed) is a pair; ``grid`` in the profile file: every cell of the grid.
     :param settings: ``({name, <one or more of VARIANT_KEYS>}, ...)``, e.g.
         ``{name: sparse, reward: sparse}``.
     """
@@ -129,7 +148,7 @@ class PegBudget:
         Panda task's, whose ``learner.yaml`` discount is tuned to them.
     """
     lrs: tuple[float, ...]
-    algorithms: tuple[str, ...] = ALGORITHMS
+    algorithms: tuple[str, ...] = COMPARED
     seeds: tuple[int, ...] = (0, 1, 2)
     episodes: int = 100
     train_iterations: int = 750
@@ -155,6 +174,7 @@ class Profile:
     state_grid: GridBudget | None = None
     arm: str = "realistic"
     seeds: Seeds = Seeds(tuning=(0,), report=(1,))
+    statistics: Statistics = Statistics()
 
     def __post_init__(self) -> None:
         if self.estimator not in ESTIMATORS:
@@ -182,12 +202,16 @@ def load_profile(name: str, path: Path | None = None, estimator: str | None = No
         return cls(**_fields(cls, values))
 
     p = profiles[name]
+    grid = section(GridBudget, p["grid"])
+    variants = dict(p.get("variants", {}))
+    if variants.get("cells") == "grid":          # every cell of the grid
+        variants["cells"] = [list(cell) for cell in grid.cells]
     return Profile(name=name, estimator=estimator or data.get("estimator", "ekf"),
-                   random=section(RandomBudget, p["random"]),
-                   grid=section(GridBudget, p["grid"]),
-                   variants=section(VariantBudget, p.get("variants", {})),
+                   random=section(RandomBudget, p["random"]), grid=grid,
+                   variants=section(VariantBudget, variants),
                    peg=section(PegBudget, p["peg"]),
                    nextage=section(PegBudget, p["nextage"]) if "nextage" in p else None,
                    state_grid=section(GridBudget, {**p["grid"], **p["state_grid"]})
                    if "state_grid" in p else None,
-                   arm=data.get("arm", "realistic"), seeds=seeds)
+                   arm=data.get("arm", "realistic"), seeds=seeds,
+                   statistics=Statistics(**_fields(Statistics, data.get("statistics", {}))))

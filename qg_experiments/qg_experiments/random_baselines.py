@@ -18,12 +18,14 @@ from qg_common.types import N_START_POSES
 from qg_learning_node.executor.episode import Episode
 from qg_learning_node.executor.noise import KINDS, ActionNoise
 from qg_learning_node.executor.residual_task import ACTION_DIM
+from qg_experiments import stats
 from qg_experiments.profile import RandomBudget
 from qg_experiments.runner import (ESTIMATORS, InsertionRobot, StackSettings,
                                    config_digest, episode_noise_seed, run_episode,
                                    zero_policy)
 
-__all__ = ["BaselineSpec", "baseline_specs", "run_baseline", "summarize_baselines", "random_bar"]
+__all__ = ["BaselineSpec", "baseline_specs", "run_baseline", "summarize_baselines", "random_bar",
+           "Bar", "random_bar_of"]
 
 
 @dataclass(frozen=True)
@@ -116,6 +118,28 @@ def random_bar(rows: list[dict[str, Any]], cap: int) -> tuple[float, str] | None
         return None
     capped = [(float(np.minimum(row["steps"], cap).mean()), row["label"]) for row in rows]
     return min(capped)
+
+
+@dataclass(frozen=True)
+class Bar:
+    """The random bar: the best random setting's mean steps, its episodes cut at the test cap,
+    with the 95 % interval over those episodes."""
+    label: str
+    interval: stats.Interval
+    cap: int
+
+    @property
+    def mean(self) -> float:
+        return self.interval.mean
+
+
+def random_bar_of(rows: list[dict[str, Any]], cap: int) -> Bar | None:
+    """The :class:`Bar` of the random baselines ``rows`` (:func:`random_bar`)."""
+    best = random_bar(rows, cap)
+    if best is None:
+        return None
+    row = next(r for r in rows if r["label"] == best[1])
+    return Bar(best[1], stats.mean_interval(np.minimum(row["steps"], cap)), cap)
 
 
 def baseline_specs(budget: RandomBudget, estimator: str = "ekf", config_dir: str | None = None,

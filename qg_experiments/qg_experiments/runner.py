@@ -42,6 +42,7 @@ from qg_learning_node.executor.parameters import load_geometry, load_noise, load
 from qg_learning_node.executor.observation import observation_from_step
 from qg_learning_node.executor.residual_task import (ACTION_DIM, Observation,
                                                      ResidualTask, TaskConfig)
+from qg_learning_node.learner import algorithms
 from qg_learning_node.learner.actor_mlp import ActorMLP
 from qg_learning_node.learner.ddpg import DDPG
 from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore
@@ -52,22 +53,17 @@ __all__ = ["ALGORITHMS", "ARMS", "ESTIMATORS", "DEFAULT_ROBOT", "StackSettings",
            "algorithm_config", "run_episode", "run_training", "episode_noise_seed", "zero_policy",
            "config_digest", "STACK_CONFIG_FILES"]
 
-#: Learner variants compared by the experiments. Vanilla DDPG as in the thesis: no bounds and no
-#: zero-action loops (its replay holds executed steps only); QG-DDPG: graph + a-priori bounds with
-#: the zero residual as zero action.
-ALGORITHMS = ("ddpg", "qgddpg")
+#: Our learner's algorithms, as the registry names them (``learner/algorithms.py``): vanilla
+#: DDPG (no bounds, no zero-action loops), QG-DDPG (graph + a-priori bounds, the zero residual as
+#: zero action) and QG-DDPG's parts apart.
+ALGORITHMS = algorithms.keys("ours")
 ESTIMATORS = ("ekf", "ground_truth")
 
 
 def algorithm_config(base: LearnerConfig, algorithm: str, action_dim: int) -> LearnerConfig:
-    """``base`` with the bounds, zero action and graph of ``algorithm`` (see :data:`ALGORITHMS`)."""
-    if algorithm == "ddpg":
-        return dataclasses.replace(base, use_qgraph=False, zero_action=None,
-                                   ddpg=dataclasses.replace(base.ddpg, bounds="none"))
-    if algorithm == "qgddpg":
-        return dataclasses.replace(base, use_qgraph=True, zero_action=(0.0,) * action_dim,
-                                   ddpg=dataclasses.replace(base.ddpg, bounds="qgraph+apriori"))
-    raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
+    """``base`` with the bounds, zero action and graph of ``algorithm`` (see :data:`ALGORITHMS`);
+    the residual's zero action is zero torque."""
+    return algorithms.algorithm(algorithm, "ours").learner_config(base, (0.0,) * action_dim)
 
 
 #: The files of ``config/`` whose numbers the runs use (the Panda's, the cell's, the free

@@ -1,18 +1,28 @@
-"""QG-DDPG beside SB3's DDPG and TD3 on standard Gymnasium tasks: where do the graph's bounds help?
+"""QG-DDPG beside SB3's DDPG, TD3 and SAC on standard Gymnasium tasks: where do the graph's
+bounds help?
 
-Two tasks, one dense and one sparse: ``Pendulum-v1`` (reward every step, no terminal state, every
-episode truncated at 200 steps) and ``MountainCarContinuous-v0`` (+100 once, at the goal, which
-is terminal; a small action cost otherwise). The Q-Graph bounds a transition only if a terminal
-or a loop is reachable from it in the data, so on Pendulum it can bound nothing (QG-DDPG then
-differs from our DDPG only by the a-priori bounds of the known reward range), while on
-MountainCar every episode that reached the goal bounds its whole chain.
+Three tasks: ``Pendulum-v1`` (dense: reward every step, no terminal state, every episode
+truncated at 200 steps), ``MountainCarContinuous-v0`` (+100 once, at the goal, which is
+terminal; a small action cost otherwise) and ``QGSparseMountainCar-v0`` (the same car with the
+thesis's sparse reward, -1 per step and 0 at the goal: ``gym_envs.sparse_mountain_car``). The
+Q-Graph bounds a transition only if a terminal or a loop is reachable from it in the data, so on
+Pendulum it can bound nothing (QG-DDPG then differs from our DDPG only by the a-priori bounds of
+the known reward range), while on the mountain cars every episode that reached the goal bounds
+its whole chain, and the left wall, where the car stops at exactly (-1.2, 0), joins the chains
+of different episodes.
 
 Same budget and settings for every algorithm: SB3 DDPG's defaults (``SB3_DDPG_SETTINGS``) with
 the networks of :data:`HIDDEN` (smaller than SB3's 400-300, so that 5 seeds of 4 algorithms fit
 on the 2 shared cores), the task's exploration noise of RL Zoo (Gaussian 0.1 on Pendulum,
 Ornstein-Uhlenbeck 0.5 on MountainCar, as ``rl-zoo3``'s hyperparameters set them), the same
-steps. Every ``eval_every`` steps the deterministic policy plays ``eval_episodes`` episodes on a
-second environment seeded apart from training (SB3's ``EvalCallback`` protocol).
+steps. One difference, ours: our agents see the observation box scaled to [-1, 1] (their own
+default, the thesis's state scaling), SB3's the raw observation. On MountainCar QG-DDPG's actor
+saturates the moment the graph bounds the first goal-reaching chain; with the raw observation
+(velocity within +-0.07) the critic cannot tell the directions of motion apart and the actor
+need never come back, scaled it can (docs/learning.md, section 13, where this is measured and
+where it is also shown not to be enough). Every ``eval_every`` steps the deterministic policy
+plays ``eval_episodes`` episodes on a second environment seeded apart from training (SB3's
+``EvalCallback`` protocol).
 """
 from __future__ import annotations
 
@@ -25,26 +35,31 @@ import gymnasium
 import numpy as np
 import torch
 
+from qg_experiments.sb3_models import sb3_model
 from qg_experiments.stats import mean_interval
+from qg_learning_node.learner import algorithms
 from qg_learning_node.learner.gym_agent import QGDDPG, SB3_DDPG_SETTINGS
 
-__all__ = ["TASKS", "ALGORITHMS", "HIDDEN", "StandardSpec", "run_standard", "standard_table"]
+__all__ = ["TASKS", "HIDDEN", "StandardSpec", "run_standard", "standard_table"]
 
-#: Per task: steps, evaluation period and episodes, exploration noise, and the known reward
-#: range QG-DDPG takes a priori (Pendulum: -(pi^2 + 0.1 * 8^2 + 0.001 * 2^2) .. 0; MountainCar:
-#: -0.1 * 1^2 per step .. +100 at the goal).
+#: Per task: steps, evaluation period and episodes, exploration noise, the known reward range
+#: QG-DDPG takes a priori (Pendulum: -(pi^2 + 0.1 * 8^2 + 0.001 * 2^2) .. 0; MountainCar:
+#: -0.1 * 1^2 per step .. +100 at the goal; the sparse car: -1 .. 0), and the algorithms a sweep
+#: runs by default (the registry's keys, ``learner/algorithms.py``; any registered one can run).
 TASKS: dict[str, dict[str, Any]] = {
     "Pendulum-v1": {"steps": 10_000, "eval_every": 1_000, "eval_episodes": 5,
-                    "noise": ("gaussian", 0.1, 0.0), "reward_range": (-16.2736044, 0.0)},
+                    "noise": ("gaussian", 0.1, 0.0), "reward_range": (-16.2736044, 0.0),
+                    "algorithms": ("qgddpg", "ddpg", "sb3_ddpg", "sb3_td3")},
     "MountainCarContinuous-v0": {"steps": 20_000, "eval_every": 2_500, "eval_episodes": 3,
-                                 "noise": ("ou", 0.5, 0.15), "reward_range": (-0.1, 100.0)},
+                                 "noise": ("ou", 0.5, 0.15), "reward_range": (-0.1, 100.0),
+                                 "algorithms": ("qgddpg", "ddpg", "sb3_ddpg", "sb3_td3")},
+    "qg_experiments:QGSparseMountainCar-v0": {
+        "steps": 20_000, "eval_every": 2_500, "eval_episodes": 3, "noise": ("ou", 0.5, 0.15),
+        "reward_range": (-1.0, 0.0),
+        "algorithms": ("qgddpg", "ddpg", "sb3_ddpg", "sb3_td3", "sb3_sac")},
 }
-#: ``sb3_*``: Stable-Baselines3's; ``qgddpg`` / ``ddpg``: ours (``gym_agent.QGDDPG``).
-ALGORITHMS = ("qgddpg", "ddpg", "sb3_ddpg", "sb3_td3")
 #: Hidden layers of every actor and critic here.
 HIDDEN = (64, 64)
-#: SB3's OU noise step (``OrnsteinUhlenbeckActionNoise``'s default dt; ``NoiseConfig``'s too).
-OU_DT = 0.01
 
 
 @dataclass(frozen=True)
@@ -60,13 +75,13 @@ class StandardSpec:
     def __post_init__(self) -> None:
         if self.task not in TASKS:
             raise ValueError(f"task must be one of {sorted(TASKS)}, got {self.task!r}")
-        if self.algorithm not in ALGORITHMS:
-            raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {self.algorithm!r}")
+        algorithms.algorithm(self.algorithm)
 
     @property
     def name(self) -> str:
         steps = f"_{self.steps}" if self.steps else ""
-        return f"{self.task.split('-')[0]}_{self.algorithm}{steps}_s{self.seed}"
+        task = self.task.split(":")[-1].split("-")[0]
+        return f"{task}_{self.algorithm}{steps}_s{self.seed}"
 
     def run(self) -> dict[str, Any]:
         return run_standard(self)
@@ -103,28 +118,20 @@ def _episode_recorder(episodes: list[dict[str, float]]) -> Any:
 
 
 def _sb3(spec: StandardSpec, env: gymnasium.Env) -> Any:
-    from stable_baselines3 import DDPG, TD3
     from stable_baselines3.common.logger import Logger
-    from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
-    kind, sigma, theta = TASKS[spec.task]["noise"]
-    dim = env.action_space.shape[0]
-    noise = (NormalActionNoise(np.zeros(dim), sigma * np.ones(dim)) if kind == "gaussian" else
-             OrnsteinUhlenbeckActionNoise(np.zeros(dim), sigma * np.ones(dim), theta=theta,
-                                          dt=OU_DT))
-    cls = {"sb3_ddpg": DDPG, "sb3_td3": TD3}[spec.algorithm]
-    model = cls("MlpPolicy", env, action_noise=noise, seed=spec.seed, device="cpu",
-                policy_kwargs={"net_arch": list(HIDDEN)})
+    model = sb3_model(spec.algorithm, env, spec.seed, TASKS[spec.task]["noise"],
+                      policy_kwargs={"net_arch": list(HIDDEN)})
     model.set_logger(Logger(None, []))   # SB3's own would be an empty /tmp/SB3-<time> folder
     return model
 
 
 def _ours(spec: StandardSpec, env: gymnasium.Env) -> QGDDPG:
     kind, sigma, theta = TASKS[spec.task]["noise"]
-    qg = spec.algorithm == "qgddpg"
     return QGDDPG(env, algorithm=spec.algorithm, seed=spec.seed,
                   **{**SB3_DDPG_SETTINGS, "actor_hidden": HIDDEN, "critic_hidden": HIDDEN,
                      "noise": kind, "noise_sigma": sigma, "noise_theta": theta,
-                     "reward_range": TASKS[spec.task]["reward_range"] if qg else None})
+                     "reward_range": TASKS[spec.task]["reward_range"],
+                     "normalize_observations": True})
 
 
 def run_standard(spec: StandardSpec) -> dict[str, Any]:
@@ -134,7 +141,7 @@ def run_standard(spec: StandardSpec) -> dict[str, Any]:
     task = TASKS[spec.task]
     steps, every = spec.steps or task["steps"], task["eval_every"]
     env, eval_env = gymnasium.make(spec.task), gymnasium.make(spec.task)
-    ours = not spec.algorithm.startswith("sb3")
+    ours = algorithms.REGISTRY[spec.algorithm].ours
     agent = _ours(spec, env) if ours else _sb3(spec, env)
     evaluations: list[dict[str, float]] = []
     episodes: list[dict[str, float]] = []     # training episodes: did exploration find the goal?

@@ -9,10 +9,11 @@ its interval is over episodes.
 Which tools, and why: SciPy's ``stats.bootstrap`` (bias-corrected and accelerated, 10,000
 resamples, a fixed generator so a report regenerates identically), ``stats.wilcoxon`` and
 ``stats.binomtest``. They are maintained, already pinned for the stack (no new dependency), and
-cover what the report needs. rliable (Agarwal et al. 2021) answers a different question: its
-interquartile mean and stratified bootstrap aggregate over many tasks; here each cell is one task
-with 5 runs, where its stratified bootstrap is this run bootstrap, and the interquartile mean of
-5 values drops the best and worst run, which hides the failures the report must show.
+cover what the report needs per cell. Within a cell the interval stays over its 5 per-seed means
+(an interquartile mean of 5 values would drop the best and worst run and hide the failures the
+report must show); over all cells of a setting, ``aggregates`` adds rliable's estimators
+(Agarwal et al. 2021). Several settings judged at once are corrected with :func:`holm`, and
+"no difference" is claimed only by an equivalence test (:func:`equivalence_p`).
 """
 from __future__ import annotations
 
@@ -24,7 +25,8 @@ from typing import Sequence
 import numpy as np
 
 __all__ = ["CONFIDENCE", "Interval", "mean_interval", "beats", "PairedComparison",
-           "paired_comparison", "PairedEvents", "paired_events", "format_interval"]
+           "paired_comparison", "PairedEvents", "paired_events", "format_interval", "holm",
+           "equivalence_p", "VERDICTS", "verdict"]
 
 
 def _scipy_stats():
@@ -157,6 +159,52 @@ def paired_events(a: Sequence[bool], b: Sequence[bool]) -> PairedEvents:
     p = 1.0 if only_a + only_b == 0 else float(binomtest(only_a, only_a + only_b, 0.5).pvalue)
     return PairedEvents(only_a=only_a, only_b=only_b, both=int(np.sum(x & y)),
                         neither=int(np.sum(~x & ~y)), p=p)
+
+
+def holm(pvalues: Sequence[float]) -> list[float]:
+    """Holm's step-down adjustment of a family of p-values (in their given order): the k-th
+    smallest is multiplied by (m - k + 1), made non-decreasing, capped at 1. Rejecting where the
+    adjusted p is below the level keeps the family-wise error at that level."""
+    p = np.asarray(pvalues, dtype=float)
+    if p.ndim != 1 or np.any((p < 0) | (p > 1)):
+        raise ValueError(f"need p-values in [0, 1], got {pvalues!r}")
+    order = np.argsort(p, kind="stable")
+    scaled = np.minimum(1.0, np.maximum.accumulate((len(p) - np.arange(len(p))) * p[order]))
+    adjusted = np.empty_like(p)
+    adjusted[order] = scaled
+    return adjusted.tolist()
+
+
+def equivalence_p(a: Sequence[float], b: Sequence[float], margin: float) -> float:
+    """Two one-sided tests (TOST) that paired samples differ by less than ``margin``: the
+    differences ``b - a`` are shifted by -margin and +margin and tested with one-sided Wilcoxon
+    signed-rank tests (below zero, above zero); the larger p-value is the test's. A small p means
+    the shift lies inside (-margin, margin) beyond doubt."""
+    x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if x.shape != y.shape or x.ndim != 1 or x.size == 0 or not margin > 0:
+        raise ValueError("need two paired 1-D samples of one length and a margin > 0")
+    d = y - x
+
+    def one_sided(shifted: np.ndarray, alternative: str) -> float:
+        if not np.any(shifted):            # every difference on the margin: not inside it
+            return 1.0
+        return float(_scipy_stats().wilcoxon(shifted, alternative=alternative).pvalue)
+    return max(one_sided(d - margin, "less"), one_sided(d + margin, "greater"))
+
+
+#: The verdicts of :func:`verdict`.
+VERDICTS = ("A better", "B better", "equivalent", "undecided")
+
+
+def verdict(difference: float, difference_p: float, equivalence: float,
+            level: float = 0.05) -> str:
+    """One of :data:`VERDICTS` for a paired comparison: a difference beyond doubt (its p below
+    ``level``, the direction by the sign of ``difference`` = B minus A, positive when A needs
+    fewer), else an equivalence beyond doubt (the TOST p below ``level``), else undecided. Pass
+    multiplicity-adjusted p-values (:func:`holm`) when several settings are judged at once."""
+    if difference_p < level:
+        return VERDICTS[0] if difference > 0 else VERDICTS[1]
+    return VERDICTS[2] if equivalence < level else VERDICTS[3]
 
 
 def format_interval(interval: Interval, digits: int = 1) -> str:

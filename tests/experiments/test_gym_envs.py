@@ -170,7 +170,8 @@ def test_record_video_writes_a_playable_video_of_qginsertion(tmp_path) -> None:
     assert np.abs(frames[0].astype(int) - frames[-1]).max(axis=2).mean() > 0.5
 
 
-@pytest.mark.parametrize("env_id", sorted(gym_envs.IN_PROCESS_ENV_IDS))
+@pytest.mark.parametrize("env_id", sorted(set(gym_envs.IN_PROCESS_ENV_IDS)
+                                           - {"QGSparseMountainCar-v0"}))   # Gymnasium's car
 def test_in_process_environments_render_rgb_arrays_and_refuse_other_modes(
         env_id: str, monkeypatch: pytest.MonkeyPatch) -> None:
     assert gymnasium.spec(env_id).entry_point
@@ -186,3 +187,18 @@ def test_in_process_environments_render_rgb_arrays_and_refuse_other_modes(
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     with pytest.raises(ValueError, match="needs a display"):
         gymnasium.make(env_id, render_mode="human")
+
+
+def test_the_sparse_mountain_car_pays_minus_one_per_step_and_zero_at_the_goal() -> None:
+    env = gymnasium.make("qg_experiments:QGSparseMountainCar-v0")
+    obs, _ = env.reset(seed=0)
+    rewards = []
+    while True:           # push with the velocity: the swing reaches the goal
+        obs, reward, terminated, truncated, info = env.step(
+            np.array([1.0 if obs[1] >= 0 else -1.0], np.float32))
+        rewards.append(reward)
+        if terminated or truncated:
+            break
+    assert terminated and info["is_success"] and rewards[-1] == 0.0
+    assert rewards[:-1] == [-1.0] * (len(rewards) - 1) and 50 < len(rewards) < 300
+    env.close()

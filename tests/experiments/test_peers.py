@@ -14,7 +14,7 @@ from qg_experiments.standard_tasks import StandardSpec
 TINY = {"train_episodes": 2, "train_max_steps": 2, "test_episodes": 2, "test_max_steps": 3}
 
 
-@pytest.mark.parametrize("algorithm", ["ddpg", "ours_ddpg"])
+@pytest.mark.parametrize("algorithm", ["sb3_ddpg", "ddpg"])
 def test_a_peer_run_trains_its_episodes_then_tests_the_poses(algorithm: str, tmp_path) -> None:
     spec = PeerSpec(algorithm, "defaults", 100, tensorboard_dir=str(tmp_path), **TINY)
     result = spec.run()
@@ -29,10 +29,12 @@ def test_a_peer_run_trains_its_episodes_then_tests_the_poses(algorithm: str, tmp
 
 def test_peer_specs_refuse_what_the_protocol_does_not_have() -> None:
     with pytest.raises(ValueError, match="grid"):
-        PeerSpec("td3", "grid", 100)                              # a cell needs lr and iterations
+        PeerSpec("sb3_td3", "grid", 100)                          # a cell needs lr and iterations
     with pytest.raises(ValueError, match="runner"):
-        PeerSpec("ours_ddpg", "grid", 100, 1e-3, 50)
-    assert PeerSpec("td3", "grid", 100, 1e-3, 50).name == "td3_lr0.001_it50_s100"
+        PeerSpec("ddpg", "grid", 100, 1e-3, 50)
+    with pytest.raises(ValueError, match="one of"):
+        PeerSpec("td3", "defaults", 100)                          # not the registry's key
+    assert PeerSpec("sb3_td3", "grid", 100, 1e-3, 50).name == "sb3_td3_lr0.001_it50_s100"
 
 
 def _fake(algorithm: str, seed: int, tests: list[int], train: int) -> dict:
@@ -44,14 +46,14 @@ def _fake(algorithm: str, seed: int, tests: list[int], train: int) -> dict:
 
 
 def test_the_table_counts_per_seed_means_and_the_section_is_replaced_in_place(tmp_path) -> None:
-    results = [_fake("td3", 100, [4, 200], 500), _fake("td3", 101, [2, 4], 300)]
+    results = [_fake("sb3_td3", 100, [4, 200], 500), _fake("sb3_td3", 101, [2, 4], 300)]
     (row,) = peer_table(results)
     assert row["mean_test_steps"]["mean"] == pytest.approx((102 + 3) / 2)
     assert row["solved"] == 3 and row["tests"] == 4 and row["all_solved_seeds"] == 1
     assert row["train_steps"]["mean"] == 400
     out = tmp_path / "runs"
     (out / "peers").mkdir(parents=True)
-    stale = {**_fake("td3", 102, [1, 1], 10), "config_digest": "another arm"}
+    stale = {**_fake("sb3_td3", 102, [1, 1], 10), "config_digest": "another arm"}
     for r in (*results, stale):       # a run under other config values is not counted
         (out / "peers" / f"{r['spec']['algorithm']}_{r['spec']['seed']}.json").write_text(
             json.dumps(r))
@@ -69,3 +71,16 @@ def test_a_standard_task_run_evaluates_along_the_way(tmp_path) -> None:
     assert [e["steps"] for e in result["evaluations"]] == [250]
     assert [e["steps"] for e in result["train_episodes"]] == [200]     # one finished episode
     assert -2000 < result["final_return"] <= 0
+
+
+def test_sb3_models_take_action_noise_where_the_registry_says_and_the_sparse_car_is_named(
+        ) -> None:
+    import gymnasium
+    from qg_experiments.sb3_models import sb3_model
+    env = gymnasium.make("qg_experiments:QGSparseMountainCar-v0")
+    sac = sb3_model("sb3_sac", env, 0, ("ou", 0.5, 0.15))
+    td3 = sb3_model("sb3_td3", env, 0, ("ou", 0.5, 0.15))
+    assert type(sac).__name__ == "SAC" and sac.action_noise is None       # its policy explores
+    assert type(td3.action_noise).__name__ == "OrnsteinUhlenbeckActionNoise"
+    spec = StandardSpec("qg_experiments:QGSparseMountainCar-v0", "sb3_sac", 100, steps=250)
+    assert spec.name == "QGSparseMountainCar_sb3_sac_250_s100"

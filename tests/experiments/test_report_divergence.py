@@ -1,5 +1,5 @@
 """The report's divergence call: soft divergence runs away, fitting noise only overshoots."""
-from qg_experiments.report import split_by_excess
+from qg_experiments.report.divergence import split_by_excess
 
 
 def test_only_a_mean_q_beyond_a_tenth_of_the_range_counts_as_diverged():

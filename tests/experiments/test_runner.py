@@ -82,10 +82,10 @@ def test_tiny_suite_writes_results_figures_and_report(tmp_path) -> None:
                     "thesis's 4-D wrench state", "## 3. Mean predicted Q", "## 4. Where the "
                     "thesis says the graph matters", "## 5. Clearance-fit peg", "## 6. The peg on "
                     "the simulated Nextage", "## 7. QG-DDPG against DDPG, setting by setting",
-                    "agree and disagree", "Wilcoxon"):
+                    "## 7b. Over all cells", "TOST p (Holm)", "agree and disagree", "Wilcoxon"):
         assert section in page
     for figure in ("exp1_random_steps", "exp3_mean_q", "exp5_peg_learning", "exp5_peg_q_std",
-                   "exp6_nextage_learning"):
+                   "exp6_nextage_learning", "exp7_profiles", "exp7_cell_means"):
         assert (tmp_path / "docs" / "figures" / f"{figure}.png").stat().st_size > 1000
     bar = json.loads((tmp_path / "docs" / "data" / "tiny" / "random_bar.json").read_text())
     assert bar["episodes"] == 1 and bar["seeds"] == [0] and bar["low"] <= bar["mean"] <= bar["high"]

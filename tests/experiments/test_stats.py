@@ -89,3 +89,69 @@ def test_paired_events_count_the_discordant_pairs_and_test_them_exactly():
     assert paired_events([False] * 4, [False] * 4).p == 1.0
     with pytest.raises(ValueError):
         paired_events([True], [True, False])
+
+
+# --- the aggregates (Agarwal et al. 2021) and the verdicts ---------------------------------------
+#: rliable's own test matrices (``tests/rliable/metrics_test.py``: runs x tasks) and its values.
+RLIABLE_X = np.array([[1, 2], [2, 2], [1, 1], [2, 1]], dtype=float)
+RLIABLE_Y = np.array([[1, 1], [2, 2], [3, 3]], dtype=float)
+
+
+def test_iqm_and_probability_of_improvement_give_rliables_published_values():
+    from qg_experiments.aggregates import iqm, probability_of_improvement
+    assert iqm(RLIABLE_X) == 1.5 and iqm(RLIABLE_Y) == 2.0
+    assert probability_of_improvement(RLIABLE_X, RLIABLE_Y) == pytest.approx(1 / 3)
+    assert probability_of_improvement(RLIABLE_Y, RLIABLE_Y) == 0.5      # ties count half
+    # The IQM drops the lowest and highest quarter: one run stuck at the cap moves it little.
+    assert iqm(np.array([[4.0, 5.0, 6.0, 200.0]])) == 5.5
+
+
+def test_the_stratified_bootstrap_resamples_runs_within_each_task_only():
+    from qg_experiments.aggregates import count_below, profile_band, stratified_interval
+    # Every run of task j scores j: resampling runs within tasks cannot change anything.
+    fixed = np.tile(np.arange(8.0), (5, 1))
+    assert stratified_interval(fixed) == Interval(3.5, 3.5, 3.5, 40)
+    assert count_below(fixed, 2.5) == Interval(3.0, 3.0, 3.0, 40)       # tasks 0, 1, 2
+    profile, low, high = profile_band(fixed, [-1.0, 3.5, 7.0])
+    assert profile.tolist() == low.tolist() == high.tolist() == [1.0, 0.5, 0.0]
+    with pytest.raises(ValueError):
+        stratified_interval(np.array([1.0, 2.0]))                        # not runs x tasks
+
+
+def test_holm_adjusts_a_family_step_down_and_keeps_its_order():
+    from qg_experiments.stats import holm
+    # Sorted 0.005, 0.01, 0.03, 0.04 times 4, 3, 2, 1 = 0.02, 0.03, 0.06, 0.04 -> monotone.
+    assert holm([0.01, 0.04, 0.03, 0.005]) == pytest.approx([0.03, 0.06, 0.06, 0.02])
+    assert holm([0.5, 0.9]) == [1.0, 1.0] and holm([0.2]) == [0.2]
+
+
+def test_tost_finds_equivalence_inside_the_margin_and_not_outside_it():
+    from qg_experiments.stats import equivalence_p, verdict
+    a = np.arange(20.0)
+    small = a + np.linspace(-2.0, 2.0, 20)          # every difference within 2 of zero
+    # All 20 shifted differences on one side: the exact one-sided Wilcoxon p is 2^-20.
+    assert equivalence_p(a, small, 10.0) == pytest.approx(0.5 ** 20)
+    assert equivalence_p(a, a + 15.0 + np.linspace(-2.0, 2.0, 20), 10.0) > 0.5
+    assert verdict(5.0, 0.01, 0.9) == "A better" and verdict(-5.0, 0.01, 0.9) == "B better"
+    assert verdict(1.0, 0.3, 0.01) == "equivalent" and verdict(1.0, 0.3, 0.3) == "undecided"
+
+
+def test_the_intervals_agree_with_the_ones_rliable_computes():
+    from qg_experiments.aggregates import improvement_interval, profile_band, stratified_interval
+    # rliable 1.2.0 (with pandas 2; arch fails to import under pandas 3) on these 5 x 8 scores,
+    # its default percentile intervals, 10,000 (IQM) and 5,000 (improvement, profile) resamples:
+    x = np.arange(40.0).reshape(5, 8) % 7 + np.linspace(0.0, 1.0, 8)
+    y = np.flip(x, axis=0) * 1.3 - 2.0
+    rliable = {"iqm x": (3.3, 2.55, 4.0643), "iqm y": (2.29, 1.3057, 3.2743),
+               "improvement": (0.655, 0.52, 0.78)}
+    ours = {"iqm x": stratified_interval(x), "iqm y": stratified_interval(y),
+            "improvement": improvement_interval(x, y)}
+    for name, (point, low, high) in rliable.items():
+        got = ours[name]
+        assert got.mean == pytest.approx(point), name
+        # Different generators: the ends agree within the resampling error (a few hundredths).
+        assert (got.low, got.high) == pytest.approx((low, high), abs=0.05), name
+    profile, low, high = profile_band(x, [0.0, 2.0, 4.0, 6.0])
+    assert profile.tolist() == [0.975, 0.675, 0.375, 0.125]
+    assert low == pytest.approx([0.925, 0.55, 0.25, 0.025], abs=0.05)
+    assert high == pytest.approx([1.0, 0.8, 0.5, 0.225], abs=0.05)

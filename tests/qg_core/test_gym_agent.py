@@ -139,3 +139,70 @@ def test_qgl_train_runs_on_pendulum(tmp_path) -> None:
     assert out.returncode == 0, out.stderr
     assert "60 steps" in out.stdout and "test return over 1 episodes" in out.stdout
     assert len(list(tmp_path.glob("train_Pendulum-v1_*/progress.csv"))) == 1
+
+
+def _saturation_after(steps: int, normalize: bool) -> tuple[int, float]:
+    """QG-DDPG at the standard tasks' MountainCar settings (seed 103, whose first episode reaches
+    the goal): goal-reaching episodes, and the share of an 81-state grid where |action| > 0.99."""
+    env = gymnasium.make("MountainCarContinuous-v0")
+    agent = QGDDPG(env, algorithm="qgddpg", seed=103, **{
+        **SB3_DDPG_SETTINGS, "actor_hidden": (64, 64), "critic_hidden": (64, 64), "noise": "ou",
+        "noise_sigma": 0.5, "noise_theta": 0.15, "reward_range": (-0.1, 100.0),
+        "normalize_observations": normalize})
+    goals = []
+    agent.learn(steps, callback=lambda e: goals.append(e["success"]) or True)
+    grid = [np.array([x, v], np.float32) for x in np.linspace(-1.2, 0.5, 9)
+            for v in np.linspace(-0.07, 0.07, 9)]
+    actions = np.array([agent.predict(s)[0][0] for s in grid])
+    return sum(goals), float(np.mean(np.abs(actions) > 0.99))
+
+
+@pytest.mark.slow
+def test_on_raw_mountain_car_observations_the_first_goal_saturates_qgddpgs_actor_for_good(
+        ) -> None:
+    """The cause of QG-DDPG's MountainCar seeds at -99.9 (docs/learning.md, section 13): the
+    graph bounds the first goal-reaching chain, the critic's values jump and the actor saturates
+    at one end on every state; with the raw observation (velocity within +-0.07) the critic
+    cannot tell the directions of motion apart and the saturated actor stays there, a constant
+    push that never reaches the goal. Scaled to [-1, 1], the same run recovers."""
+    goals, saturated = _saturation_after(1_000, normalize=False)
+    assert goals == 1 and saturated == 1.0
+    goals, saturated = _saturation_after(2_250, normalize=True)
+    assert goals >= 1 and saturated < 0.5
+
+
+def test_our_ddpg_train_step_is_sb3_ddpgs() -> None:
+    """From the same weights on the same minibatch, our DDPG at SB3 DDPG's settings updates as
+    SB3's DDPG does (float32 rounding through Adam apart): what differs between the two on
+    Pendulum is the random streams, not the algorithm (docs/learning.md, section 13)."""
+    from stable_baselines3 import DDPG
+    from stable_baselines3.common.logger import Logger
+    from stable_baselines3.common.type_aliases import ReplayBufferSamples
+    from qg_learning_node.learner.replay import Batch
+    env = gymnasium.make("Pendulum-v1")
+    sb3 = DDPG("MlpPolicy", env, seed=0, device="cpu", policy_kwargs={"net_arch": [64, 64]})
+    sb3.set_logger(Logger(None, []))
+    ours = QGDDPG(env, algorithm="ddpg", seed=0, **{**SB3_DDPG_SETTINGS, "actor_hidden": (64, 64),
+                                                    "critic_hidden": (64, 64)}).core.agent
+    nets = [(ours.actor, sb3.actor.mu), (ours.critic.net, sb3.critic.qf0),
+            (ours.actor_target, sb3.actor_target.mu), (ours.critic_target.net, sb3.critic_target.qf0)]
+    for mine, theirs in nets:
+        mine.load_state_dict(theirs.state_dict())
+    rng = np.random.default_rng(1)
+    n = 256
+    s, a = rng.uniform(-1, 1, (n, 3)), rng.uniform(-1, 1, (n, 1))
+    r, s2 = -rng.uniform(0, 16, n), rng.uniform(-1, 1, (n, 3))
+
+    def f(x):
+        return torch.as_tensor(x, dtype=torch.float32)
+    batch = ReplayBufferSamples(f(s), f(a), f(s2), torch.zeros(n, 1), f(r)[:, None],
+                                torch.ones(n, 1))
+    sb3.replay_buffer.sample = lambda *args, **kwargs: batch
+    start = ours.critic.net[0].weight.detach().clone()
+    for _ in range(3):
+        sb3.train(gradient_steps=1, batch_size=n)
+        ours.train_step(Batch(s, a, r, s2, np.zeros(n, bool), np.full(n, -np.inf), np.arange(n)))
+    for mine, theirs in nets:
+        for p, q in zip(mine.parameters(), theirs.parameters()):
+            assert float((p - q).abs().max()) < 1e-4
+    assert float((ours.critic.net[0].weight - start).abs().max()) > 1e-3     # it did learn

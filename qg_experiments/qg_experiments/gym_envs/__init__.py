@@ -17,6 +17,9 @@ Registering only names the classes: it loads neither pybullet, torch nor rclpy.
 ``QGInsertion-v0``         the Panda shaft into the bearing, in process (:mod:`.insertion`)
 ``QGNextagePeg-v0``        the Nextage peg into the clearance-fit hole, in process (:mod:`.peg`)
 ``QGInsertionROS-v0``      the Panda shaft through a running robot process (:mod:`.ros_insertion`)
+``QGSparseMountainCar-v0`` Gymnasium's continuous mountain car, reward -1 per step and 0 at the
+                           goal: a standard task with the thesis's sparse reward
+                           (:mod:`.sparse_mountain_car`)
 =========================  ==============================================================
 """
 from __future__ import annotations
@@ -27,6 +30,7 @@ __all__ = ["ENV_IDS", "IN_PROCESS_ENV_IDS", "ROS_ENV_IDS", "register_envs"]
 IN_PROCESS_ENV_IDS = {
     "QGInsertion-v0": "qg_experiments.gym_envs.insertion:InsertionEnv",
     "QGNextagePeg-v0": "qg_experiments.gym_envs.peg:NextagePegEnv",
+    "QGSparseMountainCar-v0": "qg_experiments.gym_envs.sparse_mountain_car:SparseMountainCar",
 }
 #: Environments that drive a robot process over ROS 2 (``qgl up`` or ``robot_bridge_node robot``).
 ROS_ENV_IDS = {

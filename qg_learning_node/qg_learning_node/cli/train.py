@@ -15,6 +15,8 @@ import time
 
 from qg_common.params import runs_dir
 
+from qg_learning_node.learner import algorithms
+
 __all__ = ["add_parser"]
 
 
@@ -66,7 +68,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     train = sub.add_parser("train", help="QG-DDPG on a Gymnasium environment (no ROS)")
     train.add_argument("--env", required=True, help="a Gymnasium id, e.g. Pendulum-v1")
     train.add_argument("--steps", type=int, default=20_000, help="environment steps")
-    train.add_argument("--algorithm", choices=("qgddpg", "ddpg"), default="qgddpg")
+    train.add_argument("--algorithm", choices=algorithms.keys("ours"), default="qgddpg",
+                       help="one of our algorithms (learner/algorithms.py)")
     train.add_argument("--preset", choices=("thesis", "sb3"), default="thesis",
                        help="start from the thesis's settings or SB3 DDPG's")
     train.add_argument("--set", type=_setting, action="append", default=[], metavar="NAME=VALUE",

@@ -26,8 +26,9 @@ import torch
 from torch import nn
 
 from qg_learning_node.learner.adam import Adam
-from qg_learning_node.learner.learner_config import (ACTOR_ACTIVATION_NAMES, BOUND_MODES,
-                                                     DDPGConfig, realisable_range)
+from qg_learning_node.learner.learner_config import (ACTOR_ACTIVATION_NAMES, APRIORI_BOUNDS,
+                                                     BOUND_MODES, GRAPH_BOUNDS, DDPGConfig,
+                                                     realisable_range)
 from qg_learning_node.learner.replay import Batch, NStepContext
 
 __all__ = ['BOUND_MODES', 'DDPG', 'DDPGConfig', 'build_mlp', 'realisable_range']
@@ -119,13 +120,13 @@ class DDPG:
         mode, g = self.config.bounds, self.config.gamma
         lower: np.ndarray | float = -np.inf
         upper = np.inf
-        if mode in ('apriori', 'qgraph+apriori'):
+        if mode in APRIORI_BOUNDS:
             lower, upper = self.range
         if mode == 'empirical':
             if reward_range is None:
                 raise ValueError('bounds="empirical" needs the reward_range of the replay memory')
             lower, upper = realisable_range(reward_range[0], reward_range[1], g)
-        if mode in ('qgraph', 'qgraph+apriori'):
+        if mode in GRAPH_BOUNDS:
             lower = np.maximum(np.asarray(batch.lower_bounds, dtype=np.float64), lower)
         return lower, upper
 

@@ -35,15 +35,17 @@ import numpy as np
 import torch
 
 from qg_learning_node.executor.noise import ActionNoise, NoiseConfig
+from qg_learning_node.learner import algorithms
 from qg_learning_node.learner.ddpg import DDPGConfig
 from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore
 from qg_learning_node.learner.training_log import TrainingLog
 
 __all__ = ["QGDDPG", "AgentSettings", "ALGORITHMS", "SB3_DDPG_SETTINGS"]
 
-#: ``qgddpg``: graph bounds (+ a-priori bounds when the reward range is known) and the zero
-#: action's loops; ``ddpg``: the same learner without any bound (thesis Algorithm 4 unclipped).
-ALGORITHMS = ("qgddpg", "ddpg")
+#: Our algorithms (``algorithms.REGISTRY``): ``qgddpg``: graph bounds (+ a-priori bounds when the
+#: reward range is known) and the zero action's loops; ``ddpg``: the same learner without any
+#: bound (thesis Algorithm 4 unclipped); and QG-DDPG's parts apart.
+ALGORITHMS = algorithms.keys("ours")
 
 #: Stable-Baselines3 DDPG's defaults (2.x, ``DDPG.__init__`` and ``TD3Policy``) in our terms:
 #: 400-300 ReLU networks with PyTorch's init, one learning rate, target networks, 100 uniformly
@@ -106,8 +108,7 @@ class AgentSettings:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if self.algorithm not in ALGORITHMS:
-            raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {self.algorithm!r}")
+        algorithms.algorithm(self.algorithm, "ours")
         if self.init not in ("thesis", "torch_default"):
             raise ValueError(f"init must be thesis or torch_default, got {self.init!r}")
         if self.learning_starts < 0 or self.train_freq < 1 or self.gradient_steps < 1:
@@ -167,22 +168,21 @@ class QGDDPG:
 
     def _learner_config(self, action_dim: int) -> LearnerConfig:
         s = self.settings
-        qg = s.algorithm == "qgddpg"
         lo, hi = self.reward_range if self.reward_range else (-math.inf, math.inf)
-        bounds = ("none" if not qg else "qgraph+apriori" if self.reward_range else "qgraph")
         init = {"thesis": ("glorot_uniform", "he_uniform"),
                 "torch_default": ("torch_default", "torch_default")}[s.init]
         ddpg = DDPGConfig(gamma=s.gamma, actor_hidden=s.actor_hidden, critic_hidden=s.critic_hidden,
                           actor_activation=s.actor_activation, actor_init=init[0],
                           critic_init=init[1], critic_lr=s.critic_lr, actor_lr=s.actor_lr,
-                          bounds=bounds, r_min=lo, r_max=hi, target_networks=s.target_networks,
+                          bounds="none", r_min=lo, r_max=hi, target_networks=s.target_networks,
                           tau=s.tau, seed=s.seed)
-        zero = (None if not qg or s.zero_action is None
+        zero = (None if s.zero_action is None
                 else tuple(self._to_actor_units(np.asarray(s.zero_action)).tolist()))
-        return LearnerConfig(ddpg=ddpg, replay_capacity=s.buffer_size, use_qgraph=qg,
-                             zero_action=zero, iterations_per_cycle=s.gradient_steps,
+        base = LearnerConfig(ddpg=ddpg, replay_capacity=s.buffer_size, use_qgraph=False,
+                             zero_action=None, iterations_per_cycle=s.gradient_steps,
                              cycle_steps=s.train_freq, batch_size=s.batch_size,
                              census_every=10**9, seed=s.seed)
+        return algorithms.algorithm(s.algorithm).learner_config(base, zero, self.reward_range is not None)
 
     # --- acting ------------------------------------------------------------------------------------
     def _state(self, observation: np.ndarray) -> np.ndarray:

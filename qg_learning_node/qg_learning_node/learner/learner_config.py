@@ -13,11 +13,17 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ['ACTOR_ACTIVATION_NAMES', 'BOUND_MODES', 'DDPGConfig', 'INITS', 'LearnerConfig',
-           'RUNTIME_FIELDS', 'SCHEDULES', 'differences', 'realisable_range',
-           'with_runtime_settings']
+__all__ = ['ACTOR_ACTIVATION_NAMES', 'APRIORI_BOUNDS', 'BOUND_MODES', 'DDPGConfig', 'GRAPH_BOUNDS',
+           'INITS', 'LearnerConfig', 'RUNTIME_FIELDS', 'SCHEDULES', 'differences',
+           'realisable_range', 'with_runtime_settings']
 
+#: How the TD targets are bounded (``ddpg`` module docstring); the algorithms that combine them
+#: are named in ``algorithms.REGISTRY``.
 BOUND_MODES = ('none', 'apriori', 'empirical', 'qgraph', 'qgraph+apriori', 'he2017')
+#: The modes that take the Q-Graph's lower bounds (and so need a graph).
+GRAPH_BOUNDS = ('qgraph', 'qgraph+apriori')
+#: The modes that take the a-priori range of the known rewards ``[r_min, r_max]``.
+APRIORI_BOUNDS = ('apriori', 'qgraph+apriori')
 #: Weight inits: the thesis's two, and PyTorch's own ``nn.Linear`` init (SB3's networks).
 INITS = ('glorot_uniform', 'he_uniform', 'torch_default')
 #: Hidden activations of the actor: the thesis's tanh, or SB3's ReLU.
@@ -107,7 +113,6 @@ class DDPGConfig:
         return cls(**values)
 
 
-_GRAPH_BOUNDS = ('qgraph', 'qgraph+apriori')
 SCHEDULES = ('cycle', 'async')
 #: Settings a running learner can take between two training cycles (``LearnerCore.reconfigure``):
 #: how much and how fast it trains, not what its networks, graph or replay memory are.
@@ -162,7 +167,7 @@ class LearnerConfig:
             object.__setattr__(self, 'zero_action', tuple(float(x) for x in self.zero_action))
         if self.replay_capacity is not None and self.replay_capacity < 1:
             raise ValueError(f'replay_capacity must be >= 1 or None, got {self.replay_capacity}')
-        if self.ddpg.bounds in _GRAPH_BOUNDS and not self.use_qgraph:
+        if self.ddpg.bounds in GRAPH_BOUNDS and not self.use_qgraph:
             raise ValueError(f'bounds={self.ddpg.bounds!r} needs use_qgraph=True')
         for name in ('iterations_per_cycle', 'cycle_steps', 'batch_size', 'census_every'):
             if getattr(self, name) < 1:

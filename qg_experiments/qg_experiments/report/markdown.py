@@ -1,0 +1,68 @@
+"""The report's markdown: numbers as text, tables, and the grid's cells.
+
+Every section of ``docs/results.md`` formats through these helpers, so a number, an interval or a
+cell reads the same wherever it appears.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from qg_experiments import stats
+from qg_experiments.random_baselines import Bar
+from qg_learning_node.learner.algorithms import label
+
+__all__ = ["fmt", "table", "speed", "bar_text", "grid_cell", "grid_table"]
+
+
+def fmt(x: float | None, digits: int = 1) -> str:
+    """``x`` with ``digits`` decimals; ``n/a`` for a missing or NaN value."""
+    return "n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{digits}f}"
+
+
+def table(header: list[str], rows: list[list[str]]) -> list[str]:
+    """A markdown table, one line per row."""
+    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + \
+        ["| " + " | ".join(r) + " |" for r in rows]
+
+
+def speed(results: list[dict[str, Any]]) -> str:
+    """RL steps, worker time and simulated time of ``results``, as one phrase."""
+    steps = sum(r.get("rl_steps", 0) for r in results)
+    wall = sum(r["wall_time"] for r in results)
+    sim = sum(r.get("sim_time", 0.0) for r in results)
+    timeouts = sum(r.get("step_timeouts", 0) for r in results)
+    text = f"{steps} RL steps in {wall / 60:.1f} worker-minutes ({steps / wall:.2f} steps/s)"
+    if sim:
+        text += (f", {sim / max(steps, 1) * 1e3:.0f} ms simulated per step, "
+                 f"{timeouts / max(steps, 1):.0%} of steps ended by the step timeout, not at rest")
+    return text
+
+
+def bar_text(bar: Bar | None) -> str:
+    """What the random bar is, in words."""
+    if bar is None:
+        return "no random baseline run: nothing marked"
+    return (f"{bar.label}, {stats.format_interval(bar.interval)} steps over "
+            f"{bar.interval.n} episodes cut at the test cap of {bar.cap}")
+
+
+def grid_cell(row: dict[str, Any] | None) -> str:
+    """``**12.3** [8.1, 17.0] (39/40)``: bold when the whole interval is below the bar."""
+    if row is None:
+        return "—"
+    mark = "**" if row["beats_random"] else ""
+    inserted = row["test_episodes"] - row["test_failures"]
+    return (f"{mark}{fmt(row['mean_test_steps'])}{mark} [{fmt(row['ci_low'])}, "
+            f"{fmt(row['ci_high'])}] ({inserted}/{row['test_episodes']})")
+
+
+def grid_table(rows: list[dict[str, Any]], caption: str) -> list[str]:
+    """The cells of ``rows`` (``grid.cell_table``), one line per cell, an algorithm per column."""
+    cells = sorted({(r["critic_lr"], r["iterations"]) for r in rows})
+    algorithms = sorted({r["algorithm"] for r in rows})
+    by_key = {(r["algorithm"], r["critic_lr"], r["iterations"]): r for r in rows}
+    return [caption, ""] + table(
+        ["critic lr", "iterations/cycle", *[label(a) for a in algorithms]],
+        [[f"{lr:g}", str(it), *[grid_cell(by_key.get((a, lr, it))) for a in algorithms]]
+         for lr, it in cells])

@@ -1,0 +1,40 @@
+"""The report's data beside the page: every table row and every episode as CSV, and the random
+bar as JSON (``docs/data/<profile>/``; small and versioned, while the per-run JSON stays under
+the runs' folder)."""
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from qg_experiments.random_baselines import Bar
+
+__all__ = ["write_csv", "episodes_csv", "write_bar"]
+
+
+def write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
+    """``rows`` as CSV, their list-valued columns left out (nothing when there are no rows)."""
+    if not rows:
+        return
+    path.parent.mkdir(parents=True, exist_ok=True)
+    keys = [k for k in rows[0] if not isinstance(rows[0][k], (list, np.ndarray))]
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, keys, extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def episodes_csv(path: Path, results: list[dict[str, Any]]) -> None:
+    """Every episode of ``results``, one row each, with its run's name."""
+    write_csv(path, [{"run": r["name"], **e} for r in results for e in r["episodes"]])
+
+
+def write_bar(path: Path, bar: Bar, seeds: list[int]) -> None:
+    """The random bar as JSON: the demo's learning curve draws it (``qgl demo``)."""
+    path.write_text(json.dumps(
+        {"label": bar.label, "mean": bar.mean, "low": bar.interval.low,
+         "high": bar.interval.high, "episodes": bar.interval.n, "cap": bar.cap,
+         "seeds": seeds}, indent=1))
