@@ -44,10 +44,11 @@ def describe_franka(params: dict[str, Any]) -> RobotDescription:
 def _create(params: dict[str, Any]) -> Robot:
     description = describe_franka(params)
     arm = FrankaArm.connect(franka_config(params), description)
-    return Robot(hardware=arm, simulation=None, description=description, paced_by_hardware=True)
+    return Robot(hardware=arm, simulation=None, description=description, paced_by_hardware=True,
+                 own_wrench=arm.external_wrench)
 
 
 #: ``robot:=franka`` (config/franka.yaml).
 FRANKA = RobotPlugin(interface="torque", config_files=(("franka_robot_node", "franka.yaml"),),
                      parameters=(FRANKA_SECTION,), describe=describe_franka, create=_create,
-                     simulated=False)
+                     simulated=False, own_wrench_topic="franka/external_wrench")

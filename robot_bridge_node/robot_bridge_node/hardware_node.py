@@ -17,6 +17,7 @@ from typing import Any
 from qg_common import topics
 from qg_common.node_parameters import declare_parameters
 from qg_common.params import ParameterSection, config_from_dict
+from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from sensor_msgs.msg import JointState as JointStateMsg
 
@@ -69,8 +70,8 @@ HARDWARE_SECTION = ParameterSection("hardware", HardwareConfig, ranges={
 
 
 class HardwareNode(Node):
-    """Publishes a real robot's joint state (node ``hardware``) and declares its parameters
-    (``hardware.*`` and the plugin's own)."""
+    """Publishes a real robot's joint state and its own wrench estimate where it has one (node
+    ``hardware``), and declares its parameters (``hardware.*`` and the plugin's own)."""
 
     def __init__(self, plugin: RobotPlugin) -> None:
         super().__init__("hardware")
@@ -81,3 +82,7 @@ class HardwareNode(Node):
         self.joint_names = plugin.describe(self.params).joint_names
         self.joint_states = self.create_publisher(JointStateMsg, topics.JOINT_STATES,
                                                   topics.SENSOR_QOS)
+        #: The robot's own wrench estimate, beside the loop's (``RobotPlugin.own_wrench_topic``).
+        self.own_wrench = self.create_publisher(WrenchStamped, plugin.own_wrench_topic,
+                                                topics.SENSOR_QOS) \
+            if plugin.own_wrench_topic else None

@@ -91,7 +91,8 @@ class RobotProcess:
         config = state.config
         robot = str(bridge.get_parameter("robot").value)
         description = state.plugin.describe(state.params)
-        self.names = TickNames(tuple(state.joint_names), base_frame(description))
+        self.names = TickNames(tuple(state.joint_names), base_frame(description),
+                               state.plugin.own_wrench_topic)
         self.lockstep = not config.realtime
         spec = loop_spec(robot, config, state.params, bridge.params, estimator.params)
         self.link = LoopLink(spec, len(self.names.joint_names), self, forked=forked)
@@ -108,6 +109,8 @@ class RobotProcess:
         if isinstance(state, SimulationNode):
             self._publishers.update({"/sim/ground_truth": state.ground_truth,
                                      "/sim/ground_truth_wrench": state.ground_truth_wrench})
+        elif state.own_wrench is not None:
+            self._publishers[f"/{self.names.own_wrench_topic}"] = state.own_wrench
         bridge.setpoint_handler = self.submit_setpoint
         if recorder is not None:
             recorder.clock_ns = self.link.now_ns

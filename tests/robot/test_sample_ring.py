@@ -12,8 +12,8 @@ from robot_bridge_node.core.sample_ring import (SampleRing, truth_from_array, tr
 def write(ring: SampleRing, first: int, n: int) -> None:
     for tick in range(first, first + n):
         q = np.full(ring.n_joints, float(tick))
-        truth = ring.write(1000 * tick, tick, 5, q, -q, 2 * q, 3 * q, np.arange(6.0), np.ones(3),
-                           np.eye(3), np.full(6, 0.5))
+        truth = ring.write(1000 * tick, tick, 5, q, -q, 2 * q, 3 * q, np.arange(6.0),
+                           -np.arange(6.0), np.ones(3), np.eye(3), np.full(6, 0.5))
         truth[:] = tick
         ring.commit()
 
@@ -29,6 +29,7 @@ def test_records_come_out_once_in_order_across_the_wrap() -> None:
         assert np.array_equal(records["q"][:, 0], records["tick"].astype(float))
         assert np.array_equal(records["tau"][:, -1], 2.0 * records["tick"])
         assert np.array_equal(records["tau_cmd"][:, -1], 3.0 * records["tick"])
+        assert np.array_equal(records["own_wrench"][:, 5], np.full(n, -5.0))
         assert np.all(records["flags"] == 5) and np.all(records["tool_rotation"] == np.eye(3))
         assert np.array_equal(records["wrench"][:, 5], np.full(n, 5.0))
         assert np.array_equal(records["truth"][:, 13], records["tick"].astype(float))

@@ -10,7 +10,7 @@ import os
 import numpy as np
 import pytest
 from conftest import Stack
-from robot_client import DEEP, RobotClient, shaft_start
+from robot_client import DEEP, RobotClient, shaft_start, wrench
 
 from qg_common.rotations import matrix_from_quaternion
 
@@ -61,14 +61,23 @@ def test_the_robot_process_drives_franky_sim_through_libfranka(tmp_path):
             # The 1 kHz topics, the arm held still (the watchdog holds it 0.1 s after the step):
             # the loop's torque (gravity included; the plugin takes it out for libfranka, which
             # adds it back) and franky-sim's measured one, two fields that agree at rest.
+            from geometry_msgs.msg import WrenchStamped
             from sensor_msgs.msg import JointState
             measured: list[JointState] = []
             commanded: list[JointState] = []
+            libfranka: list[WrenchStamped] = []
             cli.spin_for(0.5)
             cli.node.create_subscription(JointState, "/joint_states", measured.append, DEEP)
             cli.node.create_subscription(JointState, "/joint_commands", commanded.append, DEEP)
-            assert cli.spin_until(lambda: min(len(commanded), len(measured)) >= 20, 20.0), \
-                (len(commanded), len(measured), stack.logs())
+            cli.node.create_subscription(WrenchStamped, "/franka/external_wrench",
+                                         libfranka.append, DEEP)
+            assert cli.spin_until(
+                lambda: min(len(commanded), len(measured), len(libfranka)) >= 20, 20.0), \
+                (len(commanded), len(measured), len(libfranka), stack.logs())
+            # libfranka's own estimate beside the EKF's, as libfranka gives it (base frame);
+            # franky-sim's is zeros.
+            assert libfranka[-1].header.frame_id == "base"
+            assert wrench(libfranka[-1].wrench).tolist() == [0.0] * 6
             names = [f"fr3_joint{i}" for i in range(1, 8)]
             assert list(measured[-1].name) == names and list(commanded[-1].name) == names
             tau = np.median([m.effort for m in measured], axis=0)

@@ -175,12 +175,17 @@ class Robot:
     :param paced_by_hardware: ``read`` waits for the robot's next state (a real arm's 1 kHz, as
         libfranka's ``readOnce``; the hardware is ``StampedStates``): a realtime loop ticks
         when the robot says, on the states' clock, with no pace of its own.
+    :param own_wrench: the robot's own estimate of the external wrench (a Franka's
+        ``O_F_ext_hat_K``) in the last state read, if its controller gives one: (6,) in the
+        robot's base frame. The loop never uses it; it is published and recorded beside the
+        loop's estimate (``RobotPlugin.own_wrench_topic``) so that a cell can compare the two.
     """
     hardware: TorqueInterface | PositionInterface
     simulation: SimulationInterface | None
     description: RobotDescription
     wrist_sensor: ForceTorqueSensor | None = None
     paced_by_hardware: bool = False
+    own_wrench: Callable[[], np.ndarray] | None = None
 
 
 @dataclass(frozen=True)
@@ -200,6 +205,8 @@ class RobotPlugin:
     :param create: builds the robot from those parameters.
     :param simulated: a simulation (its robot process has a ``sim`` node: ground truth, a
         simulated clock); False for a real robot (a ``hardware`` node instead).
+    :param own_wrench_topic: where the robot's own wrench estimate is published (relative, e.g.
+        ``franka/external_wrench``); "" if its robots have none.
     """
     interface: str
     config_files: tuple[tuple[str, str], ...]
@@ -207,6 +214,7 @@ class RobotPlugin:
     describe: Callable[[dict[str, Any]], RobotDescription]
     create: Callable[[dict[str, Any]], Robot]
     simulated: bool = True
+    own_wrench_topic: str = ""
 
 
 @dataclass(frozen=True)

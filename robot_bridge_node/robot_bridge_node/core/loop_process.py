@@ -30,17 +30,19 @@ import time
 import traceback
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 from qg_common.realtime_pacer import DEFAULT_SPIN, FIFO_SPIN, RealtimePacer, fifo_priority
 
-from robot_bridge_node.core.hardware_interface import robot_plugin
+from robot_bridge_node.core.hardware_interface import Robot, robot_plugin
 from robot_bridge_node.core.interface_kinds import interface_kind
 from robot_bridge_node.core.loop_runner import (LoopRunner, ResetCommand, SetpointCommand,
                                                 StepEvent)
 from robot_bridge_node.core.robot_loop import MAX_STATE_GAP, RobotLoop, StateClock
-from robot_bridge_node.core.sample_ring import (HAS_TOOL, HAS_TRUTH, HAS_WRENCH, PUBLISH,
+from robot_bridge_node.core.sample_ring import (HAS_OWN_WRENCH, HAS_TOOL, HAS_TRUTH,
+                                                HAS_WRENCH, PUBLISH,
                                                 SampleRing, truth_to_array)
 from robot_bridge_node.core.tick_timing import TickTiming
 
@@ -81,12 +83,15 @@ class RingOutlet:
 
     :param truth_every: compute the ground truth on every this many published samples (0:
         never).
+    :param own_wrench: the robot's own wrench estimate (``Robot.own_wrench``), if it has one.
     """
 
-    def __init__(self, ring: SampleRing, events: EventSender, truth_every: int) -> None:
+    def __init__(self, ring: SampleRing, events: EventSender, truth_every: int,
+                 own_wrench: Callable[[], np.ndarray] | None = None) -> None:
         self.ring = ring
         self.events = events
         self.truth_every = truth_every
+        self.own_wrench = own_wrench
         self.ticks = 0
         self.published = 0
 
@@ -104,11 +109,16 @@ class RingOutlet:
         else:
             position, rotation, twist = tool.position, tool.rotation, tool.twist
             flags |= HAS_TOOL
+        if self.own_wrench is None:
+            own = _ZEROS[:6]
+        else:
+            own = self.own_wrench()
+            flags |= HAS_OWN_WRENCH
         truth = publish and self.truth_every > 0 and self.published % self.truth_every == 0
         self.published += publish
         values = self.ring.write(t_ns, self.ticks, flags | HAS_TRUTH if truth else flags,
-                                 state.q, state.dq, state.tau, loop.commanded, wrench, position,
-                                 rotation, twist)
+                                 state.q, state.dq, state.tau, loop.commanded, wrench, own,
+                                 position, rotation, twist)
         if truth:
             truth_to_array(loop.ground_truth(), values)
         self.ring.commit()
@@ -188,9 +198,9 @@ class PipeMailbox:
         return setpoint, reset
 
 
-def _build(spec: LoopSpec) -> tuple[RobotLoop, bool]:
-    """The robot's loop, and whether the robot paces it (``Robot.paced_by_hardware``: its loop
-    ticks on its states' clock)."""
+def _build(spec: LoopSpec) -> tuple[RobotLoop, Robot]:
+    """The robot's loop, and the robot (``paced_by_hardware``: its loop ticks on its states'
+    clock; ``own_wrench``)."""
     plugin = robot_plugin(spec.robot)
     robot = plugin.create(spec.robot_params)
     bridge_params = {**spec.bridge_params,
@@ -198,7 +208,7 @@ def _build(spec: LoopSpec) -> tuple[RobotLoop, bool]:
     clock = StateClock(robot.hardware, MAX_STATE_GAP) if robot.paced_by_hardware else None
     loop = interface_kind(plugin.interface).build_loop(robot, bridge_params,
                                                        spec.estimator_params, clock=clock)
-    return loop, robot.paced_by_hardware
+    return loop, robot
 
 
 class RealtimePace:
@@ -239,7 +249,7 @@ def run(conn: Connection, ring: SampleRing) -> int:
     """Receive the spec, build the loop, say ``ready`` (or why not), run until stopped."""
     spec: LoopSpec = conn.recv()
     try:
-        loop, paced_by_robot = _build(spec)
+        loop, robot = _build(spec)
     except Exception:  # noqa: BLE001 - whatever fails, the robot process must hear why
         conn.send(("error", f"the robot loop could not be built:\n{traceback.format_exc()}"))
         return 1
@@ -258,10 +268,10 @@ def run(conn: Connection, ring: SampleRing) -> int:
                                          f"running unprioritised"))
     stop = threading.Event()
     events = EventSender(conn, stop)      # after the priority: its thread has the loop's
-    outlet = RingOutlet(ring, events, spec.truth_every // spec.publish_every)
+    outlet = RingOutlet(ring, events, spec.truth_every // spec.publish_every, robot.own_wrench)
     # A robot that paces its loop (its read waits for its next state) needs no wall-clock
     # pacer: the loop's timing is then the robot's periods as the loop saw them.
-    pace = RealtimePace(loop.config.dt, events, spin, wait=not paced_by_robot) \
+    pace = RealtimePace(loop.config.dt, events, spin, wait=not robot.paced_by_hardware) \
         if spec.realtime else None
     runner = LoopRunner(loop, PipeMailbox(conn, stop), outlet, lockstep=not spec.realtime,
                         pace=pace, after_reset=pace.restart if pace is not None else None,

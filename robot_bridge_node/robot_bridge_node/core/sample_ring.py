@@ -22,10 +22,10 @@ import numpy as np
 from qg_common.types import GroundTruth
 
 __all__ = ["SampleRing", "record_dtype", "truth_to_array", "truth_from_array", "TRUTH_SIZE",
-           "PUBLISH", "HAS_WRENCH", "HAS_TRUTH", "HAS_TOOL", "DEFAULT_CAPACITY"]
+           "PUBLISH", "HAS_WRENCH", "HAS_TRUTH", "HAS_TOOL", "HAS_OWN_WRENCH", "DEFAULT_CAPACITY"]
 
 #: Record flags.
-PUBLISH, HAS_WRENCH, HAS_TRUTH, HAS_TOOL = 1, 2, 4, 8
+PUBLISH, HAS_WRENCH, HAS_TRUTH, HAS_TOOL, HAS_OWN_WRENCH = 1, 2, 4, 8, 16
 #: [records] 16 s at 1 kHz: the reader may stall this long (a loaded machine) without loss.
 DEFAULT_CAPACITY = 16384
 _HEADER = 8                     # int64 words before the records: count, capacity, joints
@@ -37,11 +37,13 @@ TRUTH_SIZE = 14
 def record_dtype(n_joints: int) -> np.dtype:
     """One tick's record for an arm of ``n_joints`` joints: ``tau`` the measured joint torques,
     ``tau_cmd`` the torques the loop commanded (on a simulated arm the first is the second as
-    its sensors read it; a real arm's sensors read what the links got)."""
+    its sensors read it; a real arm's sensors read what the links got); ``wrench`` the loop's
+    estimate of the contact wrench, ``own_wrench`` the robot's own where it has one
+    (``Robot.own_wrench``)."""
     return np.dtype([("t_ns", np.int64), ("tick", np.int64), ("flags", np.int64),
                      ("q", np.float64, n_joints), ("dq", np.float64, n_joints),
                      ("tau", np.float64, n_joints), ("tau_cmd", np.float64, n_joints),
-                     ("wrench", np.float64, 6),
+                     ("wrench", np.float64, 6), ("own_wrench", np.float64, 6),
                      ("tool_position", np.float64, 3), ("tool_rotation", np.float64, (3, 3)),
                      ("tool_twist", np.float64, 6), ("truth", np.float64, TRUTH_SIZE)])
 
@@ -119,13 +121,14 @@ class SampleRing:
 
     # --- the writer (the loop) ---------------------------------------------------------------
     def write(self, t_ns: int, tick: int, flags: int, q: np.ndarray, dq: np.ndarray,
-              tau: np.ndarray, tau_cmd: np.ndarray, wrench: np.ndarray, position: np.ndarray,
-              rotation: np.ndarray, twist: np.ndarray) -> np.ndarray:
+              tau: np.ndarray, tau_cmd: np.ndarray, wrench: np.ndarray, own_wrench: np.ndarray,
+              position: np.ndarray, rotation: np.ndarray, twist: np.ndarray) -> np.ndarray:
         """Fill the next record in two copies (the loop's per-tick write: ~1.5 us, where a
         field-by-field fill took 3.7 us); returns its ``truth`` numbers, to fill before
         ``commit`` on a tick that has them."""
         i = int(self._header[0]) % self.capacity
-        np.concatenate((q, dq, tau, tau_cmd, wrench, position, rotation.ravel(), twist),
+        np.concatenate((q, dq, tau, tau_cmd, wrench, own_wrench, position, rotation.ravel(),
+                        twist),
                        out=self._floats[i, 3:self._truth_at])
         words = self._ints[i]
         words[0], words[1], words[2] = t_ns, tick, flags

@@ -2,6 +2,7 @@
 
 Every tick is a message on ``/joint_states`` (the measured joint torques as ``effort``),
 ``/joint_commands`` (the commanded ones), ``/wrench_estimate`` (when the loop has an estimate),
+the robot's own estimate where it has one (``/franka/external_wrench``, base frame),
 ``/ee_pose`` and ``/ee_twist`` (once the controller has a tool pose, in the robot's base frame:
 its URDF's root link), and the ticks
 the loop computed the ground truth for are messages on ``/sim/ground_truth`` and
@@ -24,19 +25,22 @@ from qg_common.types import TOOL_FRAME
 from qg_recording.cdr import FixedLayout, fixed_layout, joint_state_layout
 from qg_recording.episode_recorder import TOPICS, EpisodeRecorder, ground_truth_columns
 
-from robot_bridge_node.core.sample_ring import HAS_TOOL, HAS_TRUTH, HAS_WRENCH
+from robot_bridge_node.core.sample_ring import HAS_OWN_WRENCH, HAS_TOOL, HAS_TRUTH, HAS_WRENCH
 
 __all__ = ["TickNames", "TopicRows", "tick_rows", "serialized_ticks", "record_ticks"]
 
 _GROUND_TRUTH = fixed_layout("qg_interfaces/msg/GroundTruth", TOOL_FRAME)
+_WRENCH_STAMPED = "geometry_msgs/msg/WrenchStamped"
 
 
 @dataclass(frozen=True)
 class TickNames:
     """The names a robot's 1 kHz messages carry: its joints (in the order of every joint
-    vector) and its base frame (its URDF's root link: ``robot_frames.urdf_root_link``)."""
+    vector), its base frame (its URDF's root link: ``robot_frames.urdf_root_link``) and the
+    topic of its own wrench estimate (``RobotPlugin.own_wrench_topic``; "" none)."""
     joint_names: tuple[str, ...]
     base_frame: str
+    own_wrench_topic: str = ""
 
 
 @dataclass(frozen=True)
@@ -93,6 +97,12 @@ def tick_rows(records: np.ndarray, names: TickNames) -> list[TopicRows]:
     wrench = records[has_wrench]
     rows.append(TopicRows("/wrench_estimate", has_wrench, wrench["t_ns"], wrench["wrench"],
                           TOOL_FRAME))
+    has_own = (flags & HAS_OWN_WRENCH) != 0
+    if names.own_wrench_topic and has_own.any():
+        own = records[has_own]
+        rows.append(TopicRows(f"/{names.own_wrench_topic}", has_own, own["t_ns"],
+                              own["own_wrench"], names.base_frame,
+                              fixed_layout=fixed_layout(_WRENCH_STAMPED, names.base_frame)))
     has_tool = (flags & HAS_TOOL) != 0
     tool = records[has_tool]
     quaternions = np.reshape([quaternion_from_matrix(r) for r in tool["tool_rotation"]], (-1, 4))

@@ -305,7 +305,7 @@ class EpisodeRecorder:
         with self._lock:
             if self._writer is None or len(t_ns) == 0:
                 return
-            writer = self._ensure_topic(topic, None)
+            writer = self._ensure_topic(topic, None if layout is None else layout.type_name)
             type_name = writer.topic_type(topic)
             if layout is None:
                 layout = (cdr.joint_state_layout(frame_id, tuple(names)) if names is not None
