@@ -92,3 +92,29 @@ def test_the_robot_process_drives_franky_sim_through_libfranka(tmp_path):
             assert "/sim/ground_truth" not in topics and "/clock" not in topics
     finally:
         stack.stop(grace=5.0)
+
+
+def test_an_unreachable_franka_stops_the_robot_process_in_time_with_its_reason(tmp_path):
+    """Nothing serves libfranka at the address: the robot process ends within 10 s (refused
+    connections are retried for ``franka.connect_timeout``, 5 s) with exit code 1 and one line
+    naming the address and why, and leaves no loop process behind."""
+    import time
+    unserved = f"127.0.{35 + os.getpid() % 200}.254"
+    stack = Stack(tmp_path)
+    try:
+        began = time.monotonic()
+        stack.start(("robot", "robot_bridge_node", "robot",
+                     ("--ros-args", "-p", "robot:=franka", "-p", f"franka.address:={unserved}")))
+        name, code = stack.launcher.wait_any(period=0.05)
+        took = time.monotonic() - began
+        assert (name, code) == ("robot", 1) and took < 10.0, (took, stack.logs())
+        log = stack.logs()
+        assert f"error: the robot loop could not be built: the Franka at {unserved}" in log
+        assert "connection refused" in log and "Traceback" not in log
+        # The forked loop process carries the same command line: none is left.
+        import subprocess
+        left = subprocess.run(["pgrep", "-f", f"franka.address:={unserved}"],
+                              capture_output=True, text=True).stdout.split()
+        assert left == [], left
+    finally:
+        stack.stop(grace=1.0)

@@ -250,6 +250,9 @@ def run(conn: Connection, ring: SampleRing) -> int:
     spec: LoopSpec = conn.recv()
     try:
         loop, robot = _build(spec)
+    except ConnectionError as exc:     # an unreachable robot: its message says where and why
+        conn.send(("error", f"the robot loop could not be built: {exc}"))
+        return 1
     except Exception:  # noqa: BLE001 - whatever fails, the robot process must hear why
         conn.send(("error", f"the robot loop could not be built:\n{traceback.format_exc()}"))
         return 1

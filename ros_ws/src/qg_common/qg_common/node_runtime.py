@@ -83,7 +83,12 @@ def run_nodes(factories: Sequence[Callable[[], Node]], argv: Sequence[str] | Non
         for node in nodes:
             executor.add_node(node)
         if background is not None:
-            stop_background = background(nodes)
+            try:
+                stop_background = background(nodes)
+            except (RuntimeError, TimeoutError) as exc:   # the work could not start: say why
+                print(f"error: {exc}", file=sys.stderr)
+                code = 1
+                stopping.set()
         stopping.spinning = True
         # Until a signal (noticed within 0.1 s) or a failed background thread shuts ROS down.
         while not stopping.is_set() and rclpy.ok():
