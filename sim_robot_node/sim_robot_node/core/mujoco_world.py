@@ -117,11 +117,22 @@ def add_shaft_cell(spec: mujoco.MjSpec, hand: mujoco.MjsBody, geometry: ShaftTas
 
     housing = spec.worldbody.add_body(name=names.housing_body, mocap=True,
                                       pos=list(g.hole_position))
+    rim = m.rim_chamfer
     for i, box in enumerate(housing_boxes(g, c)):
-        housing.add_geom(name=f"{prefix}housing_{i}", type=mujoco.mjtGeom.mjGEOM_BOX,
-                         size=[s / 2 for s in box.size], pos=list(box.centre),
-                         quat=_quat_from_yaw(box.yaw), contype=0, conaffinity=CELL_CONTACT_BIT,
-                         density=0.0, **contact)
+        placed = dict(name=f"{prefix}housing_{i}", pos=list(box.centre),
+                      quat=_quat_from_yaw(box.yaw), contype=0, conaffinity=CELL_CONTACT_BIT,
+                      density=0.0, **contact)
+        if rim and i < c.bore_segments:
+            hx, hy, hz = (s / 2 for s in box.size)
+            corners = [(x, y, z) for x in (-hx, hx) for y in (-hy, hy) for z in (-hz, hz)
+                       if not (x < 0 and z > 0)]
+            corners += [(x, y, z) for y in (-hy, hy) for x, z in ((-hx, hz - rim),
+                                                                   (-hx + rim, hz))]
+            spec.add_mesh(name=placed["name"], uservert=np.ravel(corners).tolist())
+            housing.add_geom(type=mujoco.mjtGeom.mjGEOM_MESH, meshname=placed["name"], **placed)
+        else:
+            housing.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[s / 2 for s in box.size],
+                             **placed)
     slab = plunger_box(g)
     plunger = housing.add_body(name=prefix + "plunger", pos=[0.0, 0.0, -g.bore_depth],
                                mass=c.plunger_mass, ipos=list(slab.centre),
