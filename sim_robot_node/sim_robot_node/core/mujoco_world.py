@@ -89,46 +89,57 @@ def add_shaft_cell(spec: mujoco.MjSpec, hand: mujoco.MjsBody, geometry: ShaftTas
     :param prefix: of every element's name.
     :returns: the names of what was added.
     """
-    g, c, m = geometry, config, config.mujoco
+    c = config
     grasp_position = np.zeros(3) if grasp_position is None else np.asarray(grasp_position, float)
     grasp_quat = np.array([1.0, 0.0, 0.0, 0.0]) if grasp_quat is None else np.asarray(grasp_quat,
                                                                                        float)
-    friction = [c.friction, 0.0, 0.0]        # sliding only (condim 3): as pybullet's contacts
-    contact = dict(condim=3, friction=friction, solref=list(m.contact_solref),
-                   solimp=list(m.contact_solimp), margin=0.0, gap=0.0)
-
     names = ShaftCell(shaft_body=prefix + "shaft", shaft_geom=prefix + "shaft",
                       housing_body=prefix + "housing", plunger_joint=prefix + "plunger",
                       payload_body=(prefix + "payload_error"
                                     if c.imperfections.payload_mass_error > 0.0 else None))
-    ixx, izz = shaft_inertia(g, c)
+    contact = _contact(c)
+    ixx, izz = shaft_inertia(geometry, c)
     shaft = hand.add_body(name=names.shaft_body, pos=grasp_position, quat=grasp_quat,
-                          mass=c.shaft_mass, ipos=list(g.shaft_centre), inertia=[ixx, ixx, izz],
-                          explicitinertial=True)
+                          mass=c.shaft_mass, ipos=list(geometry.shaft_centre),
+                          inertia=[ixx, ixx, izz], explicitinertial=True)
     shaft.add_geom(name=names.shaft_geom, type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                   size=[g.shaft_radius, g.shaft_length / 2, 0.0], pos=list(g.shaft_centre),
-                   contype=CELL_CONTACT_BIT, conaffinity=0, density=0.0, **contact)
+                   size=[geometry.shaft_radius, geometry.shaft_length / 2, 0.0],
+                   pos=list(geometry.shaft_centre), contype=CELL_CONTACT_BIT, conaffinity=0,
+                   **contact)
     if names.payload_body is not None:
         # The real arm's unmodelled load: on the hand, never in the bridge's model.
         hand.add_body(name=names.payload_body, pos=grasp_position, quat=grasp_quat,
                       mass=c.imperfections.payload_mass_error,
                       ipos=list(c.imperfections.payload_com_error),
                       inertia=[PAYLOAD_INERTIA] * 3, explicitinertial=True)
+    _add_housing(spec, geometry, c, names, prefix)
+    return names
 
+
+def _contact(config: ShaftSceneConfig) -> dict:
+    """The contact settings of every geom of the cell (they collide only with each other, so
+    these are their contacts' settings): sliding friction only (condim 3), as pybullet's
+    contacts; no mass from the geoms (the bodies' inertials are explicit)."""
+    m = config.mujoco
+    return dict(condim=3, friction=[config.friction, 0.0, 0.0], solref=list(m.contact_solref),
+                solimp=list(m.contact_solimp), margin=0.0, gap=0.0, density=0.0)
+
+
+def _add_housing(spec: mujoco.MjSpec, g: ShaftTaskGeometry, c: ShaftSceneConfig,
+                 names: ShaftCell, prefix: str) -> None:
+    """The housing, a mocap body at the bearing face centre: the bore's and the counterbore's
+    boxes (the bore's rim chamfered: each of its boxes a convex mesh), and the inner ring on its
+    slide joint below the bore, its weight carried, held by the fit's friction up to its stop."""
+    m, contact = c.mujoco, _contact(c)
     housing = spec.worldbody.add_body(name=names.housing_body, mocap=True,
                                       pos=list(g.hole_position))
-    rim = m.rim_chamfer
     for i, box in enumerate(housing_boxes(g, c)):
         placed = dict(name=f"{prefix}housing_{i}", pos=list(box.centre),
                       quat=_quat_from_yaw(box.yaw), contype=0, conaffinity=CELL_CONTACT_BIT,
-                      density=0.0, **contact)
-        if rim and i < c.bore_segments:
-            hx, hy, hz = (s / 2 for s in box.size)
-            corners = [(x, y, z) for x in (-hx, hx) for y in (-hy, hy) for z in (-hz, hz)
-                       if not (x < 0 and z > 0)]
-            corners += [(x, y, z) for y in (-hy, hy) for x, z in ((-hx, hz - rim),
-                                                                   (-hx + rim, hz))]
-            spec.add_mesh(name=placed["name"], uservert=np.ravel(corners).tolist())
+                      **contact)
+        if m.rim_chamfer and i < c.bore_segments:
+            spec.add_mesh(name=placed["name"],
+                          uservert=_chamfered_box(box.size, m.rim_chamfer).ravel().tolist())
             housing.add_geom(type=mujoco.mjtGeom.mjGEOM_MESH, meshname=placed["name"], **placed)
         else:
             housing.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[s / 2 for s in box.size],
@@ -146,8 +157,18 @@ def add_shaft_cell(spec: mujoco.MjSpec, hand: mujoco.MjsBody, geometry: ShaftTas
                       solref_limit=list(m.contact_solref), solimp_limit=list(m.contact_solimp))
     plunger.add_geom(name=prefix + "plunger", type=mujoco.mjtGeom.mjGEOM_BOX,
                      size=[s / 2 for s in slab.size], pos=list(slab.centre), contype=0,
-                     conaffinity=CELL_CONTACT_BIT, density=0.0, **contact)
-    return names
+                     conaffinity=CELL_CONTACT_BIT, **contact)
+
+
+def _chamfered_box(size: tuple[float, float, float], chamfer: float) -> np.ndarray:
+    """(10, 3) the corners of a bore box (radial, tangential, axial ``size``, centred) whose
+    edge at the bore's rim (inner face, top) is cut by a 45 degree ``chamfer``."""
+    hx, hy, hz = (s / 2 for s in size)
+    corners = [(x, y, z) for x in (-hx, hx) for y in (-hy, hy) for z in (-hz, hz)
+               if not (x < 0 and z > 0)]
+    corners += [(x, y, z) for y in (-hy, hy)
+                for x, z in ((-hx, hz - chamfer), (-hx + chamfer, hz))]
+    return np.array(corners)
 
 
 def set_cell_physics(spec: mujoco.MjSpec, config: ShaftSceneConfig) -> None:
