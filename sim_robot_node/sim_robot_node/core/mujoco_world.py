@@ -279,9 +279,10 @@ class MujocoShaftWorld:
 
     def contact_wrench(self) -> np.ndarray:
         """The sum of the contact forces on the shaft of the last step, about the tool origin,
-        tool frame. MuJoCo's contact forces satisfy the shaft's balance (the static test of
-        ``tests/robot/test_mujoco_world.py`` checks them against the hand's reaction), unlike
-        pybullet's ``getContactPoints``."""
+        tool frame: at rest what a wrist sensor between hand and shaft reads, the shaft's weight
+        taken out. ``tests/robot/test_mujoco_world.py`` checks it against the arm's balance
+        over a step (pybullet's summed contact points failed that check; its world reads the
+        shaft joint's reaction instead)."""
         m, d = self.model, self.data
         position, rotation = self.tool_pose()
         force, torque = np.zeros(3), np.zeros(3)

@@ -84,8 +84,9 @@ class MujocoSettings:
         margin, 1 mm (the bore's rim, the shaft's tip); MuJoCo's are sharp, and the shaft's
         flat end resting on a sharp rim holds by friction where pybullet's slides in: without
         it uniform random residuals needed 87 steps (5 of 8 starts in 200 steps, at rest);
-        with it 38 (8 of 8). A chamfer of the tip instead did as well (24 steps) but its mesh
-        doubles the collision time; the rim's costs nothing (its boxes are tested anyway).
+        with it 31.7 (32 of 32, docs/learning.md section 13). A chamfer of the tip instead did
+        as well (24 steps, 8 of 8) but its mesh doubles the collision time; the rim's costs
+        nothing (its boxes are tested anyway).
     :param contact_solref: (time constant [s], damping ratio) of the shaft's contacts and the
         inner ring's hard stop; MuJoCo clamps the time constant to at least 2 time steps.
     :param contact_solimp: (d0, dwidth, width [m], midpoint, power) of the same.
