@@ -4,7 +4,9 @@ Runs residual episodes (8 start poses, at most ``--max-steps`` steps each; unifo
 residuals, or with ``--policy zero`` the base push alone) through the in-process Panda task (sim
 + bridge loop + EKF, ``config/``) with ``rest.max_time`` raised to ``--max-time``, and prints the
 distribution of step durations, the share of steps that still reached the limit and the RL steps
-per wall second.
+per wall second and per CPU second of this process (the machine is shared: CPU time is what a
+core gives when the process has it alone). Each ``--robot`` (default: the Panda on pybullet,
+then on MuJoCo) is measured in turn, in one run.
 
 - ``--arm realistic|ideal``: the arm as ``StackSettings.load`` builds it (``ideal``:
   ``panda_ideal.yaml`` on top of ``panda_scene.yaml``; arm seed 0 of the file).
@@ -21,6 +23,7 @@ inertia a free step needs about 1.5 s to settle. The last line is one JSON objec
 
 Usage: python benchmarks/time_to_rest.py [--max-time 3.0] [--seed 0] [--arm realistic|ideal]
        [--policy random|zero] [--set rest.max_time=...] [--scene-set panda_scene.friction=...]
+       [--robot sim_panda_pybullet --robot sim_panda_mujoco]
 """
 from __future__ import annotations
 
@@ -33,7 +36,7 @@ import time
 import numpy as np
 import yaml
 from qg_learning_node.executor.residual_task import ACTION_DIM
-from qg_experiments.runner import ARMS, PandaTask, StackSettings
+from qg_experiments.runner import ARMS, InsertionRobot, StackSettings
 
 
 def _override(params: dict, assignment: str) -> None:
@@ -70,22 +73,9 @@ def _pct(values: list[float], q: float) -> float | None:
     return float(np.percentile(values, q)) if values else None
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--max-time", type=float, default=3.0, help="rest.max_time [s]")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--max-steps", type=int, default=60, help="per episode")
-    parser.add_argument("--arm", choices=ARMS, default="realistic")
-    parser.add_argument("--policy", choices=("random", "zero"), default="random",
-                        help="uniform random residuals or the zero residual (base push only)")
-    parser.add_argument("--window", type=int, default=20,
-                        help="ticks at the end of each step whose speeds are reported")
-    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
-                        help="bridge.yaml parameter")
-    parser.add_argument("--scene-set", action="append", default=[], metavar="SECTION.KEY=VALUE",
-                        help="panda_scene.yaml parameter, e.g. panda_scene.solver_iterations=100")
-    args = parser.parse_args()
-    settings = StackSettings.load(arm=args.arm)
+def measure(robot_name: str, args: argparse.Namespace) -> dict:
+    """Time to rest and RL steps per second of ``robot_name`` under ``args``."""
+    settings = StackSettings.load(arm=args.arm, robot=robot_name)
     bridge = copy.deepcopy(settings.bridge)
     bridge.setdefault("rest", {})["max_time"] = args.max_time
     for assignment in args.set:
@@ -93,14 +83,14 @@ def main() -> None:
     robot = copy.deepcopy(settings.robot)
     for assignment in args.scene_set:
         _override(robot, assignment)
-    env = PandaTask(dataclasses.replace(settings, bridge=bridge, robot=robot))
+    env = InsertionRobot(dataclasses.replace(settings, bridge=bridge, robot=robot))
     trace = _SpeedTrace(env.loop.rest)
     rest = env.loop.rest.config
     rng = np.random.default_rng(args.seed)
     durations, timed_out, episode_steps, successes = [], [], [], 0
     end_linear, end_angular, blocked = [], [], {"linear": 0, "angular": 0, "both": 0}
     window_linear, window_angular = [], []   # per step: the last ticks' median / p99 speed
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     for pose in range(8):
         obs = env.reset(pose)
         for step in range(1, args.max_steps + 1):
@@ -122,18 +112,20 @@ def main() -> None:
                        else "linear" if moving_linear else "angular" if moving_angular else None)
                 if key is not None:
                     blocked[key] += 1
-            if obs.success or env.residual.left_bore(obs):
+            if env.residual.succeeded(obs) or env.residual.left_bore(obs):
                 break
-        successes += int(obs.success)
+        successes += int(env.residual.succeeded(obs))
         episode_steps.append(step)
-    wall = time.perf_counter() - start
+    wall, cpu = time.perf_counter() - start, time.process_time() - cpu
+    env.close()
     d = np.array(durations)
     win_lin = [float(np.median(w)) for w in window_linear]
     win_ang = [float(np.median(w)) for w in window_angular]
     win_lin99 = [float(np.percentile(w, 99)) for w in window_linear]
     win_ang99 = [float(np.percentile(w, 99)) for w in window_angular]
-    result = {"arm": args.arm, "policy": args.policy, "max_time": args.max_time,
-              "overrides": args.set, "scene_overrides": args.scene_set, "steps": len(d),
+    result = {"robot": robot_name, "engine": settings.engine, "arm": args.arm,
+              "policy": args.policy, "max_time": args.max_time, "overrides": args.set,
+              "scene_overrides": args.scene_set, "steps": len(d),
               "success": f"{successes}/8", "mean_episode_steps": float(np.mean(episode_steps)),
               "timeout_fraction": float(np.mean(timed_out)),
               "duration_p25": float(np.percentile(d, 25)),
@@ -147,11 +139,14 @@ def main() -> None:
               "window_linear_speed_p99_median": _pct(win_lin99, 50),
               "window_angular_speed_median": _pct(win_ang, 50),
               "window_angular_speed_p99_median": _pct(win_ang99, 50),
-              "rl_steps_per_second": len(d) / wall, "sim_seconds_per_wall_second": d.sum() / wall}
-    print(f"{len(d)} {args.policy} steps, {args.arm} arm, max_time {args.max_time} s "
-          f"{args.set} {args.scene_set}: {result['timeout_fraction']:.0%} at the limit; time to "
-          f"rest median {result['duration_median']:.3f} s (p25 {result['duration_p25']:.3f}, p90 "
-          f"{result['duration_p90']:.3f}); {result['rl_steps_per_second']:.1f} RL steps/s; "
+              "rl_steps_per_second": len(d) / wall, "rl_steps_per_cpu_second": len(d) / cpu,
+              "sim_seconds_per_wall_second": d.sum() / wall}
+    print(f"{robot_name} ({settings.engine}): {len(d)} {args.policy} steps, {args.arm} arm, "
+          f"max_time {args.max_time} s {args.set} {args.scene_set}: "
+          f"{result['timeout_fraction']:.0%} at the limit; time to rest median "
+          f"{result['duration_median']:.3f} s (p25 {result['duration_p25']:.3f}, p90 "
+          f"{result['duration_p90']:.3f}); {result['rl_steps_per_second']:.1f} RL steps/s "
+          f"({result['rl_steps_per_cpu_second']:.1f} per CPU second); "
           f"success {result['success']}, {result['mean_episode_steps']:.1f} steps/episode")
     if end_linear:
         print(f"steps at the limit end at (median) {np.median(end_linear) * 1e3:.2f} mm/s, "
@@ -162,7 +157,30 @@ def main() -> None:
           f"{result['window_linear_speed_p99_median'] * 1e3:.2f} mm/s, "
           f"{result['window_angular_speed_median']:.4f} / "
           f"{result['window_angular_speed_p99_median']:.4f} rad/s")
-    print(json.dumps(result))
+    return result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--max-time", type=float, default=3.0, help="rest.max_time [s]")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--max-steps", type=int, default=60, help="per episode")
+    parser.add_argument("--arm", choices=ARMS, default="realistic")
+    parser.add_argument("--policy", choices=("random", "zero"), default="random",
+                        help="uniform random residuals or the zero residual (base push only)")
+    parser.add_argument("--window", type=int, default=20,
+                        help="ticks at the end of each step whose speeds are reported")
+    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                        help="bridge.yaml parameter")
+    parser.add_argument("--scene-set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                        help="panda_scene.yaml parameter, e.g. panda_scene.solver_iterations=100")
+    parser.add_argument("--robot", action="append", default=None,
+                        help="robot plugin (repeat for several; default: the Panda on each "
+                             "engine)")
+    args = parser.parse_args()
+    robots = args.robot or ["sim_panda_pybullet", "sim_panda_mujoco"]
+    results = {robot: measure(robot, args) for robot in robots}
+    print(json.dumps(results))
 
 
 if __name__ == "__main__":
