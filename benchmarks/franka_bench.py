@@ -1,8 +1,9 @@
 """The Franka plugin through franky-sim on this machine: holding still, the bridge's loop on it,
 a known push on the hand, and how fast an unreachable arm is refused.
 
-Starts ``franka_sim`` (franky-sim's MuJoCo FR3 with the demo scene: a block 5 cm below the held
-cylinder's tip) on a private loopback address, connects ``robot:=franka`` and measures:
+Starts ``franka_sim`` (franky-sim's MuJoCo FR3 with the demo scene: a block 10 cm below the held
+cylinder's tip where the arm starts, and no unknown payload, so gravity alone holds the arm) on a
+private loopback address, connects ``robot:=franka`` and measures:
 
 1. *hold*: ``--hold`` seconds of gravity-only torques (zero after the gravity the robot adds is
    subtracted): libfranka's ``control_command_success_rate``, the joints' and the tool's drift,
@@ -153,7 +154,8 @@ def main() -> None:
     parser.add_argument("--sim-priority", type=int, default=40, help="SCHED_FIFO of franky-sim")
     args = parser.parse_args()
     address = f"127.0.{34 + os.getpid() % 200}.{1 + os.getpid() % 250}"
-    sim = spawn(address, "--realtime-priority", str(args.sim_priority))
+    sim = spawn(address, "--realtime-priority", str(args.sim_priority), "--scene",
+                "franka_robot_node.core.franky_sim_scene:demo_scene")
     if args.priority > 0:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.priority))
     results: dict = {"address": address, "load_average": os.getloadavg()[0]}

@@ -3,9 +3,12 @@
     ros2 run franka_robot_node franka_sim [--address 127.0.0.1] [--scene module:function]
 
 The address and the held part come from ``config/franka.yaml`` (``franka.address``,
-``franka.tool``: the same numbers the plugin connects with), ``--params-file`` or
-``--address`` override them. ``--scene`` names the function that returns the scene's extensions
-from the held part (default: the demo's fixture and held cylinder). A known wrench on the hand
+``franka.tool``: the same numbers the plugin connects with), the cell from
+``config/shaft_task.yaml`` (its geometry and the housing's pose) and ``config/panda_scene.yaml``
+(its physics); ``--params-file`` (any of those sections) or ``--address`` override them.
+``--scene`` names the function that returns the scene's extensions from the held part and those
+parameters (default: the shaft task's cell, ``franky_sim_scene.shaft_scene``). The arm starts
+with the shaft upright 5 cm above the bearing face (``franky_sim_scene.parked_q``). A known wrench on the hand
 (base frame, at the tool centre point): ``--hand-wrench Fx Fy Fz Tx Ty Tz`` from the start, or a
 line ``wrench Fx Fy Fz Tx Ty Tz`` on standard input at any time (acknowledged on standard
 output). Runs until SIGINT/SIGTERM or ``--seconds``; prints its step rate at the end.
@@ -24,19 +27,40 @@ import time
 from pathlib import Path
 from typing import TextIO
 
-from qg_common.params import ConfigError, load_ros_params, package_config
+from typing import Any
+
+from qg_common.params import ConfigError, load_ros_params, merge_params, package_config
+from qg_common.shaft_task import SHAFT_TASK_SECTION, ShaftTaskGeometry
+from robot_bridge_node.core.arm_model import ArmModel
 
 from franka_robot_node.core.franka_config import FrankaConfig
 from franka_robot_node.core.franky_sim_host import FrankySimHost, SceneExtension
+from franka_robot_node.core.franky_sim_scene import SCENE_CONFIG_FILES, parked_q
+from franka_robot_node.plugin import describe_franka
 
-__all__ = ["main", "scene_extensions", "spawn", "DEFAULT_SCENE"]
+__all__ = ["main", "scene_params", "scene_extensions", "spawn", "DEFAULT_SCENE"]
 
 #: The scene ``franka_sim`` builds unless told otherwise.
-DEFAULT_SCENE = "franka_robot_node.core.franky_sim_scene:demo_scene"
+DEFAULT_SCENE = "franka_robot_node.core.franky_sim_scene:shaft_scene"
 
 
-def scene_extensions(name: str, config: FrankaConfig) -> list[SceneExtension]:
-    """The extensions ``module:function`` returns for the configured held part.
+def scene_params(params_file: Path | None = None) -> dict[str, Any]:
+    """The installed ``SCENE_CONFIG_FILES``' parameters, ``params_file``'s over them.
+
+    :raises ConfigError: if a file is missing or malformed.
+    """
+    params: dict[str, Any] = {}
+    for package, name in SCENE_CONFIG_FILES:
+        params = merge_params(params, load_ros_params(package_config(package, name)))
+    if params_file is not None:
+        params = merge_params(params, load_ros_params(params_file))
+    return params
+
+
+def scene_extensions(name: str, config: FrankaConfig,
+                     params: dict[str, Any]) -> list[SceneExtension]:
+    """The extensions ``module:function`` returns for the configured held part and the
+    scene's parameters (``scene_params``).
 
     :raises ValueError: if ``name`` is not ``module:function`` or cannot be imported.
     """
@@ -47,7 +71,7 @@ def scene_extensions(name: str, config: FrankaConfig) -> list[SceneExtension]:
         make = getattr(importlib.import_module(module), function)
     except (ImportError, AttributeError) as exc:
         raise ValueError(f"--scene {name!r}: {exc}") from exc
-    return list(make(config.tool))
+    return list(make(config.tool, params))
 
 
 def spawn(address: str, *args: str, timeout: float = 30.0) -> subprocess.Popen:
@@ -99,12 +123,12 @@ def _serve_stdin(host: FrankySimHost, stdin: TextIO, out: TextIO) -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--params-file", type=Path, default=None,
-                        help="ROS 2 parameter file with the franka section "
-                             "(default: the installed config/franka.yaml)")
+                        help="ROS 2 parameter file over the installed config/franka.yaml, "
+                             "shaft_task.yaml and panda_scene.yaml (any of their sections)")
     parser.add_argument("--address", default=None, help="loopback address to serve on "
                         "(default: franka.address)")
     parser.add_argument("--scene", default=DEFAULT_SCENE, help="module:function returning the "
-                        "scene's extensions for the held part")
+                        "scene's extensions for the held part and the parameters")
     parser.add_argument("--hand-wrench", type=float, nargs=6, default=None,
                         metavar=("FX", "FY", "FZ", "TX", "TY", "TZ"))
     parser.add_argument("--seconds", type=float, default=0.0, help="stop after this long "
@@ -114,14 +138,16 @@ def main(argv: list[str] | None = None) -> int:
                         "stands in for a robot with a computer of its own")
     args = parser.parse_args(argv)
     try:
-        path = args.params_file or package_config("franka_robot_node", "franka.yaml")
-        config = FrankaConfig.from_dict(load_ros_params(path).get("franka", {}))
-        extensions = scene_extensions(args.scene, config)
+        params = scene_params(args.params_file)
+        config = FrankaConfig.from_dict(params.get("franka", {}))
+        extensions = scene_extensions(args.scene, config, params)
         address = args.address or config.address
-        host = FrankySimHost(address, extensions)
+        park = parked_q(ArmModel.from_description(describe_franka(params)),
+                        ShaftTaskGeometry.from_dict(params.get(SHAFT_TASK_SECTION.prefix, {})))
+        host = FrankySimHost(address, extensions, initial_q=park)
         if args.hand_wrench is not None:
             host.set_hand_wrench(args.hand_wrench)
-    except (ConfigError, ValueError, OSError) as exc:
+    except (ConfigError, ValueError, OSError, RuntimeError) as exc:
         print(f"franka_sim: {exc}", file=sys.stderr, flush=True)
         return 2
     if args.realtime_priority > 0:

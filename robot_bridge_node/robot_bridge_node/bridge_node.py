@@ -133,8 +133,14 @@ def log_at(node: Node, level: str, message: str) -> None:
     if len(_logged) > 1000:              # lines carrying numbers: forget the old ones
         for old in [k for k, t in _logged.items() if now - t >= LOG_REPEAT]:
             del _logged[old]
+    # Each severity from a call site of its own: rclpy refuses a call site that changes it.
     logger = node.get_logger()
-    {"info": logger.info, "warning": logger.warning}.get(level, logger.error)(message)
+    if level == "info":
+        logger.info(message)
+    elif level == "warning":
+        logger.warning(message)
+    else:
+        logger.error(message)
 
 
 # --- separate-process mode ------------------------------------------------------------------

@@ -14,17 +14,22 @@ import pinocchio as pin
 import pytest
 from franka_robot_node.core.fr3_description import FR3_READY, fr3_arm
 from franka_robot_node.core.franka_arm import FrankaConnectError, FrankaFault, TorqueRejected
+from franka_robot_node.core.franka_config import FrankaConfig
 from franka_robot_node.core.franky_sim_host import FrankySimHost
-from franka_robot_node.franka_sim import spawn
+from franka_robot_node.core.franky_sim_scene import CELL_PREFIX, PARK_HEIGHT, parked_q
+from franka_robot_node.franka_sim import DEFAULT_SCENE, scene_extensions, scene_params, spawn
 from franka_robot_node.plugin import FRANKA, describe_franka
+from qg_common.shaft_task import ShaftTaskGeometry
 from qg_common.types import WrenchSetpoint
 from robot_bridge_node.core.arm_model import ArmModel
 from robot_bridge_node.core.hardware_interface import robot_defaults
 from robot_bridge_node.core.robot_loop import MAX_STATE_GAP, StateClock, build_loop
+from sim_robot_node.core.shaft_scene import ShaftSceneConfig
 
 #: A loopback address of this test run's own (franky-sim binds libfranka's fixed port 1337).
 ADDRESS = f"127.0.{35 + os.getpid() % 200}.{1 + os.getpid() % 200}"
 UNSERVED = f"127.0.{35 + os.getpid() % 200}.250"
+DEMO_SCENE = "franka_robot_node.core.franky_sim_scene:demo_scene"
 
 
 def test_the_bridges_fr3_model_is_franky_sims_arm():
@@ -61,7 +66,9 @@ def test_the_bridges_fr3_model_is_franky_sims_arm():
 
 @pytest.fixture(scope="module")
 def franky_sim():
-    process = spawn(ADDRESS, "--realtime-priority", "40")
+    # The demo's block and held cylinder, not the task's cell: these tests hold the arm with
+    # gravity alone, which the cell's unknown payload (the realistic arm's 0.1 kg) would sag.
+    process = spawn(ADDRESS, "--realtime-priority", "40", "--scene", DEMO_SCENE)
     yield process
     process.terminate()
     process.wait(10)
@@ -190,3 +197,40 @@ def test_an_unreachable_address_is_refused_in_time_with_its_reason(address, reas
         FRANKA.create({"franka": {"address": address, "connect_timeout": 1.0}})
     assert time.monotonic() - start < 2.0
     assert address in str(refused.value)
+
+
+def test_franky_sims_shaft_cell_is_the_tasks():
+    """franka_sim's default scene is the shaft task's cell from the same description and YAML
+    as the simulated Panda's (``mujoco_world.add_shaft_cell``, config/shaft_task.yaml and
+    panda_scene.yaml): the housing where the task's fixture is, the shaft in the hand with its
+    grasp point at the bridge's tool frame (to 0.2 mm), the fit's friction, and the arm parked
+    with the tip 5 cm above the bearing face."""
+    params = scene_params()
+    geometry = ShaftTaskGeometry.from_dict(params["shaft_task"])
+    cell = ShaftSceneConfig.from_dict(params["panda_scene"])
+    model = ArmModel.from_description(describe_franka(params))
+    park = parked_q(model, geometry)
+    host = FrankySimHost(UNSERVED, scene_extensions(
+        DEFAULT_SCENE, FrankaConfig.from_dict(params["franka"]), params), initial_q=park)
+    try:
+        m, d = host.sim.model, host.sim.data
+        mujoco.mj_forward(m, d)
+        np.testing.assert_allclose(d.qpos[host.robot._qpos_addrs], park, atol=1e-12)
+        housing = m.body(CELL_PREFIX + "housing")
+        np.testing.assert_allclose(d.mocap_pos[housing.mocapid[0]], geometry.hole_position,
+                                   atol=1e-12)
+        shaft = m.body(CELL_PREFIX + "shaft")
+        tool = model.kinematics(park)
+        np.testing.assert_allclose(d.xpos[shaft.id], tool.position, atol=2e-4)
+        np.testing.assert_allclose(d.xmat[shaft.id].reshape(3, 3), tool.rotation, atol=2e-3)
+        tip = d.xpos[shaft.id] + geometry.grasp_height * d.xmat[shaft.id].reshape(3, 3)[:, 2]
+        np.testing.assert_allclose(tip, np.add(geometry.hole_position, [0, 0, PARK_HEIGHT]),
+                                   atol=2e-4)
+        assert m.body_mass[shaft.id] == pytest.approx(cell.shaft_mass)
+        plunger = m.joint(CELL_PREFIX + "plunger")
+        assert m.dof_frictionloss[plunger.dofadr[0]] == cell.plunger_friction
+        assert d.ncon == 0 or not any(CELL_PREFIX in m.geom(c.geom1).name
+                                      or CELL_PREFIX in m.geom(c.geom2).name
+                                      for c in d.contact[:d.ncon])      # parked clear of it
+    finally:
+        host.close()
