@@ -267,6 +267,7 @@ class RobotLoop:
             ``reset.arrive_timeout`` after the path.
         """
         config = self.reset_config
+        self._withdraw(start)
         motion = StartMotion(self.controller.model, self.hardware.read().q, start, config)
         law = JointHold(self.controller.model, config)
         self.holding = True                  # the watchdog leaves a moving arm alone
@@ -287,6 +288,39 @@ class RobotLoop:
                 return
         raise RuntimeError(f"the arm did not arrive at the start within {config.arrive_timeout} "
                            f"s ({off * 1e3:.2f} mm, {math.degrees(turned):.2f} deg off)")
+
+    def _withdraw(self, start: StartPose) -> None:
+        """Pull the part out of the fixture along the tool's axis (``reset.withdraw_force``)
+        under the task's compliant controller, until the tool is level with ``start``'s
+        approach point (see ``start_motion``).
+
+        :raises RuntimeError: if it is not out within ``reset.withdraw_timeout``.
+        """
+        config = self.reset_config
+        approach = np.asarray(start.approach, float)
+        length = float(np.linalg.norm(approach))
+        if length == 0.0:
+            return
+        axis, entry = approach / length, np.asarray(start.position, float) - approach
+
+        def inside() -> float:
+            """[m] how far the tool is short of the approach point's level."""
+            return float(np.dot(self.controller.tool.position - entry, axis))
+
+        self.begin()
+        self.tick()                                      # holding: the tool pose of the arm now
+        if inside() <= 0.0:
+            return
+        began = self.time
+        self.command(WrenchSetpoint(np.array([0.0, 0.0, config.withdraw_force, 0.0, 0.0, 0.0])))
+        while inside() > 0.0:
+            if self.time - began > config.withdraw_timeout:
+                self.begin()                             # hold it where it stuck
+                raise RuntimeError(f"the part did not come out of the fixture within "
+                                   f"{config.withdraw_timeout} s ({inside() * 1e3:.1f} mm short "
+                                   f"of the approach point)")
+            self.tick()
+        self.begin()
 
     def _joint_tick(self, law: JointHold, q_target: np.ndarray,
                     dq_target: np.ndarray) -> JointState:

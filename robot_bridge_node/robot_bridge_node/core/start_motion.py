@@ -1,13 +1,21 @@
 """The way a torque arm gets from wherever it is to an episode's start: a motion, not a teleport.
 
 A real arm cannot be put at a start pose; between episodes it has to back out of the task and
-move there, as a robot's operator would teach it. The path has three legs, all tracked by a
-stiff joint impedance law (``JointHold``: libfranka's joint impedance example's gains) on joint
-targets that move along it:
+move there, as a robot's operator would teach it. First the part comes out of the fixture
+compliantly: ``RobotLoop.reset`` pulls the shaft along its own axis with ``withdraw_force``
+under the task's hybrid controller (soft laterally and in rotation, so the bore guides the
+shaft) until the tool is level with the approach point ``start - approach``. A stiff withdrawal
+jams: the joint law below holds the tool's orientation to a fraction of a degree, a fully
+inserted shaft in a bore of 0.1 mm clearance allows 1 degree, and the arm locked in 1 of 4
+withdrawals on the simulated Panda and on franky-sim's FR3 (not a millimetre of motion while
+its targets left by 45 mm). Then the path has three legs, all tracked by a stiff joint impedance
+law (``JointHold``: libfranka's joint impedance example's gains) on joint targets that move
+along it:
 
 1. **back out**: straight back along the start's approach axis (the bore's axis) until the tool
-   is level with the approach point ``start - approach``, clear of the housing (a straight line
-   of the tool: the joint targets are its inverse kinematics, each from the one before);
+   is level with the approach point, clear of the housing (a straight line of the tool: the
+   joint targets are its inverse kinematics, each from the one before; after the withdrawal
+   there is nothing left of it);
 2. **joint motion**: a minimum-jerk interpolation of the joints from there to the configuration
    that puts the tool at the approach point with the start's orientation (inverse kinematics of
    the bridge's model from the current joints, so the posture changes least);
@@ -44,6 +52,10 @@ class ResetConfig:
 
     :param teleport: a simulated robot is put at the start at once (its simulation's shortcut);
         false moves it there as a real arm is moved. A robot without a simulation always moves.
+    :param withdraw_force: [N] the pull along the tool's axis that takes the part out of the
+        fixture, under the task's compliant controller (the task pushes with 15 N).
+    :param withdraw_timeout: [s] the part must be out (the tool level with the approach point)
+        within this long, or the reset fails.
     :param linear_speed: [m/s] the tool's speed backing out and approaching along the axis.
     :param joint_speed: [rad/s] the peak joint speed of the joint motion.
     :param min_duration: [s] the joint motion takes at least this long.
@@ -61,6 +73,8 @@ class ResetConfig:
         integral of the joints' error (what the model does not know: an unknown payload).
     """
     teleport: bool = True
+    withdraw_force: float = 10.0
+    withdraw_timeout: float = 3.0
     linear_speed: float = 0.05
     joint_speed: float = 0.5
     min_duration: float = 0.5
@@ -73,7 +87,8 @@ class ResetConfig:
     arrive_gain: float = 5.0
 
     def __post_init__(self) -> None:
-        for name in ("linear_speed", "joint_speed", "min_duration", "arrive_tolerance",
+        for name in ("withdraw_force", "withdraw_timeout", "linear_speed", "joint_speed",
+                     "min_duration", "arrive_tolerance",
                      "arrive_angle", "arrive_speed", "arrive_timeout", "arrive_gain"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
