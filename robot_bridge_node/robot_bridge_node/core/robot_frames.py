@@ -32,8 +32,7 @@ from robot_bridge_node.core.hardware_interface import (RobotDescription, load_re
 from robot_bridge_node.core.tick_messages import TopicRows
 
 __all__ = ["TF_RATE", "TASK_SCENE_GROUP", "Transform", "RobotFrames", "base_frame",
-           "urdf_root_link",
-           "task_scene"]
+           "urdf_root_link", "urdf_with_absolute_meshes", "task_scene"]
 
 #: [Hz] of ``/tf`` (of the loop's clock: simulated time in lockstep).
 TF_RATE = 100.0
@@ -101,6 +100,23 @@ def urdf_root_link(urdf_text: str) -> str:
     return str(roots[0])
 
 
+def urdf_with_absolute_meshes(path: Path) -> str:
+    """The URDF at ``path`` with every mesh given relative to its file (franky-sim's FR3:
+    ``meshes/link0.stl``) as a ``file://`` URI: a description published on
+    ``/robot_description`` is read where the file is unknown (Foxglove, a bag, a renderer).
+    ``package://`` and other URIs and absolute paths stay as they are."""
+    text = Path(path).read_text()
+    root = ElementTree.fromstring(text)
+    relative = [m for m in root.iter("mesh")
+                if "://" not in m.get("filename", "") and not m.get("filename", "/").startswith("/")]
+    if not relative:
+        return text
+    folder = Path(path).resolve().parent
+    for mesh in relative:
+        mesh.set("filename", (folder / mesh.get("filename", "")).as_uri())
+    return ElementTree.tostring(root, encoding="unicode")
+
+
 def _transform(parent: str, child: str, pose: pin.SE3) -> Transform:
     x, y, z, w = pin.Quaternion(pose.rotation).coeffs().tolist()
     return Transform(parent, child, tuple(pose.translation.tolist()), (x, y, z, w))
@@ -117,7 +133,7 @@ class RobotFrames:
     def __init__(self, description: RobotDescription, rate: float = TF_RATE) -> None:
         if not description.urdf or not description.tool_frame:
             raise ValueError("the robot's description must name its urdf and tool_frame")
-        self.urdf = Path(description.urdf).read_text()
+        self.urdf = urdf_with_absolute_meshes(Path(description.urdf))
         self.base = urdf_root_link(self.urdf)
         self.joint_names = tuple(description.joint_names)
         self.model = driven_model(description.urdf, self.joint_names)

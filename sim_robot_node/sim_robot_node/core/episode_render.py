@@ -73,7 +73,8 @@ def _resolve(uri: str) -> str | None:
 def renderable_urdf(urdf: str) -> str:
     """``urdf`` as this renderer draws it: a link whose visuals are meshes drawn with its
     collision geometry instead (coarser, and much faster), mesh files found on this machine (a
-    shape whose mesh it cannot find is left out), no materials (the arm gets one colour)."""
+    shape whose mesh it cannot find is left out: pybullet refuses the whole file otherwise), no
+    materials (the arm gets one colour)."""
     root = ElementTree.fromstring(urdf)
     for material in root.findall("material"):
         root.remove(material)
@@ -85,14 +86,14 @@ def renderable_urdf(urdf: str) -> str:
             for collision in collisions:
                 visual = ElementTree.SubElement(link, "visual")
                 visual.extend(list(collision))
-        for visual in link.findall("visual"):
-            for material in visual.findall("material"):
-                visual.remove(material)
-            mesh = visual.find("geometry/mesh")
+        for shape in (*link.findall("visual"), *link.findall("collision")):
+            for material in shape.findall("material"):
+                shape.remove(material)
+            mesh = shape.find("geometry/mesh")
             if mesh is not None:
                 path = _resolve(mesh.get("filename", ""))
                 if path is None:
-                    link.remove(visual)
+                    link.remove(shape)
                 else:
                     mesh.set("filename", path)
     return ElementTree.tostring(root, encoding="unicode")
@@ -135,8 +136,13 @@ class SceneRenderer:
         with tempfile.TemporaryDirectory(prefix="episode_render_") as folder:
             path = Path(folder) / "robot.urdf"
             path.write_text(renderable_urdf(urdf))
-            self.robot = p.loadURDF(str(path), useFixedBase=True,
-                                    flags=p.URDF_USE_IMPLICIT_CYLINDER, physicsClientId=c)
+            try:
+                self.robot = p.loadURDF(str(path), useFixedBase=True,
+                                        flags=p.URDF_USE_IMPLICIT_CYLINDER, physicsClientId=c)
+            except p.error as exc:
+                p.disconnect(physicsClientId=c)
+                raise RuntimeError(f"pybullet could not load the robot's URDF ({exc}); a mesh "
+                                   f"given relative to a file it does not have?") from exc
         self.base = p.getBodyInfo(self.robot, physicsClientId=c)[0].decode()
         self.joints: dict[str, int] = {}
         self.links: dict[str, int] = {}
