@@ -1,8 +1,8 @@
 """The realtime loop's timing with the whole stack up and training: the goal of issue 25.
 
 Starts the stack of ``config/stack.yaml`` (robot process, learner, executor; ``--robots 2``: two
-robots and one learner) with every robot in realtime mode (``sim.clock_mode:=realtime``, the
-executor re-sending its setpoint every 5 ms), runs QG-DDPG training episodes (the demo's
+robots and one learner) with every robot in realtime mode (``sim.clock_mode:=realtime``; a
+step's setpoint holds until the step ends, no keep-alive), runs QG-DDPG training episodes (the demo's
 settings, at most 50 steps) on every robot for ``--seconds``, and reads each loop's own timing
 from its ``diagnostics`` (``loop_diagnostics``): the counts and histogram at the start and the
 end of the measured window give the tick period p50/p99/max and the share of ticks on time (a

@@ -5,7 +5,7 @@ from setuptools import find_packages, setup
 package_name = 'franka_robot_node'
 # The repository's config/ is the one source of the numbers; this package installs its
 # file from there to share/franka_robot_node/config (symlinked by --symlink-install).
-config_files = [os.path.join('..', 'config', name) for name in ('franka.yaml',)]
+config_files = [os.path.join('..', 'config', name) for name in ('franka.yaml', 'franka_real.yaml')]
 
 setup(
     name=package_name,

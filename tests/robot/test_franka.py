@@ -234,3 +234,25 @@ def test_franky_sims_shaft_cell_is_the_tasks():
                                       for c in d.contact[:d.ncon])      # parked clear of it
     finally:
         host.close()
+
+
+def test_the_real_arms_stack_is_the_rehearsals_without_franky_sim():
+    """config/stack_fr3.yaml runs what config/stack_franka.yaml runs but franky-sim, and its
+    robot process reads config/franka_real.yaml over franka.yaml: the arm's address and
+    ``enforce``, nothing else changed."""
+    from pathlib import Path
+
+    from qg_common.params import load_ros_params, merge_params, package_config
+    from qg_learning_node.cli.launcher import load_stack_config
+    config = Path(__file__).resolve().parents[2] / "config"
+    rehearsal = {s.name: s for s in load_stack_config(config / "stack_franka.yaml")}
+    real = {s.name: s for s in load_stack_config(config / "stack_fr3.yaml")}
+    assert set(rehearsal) - set(real) == {"franka_sim"} and set(real) <= set(rehearsal)
+    args = real["robot"].args
+    overlay = Path(args[args.index("--params-file") + 1])
+    assert overlay == package_config("franka_robot_node", "franka_real.yaml")
+    shipped = load_ros_params(package_config("franka_robot_node", "franka.yaml"))
+    laid = merge_params(shipped, load_ros_params(overlay))
+    changed = {k for k in shipped["franka"] if shipped["franka"][k] != laid["franka"][k]}
+    assert changed == {"address", "realtime"}
+    assert FrankaConfig.from_dict(laid["franka"]).realtime == "enforce"
