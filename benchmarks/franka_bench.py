@@ -33,7 +33,7 @@ import time
 
 import numpy as np
 from franka_robot_node.core.franka_arm import FrankaConnectError, FrankaFault
-from franka_robot_node.franka_sim import spawn
+from franka_sim_node.franka_sim import spawn
 from franka_robot_node.plugin import FRANKA
 from qg_common.params import load_ros_params, package_config
 from qg_common.types import WrenchSetpoint
@@ -155,7 +155,7 @@ def main() -> None:
     args = parser.parse_args()
     address = f"127.0.{34 + os.getpid() % 200}.{1 + os.getpid() % 250}"
     sim = spawn(address, "--realtime-priority", str(args.sim_priority), "--scene",
-                "franka_robot_node.core.franky_sim_scene:demo_scene")
+                "franka_sim_node.core.franky_sim_scene:demo_scene")
     if args.priority > 0:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.priority))
     results: dict = {"address": address, "load_average": os.getloadavg()[0]}

@@ -20,12 +20,9 @@ setup(
     zip_safe=True,
     maintainer='QG developers',
     maintainer_email='dev@qg.local',
-    description='A Franka FR3 as a torque robot plugin of the bridge through libfranka (franky), and franky-sim\'s MuJoCo FR3 with the task\'s scene to rehearse it on.',
+    description='A Franka FR3 as a torque robot plugin of the bridge through libfranka (franky).',
     license='Apache-2.0',
     entry_points={
-        'console_scripts': [
-            'franka_sim = franka_robot_node.franka_sim:main',
-        ],
         # Loaded by name by robot_bridge_node's robot process (robot:=franka).
         'robot_bridge_node.robots': [
             'franka = franka_robot_node.plugin:FRANKA',

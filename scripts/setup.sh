@@ -55,7 +55,7 @@ fi
 # 4. Our packages' sources are importable from .venv (the pure-Python cores need no ROS
 #    environment), with their metadata: robots and environments are plugins found through
 #    entry points (egg-info beside each source tree), and `qgl` is a console script of the venv.
-PY_PACKAGES=(ros_ws/src/qg_common ros_ws/src/qg_recording sim_robot_node franka_robot_node robot_bridge_node qg_learning_node
+PY_PACKAGES=(ros_ws/src/qg_common ros_ws/src/qg_recording sim_robot_node franka_robot_node franka_sim_node robot_bridge_node qg_learning_node
              qg_experiments)
 site="$("$PY" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
 printf "$ROOT/%s\n" "${PY_PACKAGES[@]}" > "$site/qg_stack_sources.pth"

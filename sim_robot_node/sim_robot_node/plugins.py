@@ -8,6 +8,7 @@ loads one. The bridge never imports this module. A torque arm in the shaft scene
 """
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from typing import Any
 
@@ -84,16 +85,20 @@ def shaft_scene_section(prefix: str) -> ParameterSection:
 
 
 def shaft_arm_plugin(arm: Callable[[], ArmDescription], section: str,
-                     config_files: tuple[str, ...]) -> RobotPlugin:
+                     config_files: tuple[str, ...], engine: str | None = None) -> RobotPlugin:
     """The plugin of a torque arm holding the shaft: the cell's geometry from
     ``config/shaft_task.yaml``, its physics the section ``section`` of the ``config_files``
     (this package's, each over the one before; a ``ShaftSceneConfig``: what no file names keeps
     the dataclass default, the task's numbers).
 
     :param arm: the arm's description (called when the robot is described, not at import).
+    :param engine: the physics engine whatever the parameters say (``sim_panda_pybullet``
+        stays pybullet when a caller's parameters leave the engine to the default); ``None``:
+        the parameters' ``engine``.
     """
     def config(params: dict[str, Any]) -> ShaftSceneConfig:
-        return ShaftSceneConfig.from_dict(params.get(section, {}))
+        config = ShaftSceneConfig.from_dict(params.get(section, {}))
+        return config if engine is None else dataclasses.replace(config, engine=engine)
 
     def geometry(params: dict[str, Any]) -> ShaftTaskGeometry:
         return ShaftTaskGeometry.from_dict(params.get(SHAFT_TASK_SECTION.prefix, {}))
@@ -126,10 +131,11 @@ SIM_PANDA = shaft_arm_plugin(panda_arm, "panda_scene", ("panda_scene.yaml",))
 #: ``robot:=sim_panda_mujoco``: the same Panda and cell on MuJoCo (config/panda_mujoco.yaml
 #: picks the engine over config/panda_scene.yaml).
 SIM_PANDA_MUJOCO = shaft_arm_plugin(panda_arm, "panda_scene",
-                                    ("panda_scene.yaml", "panda_mujoco.yaml"))
+                                    ("panda_scene.yaml", "panda_mujoco.yaml"), engine="mujoco")
 #: ``robot:=sim_panda_pybullet``: the same Panda and cell on pybullet.
 SIM_PANDA_PYBULLET = shaft_arm_plugin(panda_arm, "panda_scene",
-                                      ("panda_scene.yaml", "panda_pybullet.yaml"))
+                                      ("panda_scene.yaml", "panda_pybullet.yaml"),
+                                      engine="pybullet")
 #: ``robot:=sim_xarm7``: the UFACTORY xArm 7 in the same scene (config/xarm_scene.yaml).
 SIM_XARM7 = shaft_arm_plugin(xarm7_arm, "xarm_scene", ("xarm_scene.yaml",))
 

@@ -78,7 +78,8 @@ def test_a_payload_error_of_m_kg_at_tilt_theta_gives_its_gravity_torque():
     the bridge model's by the unknown mass's: ``J_com^T (0, 0, m g)`` at the start tilt."""
     import pybullet as p
     mass, com = 0.3, np.array([0.02, 0.0, -0.03])
-    scene = scene_with(only(payload_mass_error=mass, payload_com_error=tuple(com)))
+    scene = scene_with(only(payload_mass_error=mass, payload_com_error=tuple(com)),
+                       engine="pybullet")             # its API's inverse dynamics
     model = ArmModel.of_arm(panda_arm(), payload_mass=scene.config.shaft_mass,
                             payload_com=scene.geometry.shaft_centre)
     for pose in (0, 3):

@@ -15,9 +15,9 @@ import pytest
 from franka_robot_node.core.fr3_description import FR3_READY, fr3_arm
 from franka_robot_node.core.franka_arm import FrankaConnectError, FrankaFault, TorqueRejected
 from franka_robot_node.core.franka_config import FrankaConfig
-from franka_robot_node.core.franky_sim_host import FrankySimHost
-from franka_robot_node.core.franky_sim_scene import CELL_PREFIX, PARK_HEIGHT, parked_q
-from franka_robot_node.franka_sim import DEFAULT_SCENE, scene_extensions, scene_params, spawn
+from franka_sim_node.core.franky_sim_host import FrankySimHost
+from franka_sim_node.core.franky_sim_scene import CELL_PREFIX, PARK_HEIGHT, parked_q
+from franka_sim_node.franka_sim import DEFAULT_SCENE, scene_extensions, scene_params, spawn
 from franka_robot_node.plugin import FRANKA, describe_franka
 from qg_common.shaft_task import ShaftTaskGeometry
 from qg_common.types import WrenchSetpoint
@@ -29,7 +29,7 @@ from sim_robot_node.core.shaft_scene import ShaftSceneConfig
 #: A loopback address of this test run's own (franky-sim binds libfranka's fixed port 1337).
 ADDRESS = f"127.0.{35 + os.getpid() % 200}.{1 + os.getpid() % 200}"
 UNSERVED = f"127.0.{35 + os.getpid() % 200}.250"
-DEMO_SCENE = "franka_robot_node.core.franky_sim_scene:demo_scene"
+DEMO_SCENE = "franka_sim_node.core.franky_sim_scene:demo_scene"
 
 
 def test_the_bridges_fr3_model_is_franky_sims_arm():

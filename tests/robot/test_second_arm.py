@@ -27,8 +27,10 @@ def _bridge_params() -> dict:
 
 @pytest.fixture(scope="module")
 def ideal_xarm():
+    """The ideal xArm on pybullet, whose API gives the simulator's own masses and inverse
+    dynamics to hold the model against (the default engine's run is the realistic test's)."""
     zeros = ArmImperfections.ideal()
-    robot = load_robot("sim_xarm7", {"xarm_scene": {"imperfections": {
+    robot = load_robot("sim_xarm7", {"xarm_scene": {"engine": "pybullet", "imperfections": {
         f: getattr(zeros, f) for f in zeros.__dataclass_fields__}}})
     yield robot
     robot.simulation.scene.close()

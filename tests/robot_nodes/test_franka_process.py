@@ -20,14 +20,33 @@ pytestmark = pytest.mark.ros
 ADDRESS = f"127.0.{35 + os.getpid() % 200}.{201 + os.getpid() % 50}"
 
 
-def test_the_robot_process_drives_franky_sim_through_libfranka(tmp_path):
+@pytest.mark.alone   # two 1 kHz loops on the wall clock: libfranka's own and franky-sim's
+def test_the_robot_process_drives_franky_sim_through_libfranka(tmp_path, machine_to_itself):
+    # On two cores beside other workers' processes (another franky-sim among them), libfranka's
+    # thread missed its 50 ms torque signal timeout: a real arm's computer runs nothing else.
     stack = Stack(tmp_path)
+    with machine_to_itself():
+        _drive_franky_sim(stack)
+
+
+def _drive_franky_sim(stack: Stack) -> None:
     try:
-        stack.start(("franka_sim", "franka_robot_node", "franka_sim",
+        stack.start(("franka_sim", "franka_sim_node", "franka_sim",
                      ("--address", ADDRESS, "--realtime-priority", "40")),
                     ("robot", "robot_bridge_node", "robot",
                      ("--ros-args", "-p", "robot:=franka", "-p", f"franka.address:={ADDRESS}")))
         with stack.client() as cli:
+            # The 1 kHz topics' subscriptions first: discovery on a loaded machine can take
+            # seconds, and the reset gives it the time.
+            from geometry_msgs.msg import WrenchStamped
+            from sensor_msgs.msg import JointState
+            measured: list[JointState] = []
+            commanded: list[JointState] = []
+            libfranka: list[WrenchStamped] = []
+            cli.node.create_subscription(JointState, "/joint_states", measured.append, DEEP)
+            cli.node.create_subscription(JointState, "/joint_commands", commanded.append, DEEP)
+            cli.node.create_subscription(WrenchStamped, "/franka/external_wrench",
+                                         libfranka.append, DEEP)
             robot = RobotClient(cli)
             start = shaft_start(2)
             reply = robot.reset(start, timeout=90.0)
@@ -61,18 +80,11 @@ def test_the_robot_process_drives_franky_sim_through_libfranka(tmp_path):
             # The 1 kHz topics, the arm held still (the watchdog holds it 0.1 s after the step):
             # the loop's torque (gravity included; the plugin takes it out for libfranka, which
             # adds it back) and franky-sim's measured one, two fields that agree at rest.
-            from geometry_msgs.msg import WrenchStamped
-            from sensor_msgs.msg import JointState
-            measured: list[JointState] = []
-            commanded: list[JointState] = []
-            libfranka: list[WrenchStamped] = []
             cli.spin_for(0.5)
-            cli.node.create_subscription(JointState, "/joint_states", measured.append, DEEP)
-            cli.node.create_subscription(JointState, "/joint_commands", commanded.append, DEEP)
-            cli.node.create_subscription(WrenchStamped, "/franka/external_wrench",
-                                         libfranka.append, DEEP)
+            for received in (measured, commanded, libfranka):
+                received.clear()
             assert cli.spin_until(
-                lambda: min(len(commanded), len(measured), len(libfranka)) >= 20, 20.0), \
+                lambda: min(len(commanded), len(measured), len(libfranka)) >= 20, 30.0), \
                 (len(commanded), len(measured), len(libfranka), stack.logs())
             # libfranka's own estimate beside the EKF's, as libfranka gives it (base frame);
             # franky-sim's is zeros.
@@ -85,8 +97,11 @@ def test_the_robot_process_drives_franky_sim_through_libfranka(tmp_path):
             assert np.all(np.isfinite(tau_cmd)) and np.abs(tau_cmd).max() > 5.0   # gravity
             assert np.abs(tau - tau_cmd).max() < 0.05, (tau, tau_cmd)
 
+            # The graph of nodes arrives by discovery, which can trail the topics' data.
+            expected = {"hardware", "bridge", "wrench_estimator", "recorder"}
+            assert cli.spin_until(lambda: expected <= set(cli.node.get_node_names()), 10.0), \
+                cli.node.get_node_names()
             nodes = set(cli.node.get_node_names())
-            assert {"hardware", "bridge", "wrench_estimator", "recorder"} <= nodes, nodes
             assert "sim" not in nodes
             topics = dict(cli.node.get_topic_names_and_types())
             assert "/sim/ground_truth" not in topics and "/clock" not in topics

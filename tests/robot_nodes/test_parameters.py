@@ -32,7 +32,7 @@ def test_each_robot_node_declares_only_its_own_parameters_read_only(stack):
         assert force.read_only and "feed-forward force" in force.description
         assert (force.floating_point_range[0].from_value,
                 force.floating_point_range[0].to_value) == (0.0, 20.0)
-        assert get(cli, "/bridge", "impedance.k_null", "rest.max_time") == [10.0, 0.25]
+        assert get(cli, "/bridge", "impedance.k_null", "rest.max_time") == [10.0, 3.0]
         assert get(cli, "/bridge", "robot") == ["sim_panda"]
 
         refused = set_double(cli, "/bridge", "impedance.k_null", 20.0)

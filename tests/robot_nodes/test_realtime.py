@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import Stack
 from qg_common import conversions
-from robot_client import DEEP, RobotClient, peg_start, wrench
+from robot_client import DEEP, SHORT_STEP, RobotClient, peg_start, wrench
 
 pytestmark = pytest.mark.ros
 
@@ -36,7 +36,7 @@ def test_composed_realtime_is_paced_by_the_wall_clock_and_completes_steps(stack,
     # (3.2 s of CPU for the whole test when it runs by itself).
     with machine_to_itself(), stack.client() as cli:
         stack.start(("robot", "robot_bridge_node", "robot",
-                     ("--ros-args", "-p", "sim.clock_mode:=realtime")))
+                     ("--ros-args", "-p", "sim.clock_mode:=realtime", *SHORT_STEP)))
         robot = RobotClient(cli)
         assert robot.reset(2).success
         # The loop reports its own timing once a second (counts and a histogram of
@@ -102,7 +102,7 @@ def test_separate_sim_bridge_and_estimator_processes_complete_a_step(stack, robo
     from sensor_msgs.msg import JointState
     args = ("--ros-args", "-p", f"robot:={robot}")
     stack.start(("sim", "sim_robot_node", "sim", args),
-                ("bridge", "robot_bridge_node", "bridge", args),
+                ("bridge", "robot_bridge_node", "bridge", (*args, *SHORT_STEP)),
                 ("wrench_estimator", "robot_bridge_node", "wrench_estimator", args))
     with stack.client() as cli:
         estimates: list[WrenchStamped] = []
@@ -159,7 +159,7 @@ def nextage(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
     stack = Stack(tmp_path_factory.mktemp("nextage"))
     try:
         stack.start(("sim", "sim_robot_node", "sim", NEXTAGE),
-                    ("bridge", "robot_bridge_node", "bridge", NEXTAGE))
+                    ("bridge", "robot_bridge_node", "bridge", (*NEXTAGE, *SHORT_STEP)))
         yield stack
     finally:
         stack.stop(grace=3.0)
@@ -225,13 +225,21 @@ def test_a_bridge_started_after_a_reset_takes_control_of_the_separate_sim(nextag
     with stack.client() as cli:
         robot = RobotClient(cli)
         assert robot.reset(peg_start(3), timeout=30.0).success, stack.logs()
+
+        def readers() -> set[bytes]:
+            return {bytes(i.endpoint_gid) for i in
+                    cli.node.get_subscriptions_info_by_topic("/wrench_setpoint")}
+        old_readers = readers()
         bridge = next(r for r in stack.launcher.running if r.spec.name == "bridge").popen
         bridge.send_signal(signal.SIGINT)
         assert bridge.wait(timeout=10.0) == 0, stack.logs()
-        stack.start(("bridge2", "robot_bridge_node", "bridge", NEXTAGE))
+        stack.start(("bridge2", "robot_bridge_node", "bridge", (*NEXTAGE, *SHORT_STEP)))
         log = stack.log_dir / "bridge2.log"
         assert cli.spin_until(lambda: log.exists() and "the sim restarted" in log.read_text(),
                               30.0), stack.logs()
+        # The setpoint goes once: to the new bridge's reader, not the old one's lingering entry.
+        assert cli.spin_until(lambda: bool(readers() - old_readers), 30.0), stack.logs()
+        cli.spin_for(0.2)
         event = robot.step(1, (0.0,) * 6, timeout=20.0)
         assert event is not None, stack.logs()
         cli.spin_for(1.5)                       # past the sim's 1 s before it warns

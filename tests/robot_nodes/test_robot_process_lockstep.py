@@ -39,7 +39,7 @@ def test_reset_and_setpoints_complete_with_their_seq_and_a_rerun_repeats_them_ex
         for seq, (fz, tx, ty) in enumerate(plan, start=1):
             event = robot.step(seq, (0.0, 0.0, fz, tx, ty, 0.0))
             assert event is not None, f"no AtRest for seq {seq}\n{stack.logs()}"
-            assert 0.02 - 1e-9 <= event.duration <= 0.5 + 1e-9
+            assert 0.02 - 1e-9 <= event.duration <= 3.0 + 1e-9    # rest.max_time
             assert np.all(np.isfinite(wrench(event.wrench_estimate)))
             first.append(event)
         # Simulated time on /clock: monotonic, and at least as long as the steps took.

@@ -15,6 +15,7 @@ ROOT = Path(__file__).resolve().parents[2]
 CORE_FILES = [
     *ROOT.glob("sim_robot_node/sim_robot_node/core/**/*.py"),
     *ROOT.glob("franka_robot_node/franka_robot_node/core/**/*.py"),
+    *ROOT.glob("franka_sim_node/franka_sim_node/core/**/*.py"),
     *(p for p in ROOT.glob("ros_ws/src/qg_common/qg_common/*.py")
       if p.name not in ("callback_executor.py", "conversions.py", "node_parameters.py",
                         "node_runtime.py", "topics.py")),
@@ -34,7 +35,7 @@ def test_cores_do_not_import_rclpy():
 #: The project's Python packages and their source folders (qg_interfaces is generated).
 PACKAGE_DIRS = {"qg_common": "ros_ws/src/qg_common", "qg_recording": "ros_ws/src/qg_recording",
                 "robot_bridge_node": "robot_bridge_node", "sim_robot_node": "sim_robot_node",
-                "franka_robot_node": "franka_robot_node",
+                "franka_robot_node": "franka_robot_node", "franka_sim_node": "franka_sim_node",
                 "qg_learning_node": "qg_learning_node", "qg_experiments": "qg_experiments"}
 PROJECT = {*PACKAGE_DIRS, "qg_interfaces"}
 #: What the executor and learner may import from the project: nothing of a robot stack.
@@ -135,8 +136,11 @@ def test_only_the_experiments_compose_the_bridge_and_the_learner():
     assert composers == {"qg_experiments"}
     assert imports["qg_experiments"] >= {"robot_bridge_node", "qg_learning_node", "qg_common"}
     assert [p for p, used in imports.items() if "qg_experiments" in used] == []
-    assert [p for p, used in imports.items() if "sim_robot_node" in used] == []
-    assert [p for p, used in imports.items() if "franka_robot_node" in used] == []
+    # Robots are loaded by name; only franky-sim's rehearsal (a simulator itself) builds on the
+    # simulated cell and the Franka's description, and the real-arm plugin imports no simulator.
+    assert [p for p, used in imports.items() if "sim_robot_node" in used] == ["franka_sim_node"]
+    assert [p for p, used in imports.items() if "franka_robot_node" in used] == ["franka_sim_node"]
+    assert [p for p, used in imports.items() if "franka_sim_node" in used] == []
 
 
 def _exec_depends(package: str) -> set[str]:
@@ -155,6 +159,7 @@ def test_package_xml_declares_what_the_sources_import_and_learning_needs_no_robo
 
 #: Every Python source folder of the project (ros_ws/src/qg_learning_node etc. are symlinks).
 SOURCE_DIRS = ("qg_learning_node", "robot_bridge_node", "sim_robot_node", "franka_robot_node",
+               "franka_sim_node",
                "qg_experiments",
                "ros_ws/src/qg_common", "ros_ws/src/qg_recording", "benchmarks", "tests")
 
@@ -229,7 +234,7 @@ def test_bridge_learning_and_experiments_import_without_the_simulator():
     every module of the common, recording, bridge, learning and experiment packages imports
     where ``sim_robot_node``, ``franka_robot_node`` and libfranka's client cannot."""
     names = import_everything({"sim_robot_node", "pybullet", "franka_robot_node", "franky",
-                               "franky_sim", "mujoco"},
+                               "franka_sim_node", "franky_sim", "mujoco"},
                               ["qg_common", "qg_recording", "robot_bridge_node",
                                "qg_learning_node", "qg_experiments"])
     assert len(names) >= 80, names
@@ -237,6 +242,16 @@ def test_bridge_learning_and_experiments_import_without_the_simulator():
                    "qg_experiments.runner", "qg_experiments.environments", "qg_experiments.toys",
                    "qg_learning_node.executor_node"):
         assert module in names
+
+
+@pytest.mark.ros
+def test_the_real_arms_plugin_imports_without_any_simulator():
+    """A real Franka's computer needs libfranka's client, not a physics engine: every module of
+    ``franka_robot_node`` imports where pybullet, MuJoCo, franky-sim and the simulated robots
+    cannot (the FR3's URDF file is found, not imported, in franky-sim's package)."""
+    names = import_everything({"sim_robot_node", "pybullet", "mujoco", "franky_sim",
+                               "franka_sim_node"}, ["franka_robot_node"])
+    assert {"franka_robot_node.plugin", "franka_robot_node.core.franka_arm"} <= set(names), names
 
 
 @pytest.mark.ros

@@ -26,13 +26,28 @@ def table(header: list[str], rows: list[list[str]]) -> list[str]:
         ["| " + " | ".join(r) + " |" for r in rows]
 
 
+#: What runs saved before a run recorded its step ran on: pybullet, 0.25 s step limit.
+OLD_STEP = ("pybullet", 0.25)
+
+
+def step_label(results: list[dict[str, Any]]) -> str:
+    """The physics engine and RL step limit ``results`` ran on, as a phrase: ``pybullet, step
+    limit 0.25 s`` (several where they mix). Runs saved before a run recorded them are the old
+    step's (``OLD_STEP``), so their sections stay readable and say which MDP they measured."""
+    steps = sorted({(str(r.get("engine", OLD_STEP[0])), float(r.get("step_limit", OLD_STEP[1])))
+                    for r in results})
+    return "; ".join(f"{engine}, step limit {limit:g} s" for engine, limit in steps)
+
+
 def speed(results: list[dict[str, Any]]) -> str:
-    """RL steps, worker time and simulated time of ``results``, as one phrase."""
+    """The step's engine and limit, RL steps, worker time and simulated time of ``results``,
+    as one phrase."""
     steps = sum(r.get("rl_steps", 0) for r in results)
     wall = sum(r["wall_time"] for r in results)
     sim = sum(r.get("sim_time", 0.0) for r in results)
     timeouts = sum(r.get("step_timeouts", 0) for r in results)
-    text = f"{steps} RL steps in {wall / 60:.1f} worker-minutes ({steps / wall:.2f} steps/s)"
+    text = (f"{step_label(results)}; {steps} RL steps in {wall / 60:.1f} worker-minutes "
+            f"({steps / wall:.2f} steps/s)")
     if sim:
         text += (f", {sim / max(steps, 1) * 1e3:.0f} ms simulated per step, "
                  f"{timeouts / max(steps, 1):.0%} of steps ended by the step timeout, not at rest")

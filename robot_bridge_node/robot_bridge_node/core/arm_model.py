@@ -151,15 +151,30 @@ class ArmModel:
             error = np.concatenate([position - kin.position,
                                     pin.log3(rotation @ kin.rotation.T)])
             if np.linalg.norm(error) < tolerance:
-                return q
+                return self._within_limits(q)
             jac = kin.jacobian
             q = q + jac.T @ np.linalg.solve(jac @ jac.T + 1e-6 * np.eye(6), error)
         if np.linalg.norm(error) < 1e-6:
             # Some rotated-housing starts (yaw 90 deg, pose 7) stall at ~2.5e-7 near the wrist's
             # limit; 1 um / 1 urad is far below the 0.5 mm start clearance.
-            return q
+            return self._within_limits(q)
         raise RuntimeError(
             f"inverse kinematics did not converge (error {np.linalg.norm(error):.2e})")
+
+    def _within_limits(self, q: np.ndarray) -> np.ndarray:
+        """``q`` with each joint outside its position range turned by whole turns into it where
+        that fits: the same pose. The solver does not know the ranges; the flange joint of a
+        housing turned 90 deg came out at 5.5 rad (range +-2.9), which pybullet's torque mode let
+        pass and MuJoCo's joint limits pushed back by 4 deg within the reset's settling."""
+        lower, upper = self.model.lowerPositionLimit, self.model.upperPositionLimit
+        q = q.copy()
+        for i in range(min(len(q), len(lower))):
+            if not lower[i] <= q[i] <= upper[i]:
+                turned = q[i] - 2.0 * np.pi * np.round((q[i] - 0.5 * (lower[i] + upper[i]))
+                                                       / (2.0 * np.pi))
+                if lower[i] <= turned <= upper[i]:
+                    q[i] = turned
+        return q
 
     def tool_twist(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
         """Tool twist (v, w) in the base frame."""

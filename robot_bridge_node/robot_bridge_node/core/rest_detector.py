@@ -22,7 +22,7 @@ class RestConfig:
     angular_threshold: float = 0.02    # [rad/s]
     hold_time: float = 0.02            # [s] both speeds below threshold this long
     min_time: float = 0.02             # [s]
-    max_time: float = 0.25             # [s] (docs/learning.md: why not the prototype's 0.5)
+    max_time: float = 3.0              # [s] a safety bound: the step ends at rest (docs/learning.md 3)
 
     def __post_init__(self) -> None:
         for name in ("linear_threshold", "angular_threshold", "max_time"):

@@ -155,7 +155,7 @@ class ShaftSceneConfig:
     :param imperfections: the real arm's departures from the bridge's model.
     :param pybullet: pybullet's own settings; :param mujoco: MuJoCo's own settings.
     """
-    engine: str = "pybullet"
+    engine: str = "mujoco"
     time_step: float = 0.001
     gravity: float = 9.81
     bore_segments: int = 48

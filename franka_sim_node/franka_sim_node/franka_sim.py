@@ -1,6 +1,6 @@
 """``franka_sim``: franky-sim's MuJoCo FR3 with the task's scene, serving libfranka on loopback.
 
-    ros2 run franka_robot_node franka_sim [--address 127.0.0.1] [--scene module:function]
+    ros2 run franka_sim_node franka_sim [--address 127.0.0.1] [--scene module:function]
 
 The address and the held part come from ``config/franka.yaml`` (``franka.address``,
 ``franka.tool``: the same numbers the plugin connects with), the cell from
@@ -34,14 +34,14 @@ from qg_common.shaft_task import SHAFT_TASK_SECTION, ShaftTaskGeometry
 from robot_bridge_node.core.arm_model import ArmModel
 
 from franka_robot_node.core.franka_config import FrankaConfig
-from franka_robot_node.core.franky_sim_host import FrankySimHost, SceneExtension
-from franka_robot_node.core.franky_sim_scene import SCENE_CONFIG_FILES, parked_q
+from franka_sim_node.core.franky_sim_host import FrankySimHost, SceneExtension
+from franka_sim_node.core.franky_sim_scene import SCENE_CONFIG_FILES, parked_q
 from franka_robot_node.plugin import describe_franka
 
 __all__ = ["main", "scene_params", "scene_extensions", "spawn", "DEFAULT_SCENE"]
 
 #: The scene ``franka_sim`` builds unless told otherwise.
-DEFAULT_SCENE = "franka_robot_node.core.franky_sim_scene:shaft_scene"
+DEFAULT_SCENE = "franka_sim_node.core.franky_sim_scene:shaft_scene"
 
 
 def scene_params(params_file: Path | None = None) -> dict[str, Any]:
@@ -82,7 +82,7 @@ def spawn(address: str, *args: str, timeout: float = 30.0) -> subprocess.Popen:
     :raises RuntimeError: if it ended or did not serve within ``timeout`` seconds (with what it
         printed).
     """
-    process = subprocess.Popen([sys.executable, "-m", "franka_robot_node.franka_sim",
+    process = subprocess.Popen([sys.executable, "-m", "franka_sim_node.franka_sim",
                                 "--address", address, *args], stdin=subprocess.PIPE,
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                bufsize=1)

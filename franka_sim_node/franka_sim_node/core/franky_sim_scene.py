@@ -33,7 +33,7 @@ from robot_bridge_node.core.arm_model import ArmModel
 
 from franka_robot_node.core.fr3_description import FR3_READY
 from franka_robot_node.core.franka_config import HeldTool
-from franka_robot_node.core.franky_sim_host import HAND_BODY, TCP_IN_HAND, SceneExtension
+from franka_sim_node.core.franky_sim_host import HAND_BODY, TCP_IN_HAND, SceneExtension
 
 __all__ = ["fixture_box", "held_cylinder", "residual_joint_friction", "shaft_cell",
            "shaft_scene", "parked_q", "demo_scene", "HELD_BODY", "FIXTURE_BODY", "CELL_PREFIX",
