@@ -88,6 +88,65 @@ def test_a_joint_past_its_velocity_limit_is_braked_and_one_within_is_not() -> No
     np.testing.assert_allclose(braked, expected, atol=1e-12)
 
 
+def _numpy_limit_torques(limits, last: np.ndarray | None, tau: np.ndarray, dt: float,
+                         dq: np.ndarray | None) -> np.ndarray:
+    """The torque limits as NumPy wrote them before the filter moved to Python floats (the
+    reference the filter must match)."""
+    with np.errstate(invalid="ignore"):           # inf - inf, inf * 0: NaN, as intended
+        return _numpy_limits(limits, last, tau, dt, dq)
+
+
+def _numpy_limits(limits, last: np.ndarray | None, tau: np.ndarray, dt: float,
+                  dq: np.ndarray | None) -> np.ndarray:
+    if dq is not None:
+        excess = dq - np.clip(dq, -limits.velocity, limits.velocity)
+        if np.any(excess):
+            tau = tau - VELOCITY_BRAKE_DAMPING * excess
+    tau = np.minimum(np.maximum(tau, -limits.torque), limits.torque)
+    if last is not None:
+        step = limits.torque_rate * dt
+        tau = np.minimum(np.maximum(tau, last - step), last + step)
+    return tau
+
+
+@pytest.mark.parametrize("arm", [panda_arm, xarm7_arm])
+def test_torque_limits_are_numpys_to_the_bit_on_random_and_non_finite_inputs(arm) -> None:
+    """3000 random commands, speeds and time steps through one filter (its rate limit
+    carries over), against the NumPy reference: every torque equal to the bit, NaN where it
+    has NaN. A fifth of the speeds are past their limits, some entries are inf or NaN, some
+    time steps 0, and an unlimited rate (inf) on one joint."""
+    limits = ArmModel.of_arm(arm()).limits
+    limits = type(limits)(limits.torque, np.where(np.arange(7) == 3, np.inf,
+                                                  limits.torque_rate), limits.velocity)
+    rng = np.random.default_rng(7)
+    safety, last = SafetyFilter(joints=limits), None
+    special = np.array([np.nan, np.inf, -np.inf, 0.0, -0.0])
+    for i in range(3000):
+        tau = rng.normal(0.0, 1.5, 7) * limits.torque
+        dq = rng.normal(0.0, 0.6, 7) * limits.velocity
+        if i % 10 == 0:
+            tau[rng.integers(7)] = rng.choice(special)
+            dq[rng.integers(7)] = rng.choice(special)
+        dt = 0.0 if i % 97 == 0 else float(rng.uniform(0.0005, 0.002))
+        speeds = None if i % 3 == 0 else dq
+        if i % 500 == 0:                      # a reset, with or without the applied torque
+            last = None if i % 1000 == 0 else rng.normal(0.0, 0.3, 7) * limits.torque
+            safety.reset(last)
+        expected = _numpy_limit_torques(limits, last, tau, dt, speeds)
+        got = safety.limit_torques(tau, dt, speeds)
+        np.testing.assert_array_equal(got, expected)
+        assert np.array_equal(np.signbit(got), np.signbit(expected))
+        last = expected
+
+
+def test_torque_limits_refuse_a_command_without_one_entry_per_joint() -> None:
+    safety = SafetyFilter(joints=PANDA_LIMITS)
+    with pytest.raises(ValueError, match="tau must have one entry per joint"):
+        safety.limit_torques(np.zeros(6), 0.001)
+    with pytest.raises(ValueError, match="dq must have one entry per joint"):
+        safety.limit_torques(np.zeros(7), 0.001, np.zeros((7, 1)))
+
+
 def test_a_filter_without_joint_limits_refuses_to_limit_torques() -> None:
     with pytest.raises(RuntimeError, match="joint limits"):
         SafetyFilter().limit_torques(np.zeros(7), 0.001)

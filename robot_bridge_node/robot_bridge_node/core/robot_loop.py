@@ -388,8 +388,9 @@ class RobotLoop:
         setpoint = self.setpoint
         tool = self.controller.tool
         if tool is not None:
-            setpoint = WrenchSetpoint(self.safety.limit_tilt(setpoint.wrench, tool.rotation),
-                                      setpoint.reference)
+            wrench = self.safety.limit_tilt(setpoint.wrench, tool.rotation)
+            if wrench is not setpoint.wrench:      # (inside the cone it is the same array)
+                setpoint = WrenchSetpoint(wrench, setpoint.reference)
         tau = self.safety.limit_torques(self.controller.step(state.q, state.dq, setpoint, dt), dt,
                                         state.dq)
         self.hardware.write(tau)
