@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 from qg_common.params import config_from_dict
+from qg_common.types import JointState
 
 __all__ = ["GAZ_2019_COULOMB", "GAZ_2019_VELOCITY", "RESIDUAL_FRICTION_SHARE", "RESIDUAL_COULOMB",
            "ArmImperfections", "ImperfectArm"]
@@ -167,14 +168,6 @@ class ArmImperfections:
                     self.velocity_noise))
 
 
-@dataclass(frozen=True)
-class Measurement:
-    """What the driver reports for one step: joint positions, velocities and torques."""
-    q: np.ndarray
-    dq: np.ndarray
-    tau: np.ndarray
-
-
 class ImperfectArm:
     """The drawn constants and the noise streams of one :class:`ArmImperfections`.
 
@@ -216,12 +209,12 @@ class ImperfectArm:
         """(n,) [Nm] the joints' friction torque at true velocities ``dq`` (opposes motion)."""
         return self._coulomb * np.tanh(dq / self._velocity) + self._viscous * dq
 
-    def measure(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray) -> Measurement:
+    def measure(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray) -> JointState:
         """The driver's reading of the true ``q``, ``dq`` and the realised torque ``tau``."""
         n = self.n_joints
         noise = self._noise.normal(0.0, 1.0, 3 * n) * self._sensor_noise
-        return Measurement(q=q + self.encoder_bias + noise[:n], dq=dq + noise[n:2 * n],
-                           tau=tau + self.torque_bias + noise[2 * n:])
+        return JointState(q=q + self.encoder_bias + noise[:n], dq=dq + noise[n:2 * n],
+                          tau=tau + self.torque_bias + noise[2 * n:])
 
     def start_jitter(self) -> tuple[np.ndarray, np.ndarray]:
         """One reset's ``(tilt vector change [rad] (2,), tip offset [m] (2,))``, housing frame."""

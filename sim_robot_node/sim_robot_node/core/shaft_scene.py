@@ -24,6 +24,7 @@ moving to the next start) leaves the cell ready as a teleport does.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -187,6 +188,13 @@ class ShaftSceneConfig:
         return config_from_dict(cls, params)
 
 
+def _all_finite(values: np.ndarray) -> bool:
+    """Whether every entry is finite: their sum is (a float sum, ~5x faster than
+    ``np.isfinite`` and ``np.all`` on a few entries), or, should finite entries overflow it,
+    each is."""
+    return math.isfinite(sum(values.tolist())) or bool(np.all(np.isfinite(values)))
+
+
 class ShaftScene:
     """The simulated cell: an arm holding the shaft above the bearing, in one engine's world.
 
@@ -212,6 +220,7 @@ class ShaftScene:
         self._kinematics = ArmModel.of_arm(arm)      # the flange is the tool frame (grasp point)
         self.world: ShaftWorld = build_world(arm, geometry, config)
         self.fixture = self._true_fixture()
+        self._bore_axis = self.fixture.rotation[:, 2].copy()   # out of the bore, housing z
         self.world.place_housing(self.fixture)
         self._tau = np.zeros(self.n_joints)
         self._steps = 0
@@ -280,10 +289,10 @@ class ShaftScene:
     def apply_torques(self, tau: np.ndarray) -> None:
         """Joint torques for the next step [Nm]; the caller enforces limits. With joint
         friction, the links get the command minus the friction at their true velocities."""
-        tau = np.asarray(tau, float)
-        if tau.shape != (self.n_joints,) or not np.all(np.isfinite(tau)):
+        tau = np.array(tau, float)                    # the scene's own copy
+        if tau.shape != (self.n_joints,) or not _all_finite(tau):
             raise ValueError(f"tau must be {self.n_joints} finite torques, got {tau}")
-        self._tau = tau.copy()
+        self._tau = tau
         if self._friction:
             tau = tau - self.arm_errors.friction(self._true.dq)
         self.world.set_arm_torques(tau)
@@ -302,12 +311,15 @@ class ShaftScene:
         q, dq = self.world.arm_state()
         self._true = JointState(q=q, dq=dq, tau=self._tau)
         if self._sensor_errors:
-            m = self.arm_errors.measure(q, dq, self._tau)
-            self._measured = JointState(q=m.q, dq=m.dq, tau=m.tau)
+            self._measured = self.arm_errors.measure(q, dq, self._tau)
 
     def _tip_depth(self) -> float:
+        """The tip's insertion depth (``ShaftTaskGeometry.measure``'s, against the true
+        housing), written out: the full measure costs ~15 us, and this runs every step while
+        the inner ring is off its start."""
         position, rotation = self.world.tool_pose()
-        return self.geometry.measure(position, rotation, self.fixture).insertion_depth
+        tip = position + self.geometry.grasp_height * rotation[:, 2]
+        return -float(self._bore_axis @ (tip - self.fixture.position))
 
     # --- ground truth -------------------------------------------------------------------
     def tool_pose(self) -> tuple[np.ndarray, np.ndarray]:
