@@ -80,3 +80,30 @@ def test_a_part_that_does_not_come_out_fails_the_reset_with_why(loop: RobotLoop)
         loop.reset_config = weak
     loop.reset(scene.geometry.start_pose(3))                    # the default pull: out
     assert _true_error(loop, 3)[0] < 0.001
+
+
+def test_the_realtime_watchdog_leaves_a_stuck_pull_alone() -> None:
+    """The pull is the loop's own motion: a part that does not move at first (here a pull too
+    weak to lift the arm) is at rest after the rest detector's 20 ms, and the realtime watchdog
+    held it stiffly 0.1 s later, ending every franky-sim reset after a jam. Now the pull goes on
+    until its time limit, and the watchdog begins no hold."""
+    bridge = merge_params(load_ros_params(config_file("bridge.yaml")),
+                          {"reset": {"teleport": False, "withdraw_force": 0.5,
+                                     "withdraw_timeout": 0.5},
+                           "loop": {"realtime": True}})
+    loop = build_loop(load_robot(ROBOT), bridge,
+                      estimator=lambda robot, model: MeasuredWrench(robot.simulation.contact_wrench))
+    scene = loop.simulation.scene
+    try:
+        assert loop.config.realtime
+        loop.begin()
+        scene.teleport(scene.geometry.start_pose(2))          # at the bore's mouth, tilted
+        for _ in range(5):
+            loop.execute(WrenchSetpoint.residual(-15.0, 0.0, 0.0))   # the base push jams it
+        assert not scene.ground_truth().success
+        holds = loop.watchdog_holds
+        with pytest.raises(RuntimeError, match="did not come out of the fixture within 0.5 s"):
+            loop.reset(scene.geometry.start_pose(3))
+        assert loop.watchdog_holds == holds
+    finally:
+        scene.close()

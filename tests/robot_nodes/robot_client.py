@@ -26,11 +26,6 @@ def peg_start(index: int) -> types.StartPose:
     return PegCell.from_dict(
         load_ros_params(config_file("peg_task.yaml"))["peg_task"]).start_pose(index)
 
-#: The pre-rest step limit (0.25 s) for tests whose subject is not the RL step (processes,
-#: transport, pacing): the default step ends at rest within ``rest.max_time`` 3 s, which on
-#: two loaded cores made a realtime step of separate processes last tens of seconds of wall time.
-SHORT_STEP = ("-p", "rest.max_time:=0.25")
-
 #: Best effort like the 1 kHz publishers, deep enough that a slow test process loses nothing.
 DEEP = rclpy.qos.QoSProfile(depth=2000, reliability=rclpy.qos.ReliabilityPolicy.BEST_EFFORT)
 

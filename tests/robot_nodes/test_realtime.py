@@ -8,9 +8,9 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-from conftest import Stack
+from conftest import SHORT_STEP, Stack
 from qg_common import conversions
-from robot_client import DEEP, SHORT_STEP, RobotClient, peg_start, wrench
+from robot_client import DEEP, RobotClient, peg_start, wrench
 
 pytestmark = pytest.mark.ros
 

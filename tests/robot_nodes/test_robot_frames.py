@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import SHORT_STEP
 from robot_client import RobotClient
 
 pytestmark = pytest.mark.ros
@@ -60,7 +61,8 @@ def test_every_robots_bag_has_its_description_and_frames_and_the_tool_is_where_f
     from robot_bridge_node.core.robot_frames import urdf_root_link
 
     stack.start(*(("robot_" + r, "robot_bridge_node", "robot",
-                   ("--ros-args", "-r", f"__ns:=/{r}", "-p", f"robot:={r}")) for r in ROBOTS))
+                   ("--ros-args", "-r", f"__ns:=/{r}", "-p", f"robot:={r}", *SHORT_STEP))
+                  for r in ROBOTS))
     episodes = Path(stack.env["QG_RUNS_DIR"]) / "episodes"
     with stack.client() as cli:
         statuses = {r: cli.node.create_publisher(EpisodeStatus, f"/{r}/episode_status", LATCHED)

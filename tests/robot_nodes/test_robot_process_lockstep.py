@@ -19,7 +19,7 @@ ROBOT = ("robot", "robot_bridge_node", "robot")
 def test_reset_and_setpoints_complete_with_their_seq_and_a_rerun_repeats_them_exactly(stack):
     stack.start(ROBOT)
     rng = np.random.default_rng(3)
-    plan = [(-10.0, *rng.uniform(-1.0, 1.0, 2)) for _ in range(10)]
+    plan = [(-10.0, *rng.uniform(-1.0, 1.0, 2)) for _ in range(5)]   # default steps: <= 3 s each
     with stack.client() as cli:
         from rosgraph_msgs.msg import Clock
         clock: list[int] = []

@@ -10,11 +10,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import SHORT_STEP
 from live_capture import RL_TOPICS, SENSOR_TOPICS, LiveCapture, offered_qos, stamp_ns
 
 pytestmark = pytest.mark.ros
 
-ROBOT = ("robot", "robot_bridge_node", "robot", ("--ros-args", "-p", "sim.clock_mode:=lockstep"))
+#: The robot process of the stack tests: lockstep, and the 0.25 s step (their subject is the
+#: stack, not the step; ``test_robot_process_lockstep.py`` and the demo run the default step).
+ROBOT = ("robot", "robot_bridge_node", "robot",
+         ("--ros-args", "-p", "sim.clock_mode:=lockstep", *SHORT_STEP))
 
 
 def executor_spec(max_steps: int, alone: bool = False) -> tuple:
@@ -116,7 +120,7 @@ def test_train_episode_is_recorded_and_replays_into_the_same_graph(stack, tmp_pa
     from qg_common.params import config_file, load_ros_params
 
     checkpoints = tmp_path / "checkpoints"
-    stack.start(ROBOT, learner_spec(checkpoints), executor_spec(max_steps=8))
+    stack.start(ROBOT, learner_spec(checkpoints), executor_spec(max_steps=25))
     with stack.client() as cli:
         live = LiveCapture(cli)
         episodes = Episodes(cli)
@@ -127,7 +131,7 @@ def test_train_episode_is_recorded_and_replays_into_the_same_graph(stack, tmp_pa
         assert response.success, response.message + stack.logs()
         final = episodes.final(response.episode_id, timeout=240.0)
         assert final.state == "done", final.message + stack.logs()
-        assert 1 <= final.step <= 8
+        assert 1 <= final.step <= 25
         states = [s.state for s in episodes.statuses if s.episode_id == response.episode_id]
         assert states.index("resetting") < states.index("running") < states.index("done")
         cli.spin_for(0.5)
@@ -399,7 +403,7 @@ def test_in_process_runner_repeats_the_ros_stack_episode(stack, tmp_path):
     # 6e-5 on MuJoCo at 0.25 s: the stiffer the contact and the longer the step, the more a
     # last-digit difference between the processes grows (its source is not found).
     engine = "sim_panda_pybullet"
-    stack.start((*ROBOT[:3], (*ROBOT[3], "-p", f"robot:={engine}", "-p", "rest.max_time:=0.25")),
+    stack.start((*ROBOT[:3], (*ROBOT[3], "-p", f"robot:={engine}")),
                 learner_spec(tmp_path / "checkpoints"), executor)
     with stack.client() as cli:
         episodes = Episodes(cli)

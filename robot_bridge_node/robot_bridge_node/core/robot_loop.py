@@ -319,6 +319,10 @@ class RobotLoop:
                 raise RuntimeError(f"the part did not come out of the fixture within "
                                    f"{config.withdraw_timeout} s ({inside() * 1e3:.1f} mm short "
                                    f"of the approach point)")
+            # The pull is the loop's own motion, not a commander's step: a jammed part rests
+            # for the rest detector's 20 ms before it breaks free, and the realtime watchdog
+            # then held it stiffly 0.1 s later (franky-sim: every reset after a jam failed).
+            self.feed_watchdog()
             self.tick()
         self.begin()
 
