@@ -35,13 +35,14 @@ import numpy as np
 from franka_robot_node.core.franka_arm import FrankaConnectError, FrankaFault
 from franka_sim_node.franka_sim import spawn
 from franka_robot_node.plugin import FRANKA
-from qg_common.params import load_ros_params, package_config
+from qg_common.params import load_ros_params, merge_params, package_config
 from qg_common.types import WrenchSetpoint
 from robot_bridge_node.core.hardware_interface import robot_defaults
 from robot_bridge_node.core.robot_loop import MAX_STATE_GAP, RobotLoop, StateClock, build_loop
 from robot_bridge_node.core.torque_kind import build_ekf
 
 PUSH = 15.0        # [N] along the tool axis, each way
+FREE_AIR_STEP = 0.25   # [s] the free-air steps' limit (nothing stops the arm: no rest)
 FORCE = (0.0, 0.0, -5.0, 0.0, 0.0, 0.0)   # [N, Nm] the known push on the hand, base frame
 
 
@@ -168,6 +169,9 @@ def main() -> None:
             print(f"hold {args.hold} s: {results['hold']}", flush=True)
             arm.close()                              # the loop's first write starts anew
             bridge = robot_defaults(FRANKA, (("robot_bridge_node", "bridge.yaml"),), "bridge")
+            # Free-air steps at the 0.25 s limit: a step that ends at rest (the default, up to
+            # 3 s) carried the free arm 0.47 m per step, out of the demo scene and its start.
+            bridge = merge_params(bridge, {"rest": {"max_time": FREE_AIR_STEP}})
             ekf = load_ros_params(package_config("robot_bridge_node", "wrench_estimator.yaml"))
             loop = build_loop(robot, bridge, lambda robot, model: build_ekf(ekf, model),
                               StateClock(arm, MAX_STATE_GAP))

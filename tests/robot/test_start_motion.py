@@ -72,7 +72,7 @@ def test_a_part_that_does_not_come_out_fails_the_reset_with_why(loop: RobotLoop)
             break
     weak = loop.reset_config
     loop.reset_config = ResetConfig(**{**weak.__dict__, "withdraw_force": 0.5,
-                                       "withdraw_timeout": 0.5})
+                                       "withdraw_force_max": 0.5, "withdraw_timeout": 0.5})
     try:
         with pytest.raises(RuntimeError, match="did not come out of the fixture within 0.5 s"):
             loop.reset(scene.geometry.start_pose(3))
@@ -89,7 +89,7 @@ def test_the_realtime_watchdog_leaves_a_stuck_pull_alone() -> None:
     until its time limit, and the watchdog begins no hold."""
     bridge = merge_params(load_ros_params(config_file("bridge.yaml")),
                           {"reset": {"teleport": False, "withdraw_force": 0.5,
-                                     "withdraw_timeout": 0.5},
+                                     "withdraw_force_max": 0.5, "withdraw_timeout": 0.5},
                            "loop": {"realtime": True}})
     loop = build_loop(load_robot(ROBOT), bridge,
                       estimator=lambda robot, model: MeasuredWrench(robot.simulation.contact_wrench))
@@ -107,3 +107,20 @@ def test_the_realtime_watchdog_leaves_a_stuck_pull_alone() -> None:
         assert loop.watchdog_holds == holds
     finally:
         scene.close()
+
+
+def test_a_pull_too_weak_at_first_grows_until_the_part_comes_out(loop: RobotLoop) -> None:
+    """A first pull that cannot lift the arm (0.5 N, see above) grows to ``withdraw_force_max``
+    over half the timeout: the part comes out and the arm reaches the next start."""
+    scene = loop.simulation.scene
+    loop.reset(scene.geometry.start_pose(4))
+    for _ in range(5):
+        loop.execute(WrenchSetpoint.residual(-15.0, 0.0, 0.0))      # jammed at the mouth
+    weak = loop.reset_config
+    loop.reset_config = ResetConfig(**{**weak.__dict__, "withdraw_force": 0.5})
+    try:
+        loop.reset(scene.geometry.start_pose(6))
+    finally:
+        loop.reset_config = weak
+    off, turned = _true_error(loop, 6)
+    assert off < 0.001 and np.degrees(turned) < 0.5, (off, np.degrees(turned))

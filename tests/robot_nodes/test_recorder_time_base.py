@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import SHORT_STEP
 from live_capture import LiveCapture, stamp_ns
 from robot_client import RobotClient
 
@@ -34,7 +35,8 @@ def test_realtime_bag_is_stamped_like_the_live_messages(stack) -> None:
     from qg_recording.episode_recorder import TOPICS
     from qg_recording.player import message_class
 
-    stack.start(("robot", "robot_bridge_node", "robot", ("--ros-args", "-p", "sim.clock_mode:=realtime")))
+    stack.start(("robot", "robot_bridge_node", "robot",
+                 ("--ros-args", "-p", "sim.clock_mode:=realtime", *SHORT_STEP)))
     bag = Path(stack.env["QG_RUNS_DIR"]) / "episodes" / EPISODE
     with stack.client() as cli:
         live = LiveCapture(cli, ("/joint_states", "/ee_pose", "/ee_at_rest"))

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from conftest import Stack
+from conftest import SHORT_STEP, Stack
 
 pytestmark = pytest.mark.ros
 
@@ -32,7 +32,9 @@ def demo_run(tmp_path_factory: pytest.TempPathFactory) -> DemoRun:
     env = Stack(tmp).env                 # the private domain and the stack's environment
     (tmp / "stack.yaml").write_text(
         "processes:\n"
-        "  - {name: robot, package: robot_bridge_node, executable: robot}\n"
+        # The 0.25 s step: the subject is the fleet, not the step.
+        "  - {name: robot, package: robot_bridge_node, executable: robot,\n"
+        f"     args: [--ros-args, {', '.join(SHORT_STEP)}]}}\n"
         "  - {name: learner, package: qg_learning_node, executable: learner}\n"
         "  - {name: executor, package: qg_learning_node, executable: executor,\n"
         f"     args: [--ros-args, -p, 'task.test_max_steps:={TEST_MAX_STEPS}']}}\n")

@@ -175,4 +175,7 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
         # The peers' runs come from their own benchmarks; their section follows ours.
         from qg_experiments import peers_report
         peers_report.write_section(path, out)
+    # The Franka's runs are whole qgl runs (realtime, franky-sim): their data is kept beside.
+    from qg_experiments import franka_report
+    franka_report.write_section(path, docs / "data" / franka_report.DATA.name)
     return path

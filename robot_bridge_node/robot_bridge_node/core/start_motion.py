@@ -2,9 +2,10 @@
 
 A real arm cannot be put at a start pose; between episodes it has to back out of the task and
 move there, as a robot's operator would teach it. First the part comes out of the fixture
-compliantly: ``RobotLoop.reset`` pulls the shaft along its own axis with ``withdraw_force``
-under the task's hybrid controller (soft laterally and in rotation, so the bore guides the
-shaft) until the tool is level with the approach point ``start - approach``. A stiff withdrawal
+compliantly: ``RobotLoop.reset`` pulls the shaft out along the bore's axis with
+``withdraw_force``, growing to the safety filter's force limit while it stays in, under the
+task's hybrid controller (soft laterally and in rotation, so the bore guides the shaft) until
+the tool is level with the approach point ``start - approach``. A stiff withdrawal
 jams: the joint law below holds the tool's orientation to a fraction of a degree, a fully
 inserted shaft in a bore of 0.1 mm clearance allows 1 degree, and the arm locked in 1 of 4
 withdrawals on the simulated Panda and on franky-sim's FR3 (not a millimetre of motion while
@@ -52,8 +53,11 @@ class ResetConfig:
 
     :param teleport: a simulated robot is put at the start at once (its simulation's shortcut);
         false moves it there as a real arm is moved. A robot without a simulation always moves.
-    :param withdraw_force: [N] the pull along the tool's axis that takes the part out of the
-        fixture, under the task's compliant controller (the task pushes with 15 N).
+    :param withdraw_force: [N] the pull along the bore's axis that takes the part out of the
+        fixture, under the task's compliant controller (the task pushes with 15 N); it grows to
+        ``withdraw_force_max`` over half the timeout while the part stays in.
+    :param withdraw_force_max: [N] the strongest pull (the safety filter's ``force_max`` caps
+        it).
     :param withdraw_timeout: [s] the part must be out (the tool level with the approach point)
         within this long, or the reset fails.
     :param linear_speed: [m/s] the tool's speed backing out and approaching along the axis.
@@ -74,6 +78,7 @@ class ResetConfig:
     """
     teleport: bool = True
     withdraw_force: float = 10.0
+    withdraw_force_max: float = 20.0
     withdraw_timeout: float = 3.0
     linear_speed: float = 0.05
     joint_speed: float = 0.5
@@ -87,7 +92,8 @@ class ResetConfig:
     arrive_gain: float = 5.0
 
     def __post_init__(self) -> None:
-        for name in ("withdraw_force", "withdraw_timeout", "linear_speed", "joint_speed",
+        for name in ("withdraw_force", "withdraw_force_max", "withdraw_timeout", "linear_speed",
+                     "joint_speed",
                      "min_duration", "arrive_tolerance",
                      "arrive_angle", "arrive_speed", "arrive_timeout", "arrive_gain"):
             value = getattr(self, name)
