@@ -63,7 +63,10 @@ def test_realtime_bag_is_stamped_like_the_live_messages(stack) -> None:
         assert all(t == stamp_ns(deserialize_message(data, cls)) for t, data in recorded[topic])
         in_span = [(stamp_ns(m), data) for m, data in zip(live.decoded(topic), live.received[topic])
                    if min(by_stamp) <= stamp_ns(m) <= max(by_stamp)]
-        assert len(in_span) >= 20, (topic, len(in_span))
+        live_stamps = [stamp_ns(m) for m in live.decoded(topic)]
+        assert len(in_span) >= 20, (topic, len(in_span), len(live_stamps),
+                                    live_stamps[:1], live_stamps[-1:], min(by_stamp),
+                                    max(by_stamp), len(by_stamp))
         assert all(by_stamp.get(t) == data for t, data in in_span), topic
     events = [deserialize_message(data, message_class(TOPICS["/ee_at_rest"].type_name))
               for _, data in recorded["/ee_at_rest"]]
