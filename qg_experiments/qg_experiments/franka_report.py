@@ -14,6 +14,8 @@ import json
 from pathlib import Path
 from typing import Any
 
+from qg_experiments.report.markdown import write_marked_block
+
 __all__ = ["franka_section", "write_section", "DATA", "BEGIN", "END"]
 
 #: Where the rehearsal's measured runs are kept (relative to the repository).
@@ -37,16 +39,9 @@ def franka_section(data: dict[str, Any]) -> str:
 
 def write_section(results_md: Path, data_path: Path = DATA) -> None:
     """Replace the marked block in ``results_md`` (or append it); nothing without data."""
-    if not data_path.exists():
-        return
-    block = franka_section(json.loads(data_path.read_text()))
-    text = results_md.read_text() if results_md.exists() else ""
-    if BEGIN in text and END in text:
-        head, rest = text.split(BEGIN, 1)
-        text = head + block.rstrip("\n") + rest.split(END, 1)[1]
-    else:
-        text = text.rstrip("\n") + "\n\n" + block
-    results_md.write_text(text)
+    if data_path.exists():
+        write_marked_block(results_md, BEGIN, END,
+                           franka_section(json.loads(data_path.read_text())))
 
 
 def main() -> None:

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from qg_experiments.peers import REPORT_SEEDS, peer_table
+from qg_experiments.report.markdown import write_marked_block
 from qg_experiments.runner import config_digest
 from qg_experiments.standard_tasks import standard_table
 from qg_experiments.stats import Interval, format_interval, paired_comparison
@@ -182,14 +183,7 @@ def peers_section(out: Path) -> str:
 
 def write_section(results_md: Path, out: Path) -> None:
     """Replace the marked block in ``results_md`` (or append it)."""
-    text = results_md.read_text() if results_md.exists() else ""
-    block = peers_section(out)
-    if BEGIN in text and END in text:
-        head, rest = text.split(BEGIN, 1)
-        text = head + block.rstrip("\n") + rest.split(END, 1)[1]
-    else:
-        text = text.rstrip("\n") + "\n\n" + block
-    results_md.write_text(text)
+    write_marked_block(results_md, BEGIN, END, peers_section(out))
 
 
 def main() -> None:

@@ -6,6 +6,7 @@ cell reads the same wherever it appears.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 from qg_experiments import stats
@@ -81,3 +82,16 @@ def grid_table(rows: list[dict[str, Any]], caption: str) -> list[str]:
         ["critic lr", "iterations/cycle", *[label(a) for a in algorithms]],
         [[f"{lr:g}", str(it), *[grid_cell(by_key.get((a, lr, it))) for a in algorithms]]
          for lr, it in cells])
+
+
+def write_marked_block(page: Path, begin: str, end: str, block: str) -> None:
+    """Put ``block`` (which starts with ``begin`` and ends with ``end``) into ``page`` in place
+    of the block between those markers, or append it: a section made apart from the rest of
+    the page (the peers', the Franka's) survives the page being written anew around it."""
+    text = page.read_text() if page.exists() else ""
+    if begin in text and end in text:
+        head, rest = text.split(begin, 1)
+        text = head + block.rstrip("\n") + rest.split(end, 1)[1]
+    else:
+        text = text.rstrip("\n") + "\n\n" + block
+    page.write_text(text)
