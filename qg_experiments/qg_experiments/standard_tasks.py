@@ -35,6 +35,7 @@ import gymnasium
 import numpy as np
 import torch
 
+from qg_experiments.runner import config_digest
 from qg_experiments.sb3_models import sb3_model
 from qg_experiments.stats import mean_interval
 from qg_learning_node.learner import algorithms
@@ -157,7 +158,7 @@ def run_standard(spec: StandardSpec) -> dict[str, Any]:
     env.close()
     eval_env.close()
     return {"experiment": spec.experiment, "name": spec.name, "spec": dataclasses.asdict(spec),
-            "config_digest": "", "evaluations": evaluations, "train_episodes": episodes,
+            "config_digest": config_digest(spec.config_dir), "evaluations": evaluations, "train_episodes": episodes,
             "final_return": evaluations[-1]["return"], "wall_time": time.perf_counter() - start}
 
 
