@@ -158,7 +158,8 @@ def run_standard(spec: StandardSpec) -> dict[str, Any]:
     env.close()
     eval_env.close()
     return {"experiment": spec.experiment, "name": spec.name, "spec": dataclasses.asdict(spec),
-            "config_digest": config_digest(spec.config_dir), "evaluations": evaluations, "train_episodes": episodes,
+            "config_digest": config_digest(spec.config_dir), "evaluations": evaluations,
+            "train_episodes": episodes,
             "final_return": evaluations[-1]["return"], "wall_time": time.perf_counter() - start}
 
 
