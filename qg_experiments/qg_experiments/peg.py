@@ -146,7 +146,8 @@ def run_peg(spec: PegRunSpec) -> dict[str, Any]:
             "q_given": agent.q_values(states, actions).reshape(len(GRID_STATES), -1).tolist(),
             "q_pi": agent.q_values(GRID_STATES, agent.act(GRID_STATES)).tolist(),
             "rl_steps": int(sum(e["steps"] for e in episodes)),
-            **({"sim_time": env.sim_time, "step_timeouts": env.step_timeouts}
+            **({"sim_time": env.sim_time, "step_timeouts": env.step_timeouts,
+                "engine": "pybullet", "step_limit": env.loop.rest.config.max_time}
                if isinstance(env, NextagePeg) else {}),
             "wall_time": time.perf_counter() - start}
 

@@ -47,9 +47,9 @@ def speed(results: list[dict[str, Any]]) -> str:
     wall = sum(r["wall_time"] for r in results)
     sim = sum(r.get("sim_time", 0.0) for r in results)
     timeouts = sum(r.get("step_timeouts", 0) for r in results)
-    text = (f"{step_label(results)}; {steps} RL steps in {wall / 60:.1f} worker-minutes "
-            f"({steps / wall:.2f} steps/s)")
-    if sim:
+    text = f"{steps} RL steps in {wall / 60:.1f} worker-minutes ({steps / wall:.2f} steps/s)"
+    if sim:                    # a robot's loop, whose steps end at rest or at the step limit
+        text = f"{step_label(results)}; {text}"
         text += (f", {sim / max(steps, 1) * 1e3:.0f} ms simulated per step, "
                  f"{timeouts / max(steps, 1):.0%} of steps ended by the step timeout, not at rest")
     return text

@@ -13,7 +13,7 @@ from qg_experiments.report.aggregate_section import aggregate_section
 from qg_experiments.report.comparison import comparison, graph_section
 from qg_experiments.report.grid_sections import (grid_section, learning_curves_section,
                                                  q_section, random_section, variant_section)
-from qg_experiments.report.markdown import table
+from qg_experiments.report.markdown import step_label, table
 from qg_experiments.report.peg_sections import peg_budget, peg_paired, peg_section
 from qg_experiments.report.tables import episodes_csv, write_bar, write_csv
 from qg_experiments.runner import StackSettings
@@ -73,6 +73,7 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
                       for r in results})
     timing_path = out / "timing.json"
     timing = json.loads(timing_path.read_text()) if timing_path.exists() else {}
+    robot_runs = [r for name, results in results_by.items() if name != "peg" for r in results]
     estimator = {"ekf": "the EKF wrench estimator (as in the ROS stack)",
                  "ground_truth": "the simulator's true contact wrench (perfect sensor)"}
     lines = ["# Results: the thesis's experiments in simulation", "",
@@ -91,6 +92,9 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
              f"[`data/{profile.name}/`](data/{profile.name}/); per-run JSON: `{out}`; "
              f"TensorBoard scalars of every learning run (Stable-Baselines3's tag names): "
              f"`tensorboard --logdir {tensorboard}`.", "",
+             f"**Physics and step.** The robot runs' engine and RL step: "
+             f"{step_label(robot_runs) or 'none run'} (each section's speed line names its "
+             f"own; a step ends at rest or at its limit).", "",
              f"**Seeds.** Every table below is computed on the report seeds "
              f"{', '.join(map(str, profile.seeds.report))}; every choice of the setup (the state, "
              f"the discount, the variants' cells) was made on the tuning seeds "
