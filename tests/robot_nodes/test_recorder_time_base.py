@@ -13,7 +13,7 @@ from conftest import SHORT_STEP
 from live_capture import LiveCapture, stamp_ns
 from robot_client import RobotClient
 
-pytestmark = pytest.mark.ros   # a realtime robot process, but nothing here is timed
+pytestmark = pytest.mark.ros   # a realtime robot process
 
 EPISODE = "rt_0001"
 
@@ -25,7 +25,8 @@ def status(state: str):
                          reward_type="sparse", initial_pose=2, step=0, max_steps=1)
 
 
-def test_realtime_bag_is_stamped_like_the_live_messages(stack) -> None:
+@pytest.mark.alone   # a 1 kHz best-effort stream to this test's own subscriber
+def test_realtime_bag_is_stamped_like_the_live_messages(stack, machine_to_itself) -> None:
     from qg_interfaces.msg import EpisodeStatus
     from rclpy.serialization import deserialize_message
     from rosbags.highlevel import AnyReader
@@ -35,10 +36,14 @@ def test_realtime_bag_is_stamped_like_the_live_messages(stack) -> None:
     from qg_recording.episode_recorder import TOPICS
     from qg_recording.player import message_class
 
-    stack.start(("robot", "robot_bridge_node", "robot",
-                 ("--ros-args", "-p", "sim.clock_mode:=realtime", *SHORT_STEP)))
     bag = Path(stack.env["QG_RUNS_DIR"]) / "episodes" / EPISODE
-    with stack.client() as cli:
+    # With the machine to itself: beside the other workers this test's subscriber, starved,
+    # stopped receiving for good (3 of 6 suite runs: 318 states, 0.33 s of them, then none
+    # while the robot published on and the bag recorded; Fast DDS giving up a shared-memory
+    # reader that falls behind would do that, unproven).
+    with machine_to_itself(), stack.client() as cli:
+        stack.start(("robot", "robot_bridge_node", "robot",
+                     ("--ros-args", "-p", "sim.clock_mode:=realtime", *SHORT_STEP)))
         live = LiveCapture(cli, ("/joint_states", "/ee_pose", "/ee_at_rest"))
         statuses = cli.node.create_publisher(EpisodeStatus, "/episode_status", LATCHED)
         robot = RobotClient(cli)
@@ -47,9 +52,6 @@ def test_realtime_bag_is_stamped_like_the_live_messages(stack) -> None:
         assert cli.spin_until(bag.exists, 30.0), stack.logs()
         assert robot.reset(2).success
         assert robot.step(1, (0.0, 0.0, -8.0, 0.2, 0.0, 0.0), timeout=10.0) is not None
-        # A second of the held arm in the bag too: on loaded cores the live stream can trail
-        # the loop, and a bag of a reset and one short step held none of it (3 of 5 suite runs).
-        cli.spin_for(1.0)
         statuses.publish(status("done"))
         assert cli.spin_until(lambda: bag_info(bag).complete, 30.0), stack.logs()
     with AnyReader([bag]) as reader:
