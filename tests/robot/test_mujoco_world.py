@@ -16,6 +16,8 @@ from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from sim_robot_node.core.mujoco_world import CELL_CONTACT_BIT, add_shaft_cell, set_cell_physics
 from sim_robot_node.core.shaft_scene import ShaftSceneConfig
 
+from arms import pressed_balance
+
 ROBOT = "sim_panda_mujoco"
 PUSH = -15.0  # [N] the base policy (contact convention: pressing in)
 #: A random-residual episode that inserts in a few steps, on a fresh realistic arm (found by
@@ -105,27 +107,8 @@ def test_contact_wrench_matches_the_balance_of_the_arm(ideal_loop: RobotLoop, po
     summed contact forces are the wrench the arm feels (as a wrist sensor between hand and
     shaft would read it)."""
     loop = ideal_loop
-    geometry = loop.simulation.scene.geometry
-    loop.reset(geometry.start_pose(pose))
-    for _ in range(2):
-        loop.execute(WrenchSetpoint.residual(PUSH, *residual))
-    for _ in range(5):  # then the base push alone until the arm rests
-        if not loop.execute(WrenchSetpoint.residual(PUSH, 0.0, 0.0)).timed_out:
-            break
-    else:
-        pytest.fail("the arm did not come to rest")
+    balance = pressed_balance(loop, pose, residual, rest_steps=5, push=PUSH)
     scene = loop.simulation.scene
-    before = scene.joint_state()
-    loop.tick()
-    after = scene.joint_state()
-    model = loop.controller.model
-    kinematics = model.kinematics(before.q)
-    ddq = (after.dq - before.dq) / loop.config.dt
-    generalised = (model.mass_matrix(before.q) @ ddq
-                   + model.nonlinear_effects(before.q, before.dq) - after.tau)
-    world = np.linalg.pinv(kinematics.jacobian.T) @ generalised
-    balance = np.concatenate([kinematics.rotation.T @ world[:3],
-                              kinematics.rotation.T @ world[3:]])
     truth = scene.ground_truth().wrench
     np.testing.assert_allclose(truth[:3], balance[:3], atol=0.05)
     np.testing.assert_allclose(truth[3:], balance[3:], atol=0.005)

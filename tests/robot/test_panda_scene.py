@@ -10,12 +10,20 @@ from robot_bridge_node.core.hardware_interface import load_robot
 from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from qg_common.types import N_START_POSES, WrenchSetpoint
 
-from arms import cell, ideal, start
+from arms import cell, ideal, pressed_balance, start
 
 
 @pytest.fixture(scope="module")
 def loop() -> RobotLoop:
     loop = build_loop(load_robot("sim_panda", ideal()))
+    yield loop
+    loop.simulation.scene.close()
+
+
+@pytest.fixture(scope="module")
+def pybullet_loop() -> RobotLoop:
+    """The ideal arm on pybullet, whose own contact wrench is checked here."""
+    loop = build_loop(load_robot("sim_panda_pybullet", ideal()))
     yield loop
     loop.simulation.scene.close()
 
@@ -55,29 +63,13 @@ def test_measured_torque_is_the_last_command_and_bad_torques_are_refused(loop: R
 
 
 @pytest.mark.parametrize("pose,residual", [(0, (0.0, 0.0)), (3, (0.0, 0.0)), (2, (-1.5, 0.0))])
-def test_contact_wrench_matches_the_balance_of_the_arm(loop: RobotLoop, pose: int,
+def test_contact_wrench_matches_the_balance_of_the_arm(pybullet_loop: RobotLoop, pose: int,
                                                        residual: tuple[float, float]) -> None:
-    """J^T F = M ddq + C dq + g - tau over one step: the simulator's wrench must agree, also
-    with friction and the shaft pinched in the bore (where summing pybullet's contact points
-    came out tens of newtons off)."""
-    loop.reset(start(pose))
-    for _ in range(2):
-        loop.execute(WrenchSetpoint.residual(-15.0, *residual))
-    for _ in range(10):  # then the base push alone until the arm rests
-        if not loop.execute(WrenchSetpoint.residual(-15.0, 0.0, 0.0)).timed_out:
-            break
-    else:
-        pytest.fail("the arm did not come to rest")
-    before = loop.simulation.scene.joint_state()
-    loop.tick()  # one step of known torque: J^T F = M ddq + C dq + g - tau over that step
-    after = loop.simulation.scene.joint_state()
-    model = loop.controller.model
-    kin = model.kinematics(before.q)
-    ddq = (after.dq - before.dq) / loop.config.dt
-    generalised = (model.mass_matrix(before.q) @ ddq
-                   + model.nonlinear_effects(before.q, before.dq) - after.tau)
-    world = np.linalg.pinv(kin.jacobian.T) @ generalised
-    balance = np.concatenate([kin.rotation.T @ world[:3], kin.rotation.T @ world[3:]])
+    """J^T F = M ddq + C dq + g - tau over one step: pybullet's wrench must agree, also with
+    friction and the shaft pinched in the bore (where summing pybullet's contact points came
+    out tens of newtons off; MuJoCo's is ``test_mujoco_world.py``'s)."""
+    loop = pybullet_loop
+    balance = pressed_balance(loop, pose, residual, rest_steps=10)
     truth = loop.simulation.scene.ground_truth().wrench
     np.testing.assert_allclose(truth[:3], balance[:3], atol=0.2)
     np.testing.assert_allclose(truth[3:], balance[3:], atol=0.02)

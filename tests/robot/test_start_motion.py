@@ -42,6 +42,13 @@ def _tilt_back(loop: RobotLoop) -> tuple[float, float]:
                          -3.0, 3.0))
 
 
+def _insert(loop: RobotLoop) -> None:
+    """The base push with the tilt-back residuals, until the shaft is in (at most 20 steps)."""
+    for _ in range(20):
+        if loop.execute(WrenchSetpoint.residual(-15.0, *_tilt_back(loop))).ground_truth.success:
+            return
+
+
 def test_a_reset_moves_the_arm_to_its_start_within_a_millimetre(loop: RobotLoop) -> None:
     loop.reset(loop.simulation.scene.geometry.start_pose(0))
     off, turned = _true_error(loop, 0)
@@ -53,9 +60,7 @@ def test_a_reset_moves_the_arm_to_its_start_within_a_millimetre(loop: RobotLoop)
 def test_a_reset_takes_an_inserted_shaft_out_and_to_the_next_start(loop: RobotLoop) -> None:
     scene = loop.simulation.scene
     loop.reset(scene.geometry.start_pose(1))
-    for _ in range(20):
-        if loop.execute(WrenchSetpoint.residual(-15.0, *_tilt_back(loop))).ground_truth.success:
-            break
+    _insert(loop)
     assert scene.ground_truth().success                          # fully in: 16 mm deep
     loop.reset(scene.geometry.start_pose(5))
     off, turned = _true_error(loop, 5)
@@ -67,9 +72,7 @@ def test_a_part_that_does_not_come_out_fails_the_reset_with_why(loop: RobotLoop)
     """The withdrawal is bounded: a pull too weak to lift the arm fails in its time limit."""
     scene = loop.simulation.scene
     loop.reset(scene.geometry.start_pose(2))
-    for _ in range(20):
-        if loop.execute(WrenchSetpoint.residual(-15.0, *_tilt_back(loop))).ground_truth.success:
-            break
+    _insert(loop)
     weak = loop.reset_config
     loop.reset_config = ResetConfig(**{**weak.__dict__, "withdraw_force": 0.5,
                                        "withdraw_force_max": 0.5, "withdraw_timeout": 0.5})
