@@ -1,0 +1,78 @@
+"""When the learner node checkpoints after a training episode: once all of its transitions are
+in, or once they have stopped coming (published while the learner was down).
+
+The node's callbacks are called directly, in this process, in the order and at the pace a
+loaded machine delivers them: the episode's end first, its transitions after it, slowly.
+"""
+from __future__ import annotations
+
+import time
+
+import pytest
+
+pytestmark = pytest.mark.ros
+
+GRACE = 0.4         # [s] the grace of this test (the node's is 3 s)
+
+
+@pytest.fixture
+def learner(tmp_path, monkeypatch):
+    import rclpy
+
+    from qg_learning_node import learner_node
+
+    monkeypatch.setattr(learner_node, "CHECKPOINT_GRACE", GRACE)
+    context_args = ["--ros-args", "-p", f"checkpoint_dir:={tmp_path}", "-p", "resume:=false"]
+    rclpy.init(args=context_args, domain_id=232)        # no test's processes use it
+    node = learner_node.LearnerNode()
+    try:
+        from qg_interfaces.msg import TaskSpec
+        node._on_task(TaskSpec(kind="residual", observation="tilt_only", state_dim=2,
+                               action_dim=2))
+        yield node
+    finally:
+        node.destroy_node()
+        rclpy.shutdown()
+
+
+def _end(node, episode_id: str, steps: int) -> None:
+    from qg_interfaces.msg import EpisodeStatus
+    for state in ("running", "done"):
+        node._on_status(EpisodeStatus(episode_id=episode_id, state=state, mode="train",
+                                      step=steps))
+
+
+def _take(node, episode_id: str, step: int) -> None:
+    from qg_interfaces.msg import Transition
+    node._on_transition(Transition(episode_id=episode_id, step=step, state=[0.1, -0.2],
+                                   action=[0.0, 0.5], reward=-0.3, next_state=[0.1, -0.1]))
+
+
+def _saved_steps(node) -> int | None:
+    from qg_learning_node.learner.learner_core import LearnerCore
+    return LearnerCore.load(node.checkpoint).steps if node.checkpoint.exists() else None
+
+
+def test_a_slow_learner_checkpoints_only_once_every_transition_is_in(learner) -> None:
+    # Six transitions taken 0.25 s apart after the end: the last comes 1.5 s after it, well
+    # past the grace, yet each within the grace of the one before.
+    _end(learner, "slow", 6)
+    for step in range(6):
+        time.sleep(0.25)
+        learner._checkpoint_pending()
+        assert _saved_steps(learner) is None, step
+        _take(learner, "slow", step)
+    assert _saved_steps(learner) == 6
+
+
+def test_transitions_that_stop_coming_are_checkpointed_without_the_rest(learner) -> None:
+    _end(learner, "down", 5)
+    _take(learner, "down", 0)
+    _take(learner, "down", 1)
+    time.sleep(GRACE / 2)
+    learner._checkpoint_pending()
+    assert _saved_steps(learner) is None
+    time.sleep(GRACE)
+    learner._checkpoint_pending()
+    assert _saved_steps(learner) == 2
+    assert "down" in learner.checkpointed and "down" not in learner.pending_checkpoint
