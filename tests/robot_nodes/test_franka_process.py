@@ -91,6 +91,7 @@ def _drive_franky_sim(stack: Stack) -> None:
             # are compared tick by tick (both carry the tick's stamp) on ticks where the arm is
             # still: a loaded machine hands a subscriber a backlog, and two topics' backlogs
             # need not cover the same ticks (medians of each differed by 2.1 Nm in a suite run).
+            cli.spin_for(0.5)
             for received in (measured, commanded, libfranka):
                 received.clear()
 
