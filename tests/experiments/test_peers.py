@@ -68,7 +68,8 @@ def test_the_table_counts_per_seed_means_and_the_section_is_replaced_in_place(tm
 
 def _standard_run(algorithm: str, seed: int, final: float) -> dict:
     return {"spec": {"task": "Pendulum-v1", "algorithm": algorithm, "seed": seed},
-            "evaluations": [{"steps": 5000, "return": final - 50}, {"steps": 10000, "return": final}],
+            "evaluations": [{"steps": 5000, "return": final - 50},
+                            {"steps": 10000, "return": final}],
             "final_return": final, "wall_time": 1.0}
 
 
