@@ -2,10 +2,12 @@
 
 ``docs/results.md`` is written by ``report`` from the suite's runs; the peers' runs are made by
 their own benchmarks (``benchmarks/peers_bench.py``, ``benchmarks/standard_tasks_bench.py``), so
-their section is written here, between two markers, and a regenerated report keeps it when it
-copies the marked block over (or it is written again with ``python -m
-qg_experiments.peers_report``). Every number is counted by ``stats``: per-seed means, BCa
-intervals, paired comparisons on the same seeds.
+their section is written here, between markers, and a regenerated report keeps it when it copies
+the marked blocks over (or they are written again with ``python -m qg_experiments.peers_report``).
+SB3 on the shaft task and the standard tasks are two blocks with markers of their own, because
+their runs are made apart (hours each, not always on the same machine): each block is written
+from the runs found under ``--out`` and left as it is when there are none. Every number is
+counted by ``stats``: per-seed means, BCa intervals, paired comparisons on the same seeds.
 """
 from __future__ import annotations
 
@@ -19,15 +21,18 @@ import numpy as np
 from qg_experiments.peers import REPORT_SEEDS, peer_table
 from qg_experiments.report.markdown import write_marked_block
 from qg_experiments.runner import config_digest
-from qg_experiments.standard_tasks import standard_table
+from qg_experiments.standard_tasks import TASKS, standard_table
 from qg_experiments.stats import Interval, format_interval, paired_comparison
 from qg_experiments.tasks import load_results
 from qg_learning_node.learner.algorithms import REGISTRY, label
 
-__all__ = ["BEGIN", "END", "ours_rows", "peers_section", "write_section"]
+__all__ = ["BEGIN", "END", "STANDARD_BEGIN", "STANDARD_END", "ours_rows", "peers_section",
+           "standard_section", "write_section"]
 
 BEGIN = "<!-- peers: written by qg_experiments.peers_report -->"
 END = "<!-- /peers -->"
+STANDARD_BEGIN = "<!-- standard tasks: written by qg_experiments.peers_report -->"
+STANDARD_END = "<!-- /standard tasks -->"
 #: The prefix :func:`ours_rows` gives our runner's runs in the peers' table.
 RUNNER = "runner_"
 
@@ -127,11 +132,19 @@ def _shaft(out: Path) -> list[str]:
     return lines
 
 
+def _task_settings() -> str:
+    """The tasks' own settings of our agents (``TASKS[task]["ours"]``), as a sentence."""
+    named = [f"on {task.split(':')[-1]} " + ", ".join(f"`{k}` {v}" for k, v in s["ours"].items())
+             for task, s in TASKS.items() if s.get("ours")]
+    return ("Our agents' settings of a task alone (`standard_tasks.TASKS`): "
+            + "; ".join(named) + ". ") if named else ""
+
+
 def _standard(out: Path) -> list[str]:
     results = load_results(out, "standard_tasks")
-    if not results:
-        return []
     lines = ["### QG-DDPG on standard Gymnasium tasks", "",
+             f"Runs: `benchmarks/standard_tasks_bench.py`; per-run JSON under "
+             f"`{out}/standard_tasks`.", "",
              "Same budget and settings for all (`qg_experiments.standard_tasks`): SB3 DDPG's "
              "defaults with 64-64 networks, RL Zoo's noise per task; QG-DDPG takes the task's "
              "known reward range as a-priori bounds. *Final return*: mean of the deterministic "
@@ -143,20 +156,22 @@ def _standard(out: Path) -> list[str]:
              "cars every episode that reached the goal bounds its whole chain, none before the "
              "first success. `QGSparseMountainCar-v0` is the same car with the thesis's sparse "
              "reward (-1 per step, 0 at the goal; its return is minus the steps to the goal), "
-             "where SB3's SAC runs too. Why ours lose Pendulum seeds and QG-DDPG MountainCar "
-             "seeds: [learning.md](learning.md), section 13.", "",
-             "| task | algorithm | steps | seeds | final return [95 % CI] | steps to TD3's final "
-             "return, per seed |", "|---|---|---|---|---|---|"]
+             "where SB3's SAC runs too. " + _task_settings() + "Why ours lost Pendulum seeds and "
+             "QG-DDPG MountainCar seeds, and what the settings change: "
+             "[learning.md](learning.md), section 13.", "",
+             "| task | algorithm | steps | seeds | final return [95 % CI] | final return per seed "
+             "| steps to TD3's final return, per seed |", "|---|---|---|---|---|---|---|"]
     steps = {r["spec"]["task"]: r["evaluations"][-1]["steps"] for r in results}
-    for row in standard_table(results):
-        reach = row["steps_to_td3"] or {}
-        lines.append(f"| {row['task']} | {_standard_name(row['algorithm'])} | "
-                     f"{steps[row['task']]} | {len(row['seeds'])} | "
-                     f"{format_interval(Interval(**row['final_return']))} | "
-                     + ", ".join("inf" if math.isinf(v) else str(int(v))
-                                 for _, v in sorted(reach.items())) + " |")
     final = {(r["spec"]["task"], r["spec"]["algorithm"], r["spec"]["seed"]): r["final_return"]
              for r in results}
+    for row in standard_table(results):
+        reach = row["steps_to_td3"] or {}
+        finals = ", ".join(f"{final[row['task'], row['algorithm'], s]:.1f}" for s in row["seeds"])
+        lines.append(f"| {row['task']} | {_standard_name(row['algorithm'])} | "
+                     f"{steps[row['task']]} | {len(row['seeds'])} | "
+                     f"{format_interval(Interval(**row['final_return']))} | {finals} | "
+                     + ", ".join("inf" if math.isinf(v) else str(int(v))
+                                 for _, v in sorted(reach.items())) + " |")
     lines += [""]
     for task in sorted({k[0] for k in final}):
         def of(algorithm: str) -> dict[int, float]:
@@ -171,19 +186,28 @@ def _standard(out: Path) -> list[str]:
 
 
 def peers_section(out: Path) -> str:
-    """The marked markdown block from the saved runs under ``out``."""
+    """The peers' marked block (SB3 on the shaft task) from the saved runs under ``out``."""
     lines = [BEGIN, "## 8. Peers: Stable-Baselines3 on our task, QG-DDPG on standard tasks", "",
              "Runs: `benchmarks/peers_bench.py` (and `--ours` for our runner's runs on the same "
              "seeds), `benchmarks/standard_tasks_bench.py`; per-run JSON under "
              f"`{out}/peers`, `{out}/grid`, `{out}/standard_tasks`; the peers' TensorBoard "
              f"scalars beside ours in `{out}/tensorboard/peers`.", ""]
-    lines += _shaft(out) + _standard(out) + [END]
+    lines += _shaft(out) + [END]
     return "\n".join(lines) + "\n"
 
 
+def standard_section(out: Path) -> str:
+    """The standard tasks' marked block from the saved runs under ``out``."""
+    return "\n".join([STANDARD_BEGIN, *_standard(out), STANDARD_END]) + "\n"
+
+
 def write_section(results_md: Path, out: Path) -> None:
-    """Replace the marked block in ``results_md`` (or append it)."""
-    write_marked_block(results_md, BEGIN, END, peers_section(out))
+    """Replace each marked block in ``results_md`` whose runs are under ``out`` (or append it);
+    a block without runs there is left as the page has it."""
+    if (out / "peers").is_dir():
+        write_marked_block(results_md, BEGIN, END, peers_section(out))
+    if load_results(out, "standard_tasks"):
+        write_marked_block(results_md, STANDARD_BEGIN, STANDARD_END, standard_section(out))
 
 
 def main() -> None:
@@ -192,7 +216,7 @@ def main() -> None:
     parser.add_argument("--results", type=Path, default=Path("docs/results.md"))
     args = parser.parse_args()
     write_section(args.results, args.out)
-    print(f"wrote the peers' section of {args.results}")
+    print(f"wrote the peers' blocks of {args.results} from the runs under {args.out}")
 
 
 if __name__ == "__main__":

@@ -66,6 +66,43 @@ def test_the_table_counts_per_seed_means_and_the_section_is_replaced_in_place(tm
     assert "| SB3 TD3 | defaults | 2 | 52.5 [" in first and "3/4 | 1/2 | 400 [" in first
 
 
+def _standard_run(algorithm: str, seed: int, final: float) -> dict:
+    return {"spec": {"task": "Pendulum-v1", "algorithm": algorithm, "seed": seed},
+            "evaluations": [{"steps": 5000, "return": final - 50},
+                            {"steps": 10000, "return": final}],
+            "final_return": final, "wall_time": 1.0}
+
+
+def test_the_standard_tasks_block_is_written_alone_and_leaves_the_peers_block_as_it_is(
+        tmp_path) -> None:
+    """The SB3 shaft runs and the standard tasks' runs are made apart: regenerating one block
+    from its runs keeps the other's text, and a block is replaced in place."""
+    out = tmp_path / "runs"
+    (out / "standard_tasks").mkdir(parents=True)
+    finals = {("qgddpg", 100): -150.0, ("qgddpg", 101): -170.0, ("sb3_td3", 100): -160.0,
+              ("sb3_td3", 101): -200.0}
+    for (algorithm, seed), final in finals.items():
+        (out / "standard_tasks" / f"Pendulum_{algorithm}_s{seed}.json").write_text(
+            json.dumps(_standard_run(algorithm, seed, final)))
+    shaft = f"{peers_report.BEGIN}\n## 8. Peers\n\nthe shaft runs' text\n{peers_report.END}\n"
+    results_md = tmp_path / "results.md"
+    results_md.write_text(f"# Results\n\n{shaft}\n## 9. The Franka\n")
+    peers_report.write_section(results_md, out)
+    first = results_md.read_text()
+    assert first.startswith(f"# Results\n\n{shaft}\n## 9. The Franka\n")    # untouched
+    block = first.split(peers_report.STANDARD_BEGIN, 1)[1].split(peers_report.STANDARD_END)[0]
+    assert "| Pendulum-v1 | QG-DDPG (ours) | 10000 | 2 | -160.0 [" in block
+    assert "| -150.0, -170.0 | 10000, 10000 |" in block   # per seed; TD3's mean final: -180
+    (out / "standard_tasks" / "Pendulum_qgddpg_s101.json").write_text(
+        json.dumps(_standard_run("qgddpg", 101, -190.0)))
+    peers_report.write_section(results_md, out)
+    second = results_md.read_text()
+    assert second.count(peers_report.STANDARD_BEGIN) == 1
+    assert "| -150.0, -190.0 | 10000, inf |" in second
+    assert second.split(peers_report.STANDARD_BEGIN)[0] == first.split(
+        peers_report.STANDARD_BEGIN)[0]
+
+
 def test_a_standard_task_run_evaluates_along_the_way(tmp_path) -> None:
     result = StandardSpec("Pendulum-v1", "qgddpg", 100, steps=250).run()
     assert [e["steps"] for e in result["evaluations"]] == [250]

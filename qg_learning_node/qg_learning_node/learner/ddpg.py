@@ -12,6 +12,10 @@ the only thing the variants change (``DDPGConfig.bounds``):
 * ``he2017`` - He et al. (2017): n-step lower/upper bounds from the current critic along the
   trajectory, enforced as a penalty ``lambda * relu(L - Q)^2 + lambda * relu(Q - U)^2``.
 
+The actor's loss is ``-Q(s, pi(s))``, plus, if ``DDPGConfig.actor_preact_penalty`` is set, that
+weight times the mean squared pre-tanh output: a bound that lifts a whole goal-reaching chain at
+once can drive the tanh into saturation on every state, where it passes no gradient back.
+
 No target networks by default (the thesis argues they delay divergence, not prevent it); they can
 be switched on with a soft update rate ``tau``.
 """
@@ -184,7 +188,10 @@ class DDPG:
         critic_loss.backward()
         self.critic_opt.step()
 
-        actor_loss = -self.critic(s, self.actor(s)).mean()
+        pre_tanh = self.actor[:-1](s)      # the actor without its output tanh
+        actor_loss = -self.critic(s, torch.tanh(pre_tanh)).mean()
+        if self.config.actor_preact_penalty > 0:
+            actor_loss = actor_loss + self.config.actor_preact_penalty * torch.mean(pre_tanh ** 2)
         self.actor_opt.zero_grad()
         actor_loss.backward()
         self.actor_opt.step()

@@ -82,6 +82,8 @@ class AgentSettings:
     :param reward_range: ``(r_min, r_max)`` for a-priori bounds; ``None``: the unwrapped
         environment's ``reward_range`` if it is finite, else none.
     :param normalize_observations: scale a bounded observation box to [-1, 1].
+    :param actor_preact_penalty: ``DDPGConfig.actor_preact_penalty`` (0: none): keeps the
+        actor's tanh out of saturation when a bound lifts the critic at once.
     :param seed: networks, sampling, noise and the first ``env.reset``.
     """
     algorithm: str = "qgddpg"
@@ -105,6 +107,7 @@ class AgentSettings:
     zero_action: tuple[float, ...] | None = None
     reward_range: tuple[float, float] | None = None
     normalize_observations: bool = True
+    actor_preact_penalty: float = 0.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -175,7 +178,7 @@ class QGDDPG:
                           actor_activation=s.actor_activation, actor_init=init[0],
                           critic_init=init[1], critic_lr=s.critic_lr, actor_lr=s.actor_lr,
                           bounds="none", r_min=lo, r_max=hi, target_networks=s.target_networks,
-                          tau=s.tau, seed=s.seed)
+                          tau=s.tau, actor_preact_penalty=s.actor_preact_penalty, seed=s.seed)
         zero = (None if s.zero_action is None
                 else tuple(self._to_actor_units(np.asarray(s.zero_action)).tolist()))
         base = LearnerConfig(ddpg=ddpg, replay_capacity=s.buffer_size, use_qgraph=False,

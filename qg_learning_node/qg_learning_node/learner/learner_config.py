@@ -9,6 +9,7 @@ its networks. ``ddpg`` and ``learner_core`` use them and name them again for the
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
@@ -57,6 +58,12 @@ class DDPGConfig:
     :param tau: soft update rate of the target networks.
     :param he_horizon: steps ahead/behind for the ``he2017`` bounds.
     :param he_lambda: penalty weight of the ``he2017`` bounds.
+    :param actor_preact_penalty: weight of the mean squared pre-tanh output of the actor in its
+        loss; 0 = none (the thesis, the Panda task). Why: when the graph bounds a first
+        goal-reaching chain, the critic's values jump and the deterministic actor's tanh
+        saturates at one end on every state; saturated, tanh passes almost no gradient back, so
+        the actor stays a constant push (MountainCarContinuous-v0: docs/learning.md section 13).
+        The penalty keeps the pre-activations near the range where tanh still has a slope.
     :param seed: seed of the network initialisation.
     """
 
@@ -75,6 +82,7 @@ class DDPGConfig:
     tau: float = 0.005
     he_horizon: int = 8
     he_lambda: float = 0.01
+    actor_preact_penalty: float = 0.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -100,6 +108,9 @@ class DDPGConfig:
             raise ValueError(f'tau must lie in (0, 1], got {self.tau}')
         if self.he_horizon < 1 or self.he_lambda < 0:
             raise ValueError('he_horizon must be >= 1 and he_lambda >= 0')
+        if not 0.0 <= self.actor_preact_penalty < math.inf:
+            raise ValueError('actor_preact_penalty must be a finite number >= 0, got '
+                             f'{self.actor_preact_penalty}')
 
     @property
     def effective_actor_lr(self) -> float:

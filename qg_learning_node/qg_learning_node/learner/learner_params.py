@@ -47,7 +47,8 @@ LEARNER_SECTION = ParameterSection(
         "census_every": (1, 1_000_000), "graph_resolution": (0.0, 2.0),
         "updates_per_step": POSITIVE, "publish_every": (1, 1_000_000),
         "ddpg.gamma": (0.0, 1.0), "ddpg.critic_lr": (0.0, 1.0), "ddpg.actor_lr": (0.0, 1.0),
-        "ddpg.tau": (0.0, 1.0), "ddpg.he_horizon": (1, 100_000), "ddpg.he_lambda": POSITIVE},
+        "ddpg.tau": (0.0, 1.0), "ddpg.he_horizon": (1, 100_000), "ddpg.he_lambda": POSITIVE,
+        "ddpg.actor_preact_penalty": POSITIVE},
     runtime=RUNTIME_FIELDS, applies="from the next training cycle",
     fixed=("read-only: the networks, Q-Graph and replay memory are built with it; restart "
            "the learner (without resume) to change it"))
