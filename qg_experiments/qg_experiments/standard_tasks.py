@@ -90,6 +90,13 @@ class StandardSpec:
         task = self.task.split(":")[-1].split("-")[0]
         return f"{task}_{self.algorithm}{steps}_s{self.seed}"
 
+    @property
+    def task_settings(self) -> dict[str, Any]:
+        """The task's settings of our agents (``TASKS[task]["ours"]``) that this run takes:
+        a run is saved with them, and a saved run made without them is not this run."""
+        return (dict(TASKS[self.task].get("ours", {}))
+                if algorithms.REGISTRY[self.algorithm].ours else {})
+
     def run(self) -> dict[str, Any]:
         return run_standard(self)
 
@@ -138,7 +145,7 @@ def _ours(spec: StandardSpec, env: gymnasium.Env) -> QGDDPG:
                   **{**SB3_DDPG_SETTINGS, "actor_hidden": HIDDEN, "critic_hidden": HIDDEN,
                      "noise": kind, "noise_sigma": sigma, "noise_theta": theta,
                      "reward_range": TASKS[spec.task]["reward_range"],
-                     "normalize_observations": True, **TASKS[spec.task].get("ours", {})})
+                     "normalize_observations": True, **spec.task_settings})
 
 
 def run_standard(spec: StandardSpec) -> dict[str, Any]:
@@ -165,7 +172,7 @@ def run_standard(spec: StandardSpec) -> dict[str, Any]:
     eval_env.close()
     return {"experiment": spec.experiment, "name": spec.name, "spec": dataclasses.asdict(spec),
             "config_digest": config_digest(spec.config_dir),
-            "task_settings": task.get("ours", {}) if ours else {}, "evaluations": evaluations,
+            "task_settings": spec.task_settings, "evaluations": evaluations,
             "train_episodes": episodes,
             "final_return": evaluations[-1]["return"], "wall_time": time.perf_counter() - start}
 

@@ -53,8 +53,12 @@ def _saved(out: Path, spec: RunnableSpec) -> dict[str, Any] | None:
     defaults = {f.name: f.default for f in dataclasses.fields(spec)
                 if f.default is not dataclasses.MISSING}
     saved_spec = json.loads(json.dumps({**defaults, **result.get("spec", {})}))
+    # Settings a spec takes from elsewhere than its fields (a standard task's settings of our
+    # agents) are saved with the run; a run saved before they existed had none.
+    settings = json.loads(json.dumps(getattr(spec, "task_settings", {})))
     same = (saved_spec == json.loads(json.dumps(dataclasses.asdict(spec)))
-            and result.get("config_digest") == config_digest(spec.config_dir))
+            and result.get("config_digest") == config_digest(spec.config_dir)
+            and result.get("task_settings", {}) == settings)
     return result if same else None
 
 

@@ -121,3 +121,30 @@ def test_sb3_models_take_action_noise_where_the_registry_says_and_the_sparse_car
     assert type(td3.action_noise).__name__ == "OrnsteinUhlenbeckActionNoise"
     spec = StandardSpec("qg_experiments:QGSparseMountainCar-v0", "sb3_sac", 100, steps=250)
     assert spec.name == "QGSparseMountainCar_sb3_sac_250_s100"
+
+
+def test_a_saved_standard_run_without_its_tasks_settings_of_ours_is_not_reused(tmp_path) -> None:
+    """MountainCar gives our agents the actor's pre-tanh penalty: a run saved before that (no
+    ``task_settings``) is another run, SB3's and the other tasks' runs are unaffected."""
+    import dataclasses
+    import json
+
+    from qg_experiments.runner import config_digest
+    from qg_experiments.tasks import result_path, unsaved
+
+    def save(spec: StandardSpec, **extra) -> None:
+        path = result_path(tmp_path, spec)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps({"spec": dataclasses.asdict(spec),
+                                    "config_digest": config_digest(None), **extra}))
+
+    ours = StandardSpec("MountainCarContinuous-v0", "qgddpg", 100)
+    sb3 = StandardSpec("MountainCarContinuous-v0", "sb3_td3", 100)
+    pendulum = StandardSpec("Pendulum-v1", "qgddpg", 100)
+    assert ours.task_settings == {"actor_preact_penalty": 0.1}
+    assert sb3.task_settings == {} and pendulum.task_settings == {}
+    for spec in (ours, sb3, pendulum):
+        save(spec)                                     # saved as before the settings existed
+    assert unsaved([ours, sb3, pendulum], tmp_path) == [ours]
+    save(ours, task_settings={"actor_preact_penalty": 0.1})
+    assert unsaved([ours, sb3, pendulum], tmp_path) == []
