@@ -53,10 +53,15 @@ def _saved(out: Path, spec: RunnableSpec) -> dict[str, Any] | None:
     defaults = {f.name: f.default for f in dataclasses.fields(spec)
                 if f.default is not dataclasses.MISSING}
     saved_spec = json.loads(json.dumps({**defaults, **result.get("spec", {})}))
+    current = json.loads(json.dumps(dataclasses.asdict(spec)))
+    # Where the config files were read (config/, or a frozen copy for a long sweep) is not the
+    # run's identity; their numbers are (``config_digest``).
+    for fields in (saved_spec, current):
+        fields.pop("config_dir", None)
     # Settings a spec takes from elsewhere than its fields (a standard task's settings of our
     # agents) are saved with the run; a run saved before they existed had none.
     settings = json.loads(json.dumps(getattr(spec, "task_settings", {})))
-    same = (saved_spec == json.loads(json.dumps(dataclasses.asdict(spec)))
+    same = (saved_spec == current
             and result.get("config_digest") == config_digest(spec.config_dir)
             and result.get("task_settings", {}) == settings)
     return result if same else None

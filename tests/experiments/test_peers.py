@@ -148,3 +148,33 @@ def test_a_saved_standard_run_without_its_tasks_settings_of_ours_is_not_reused(t
     assert unsaved([ours, sb3, pendulum], tmp_path) == [ours]
     save(ours, task_settings={"actor_preact_penalty": 0.1})
     assert unsaved([ours, sb3, pendulum], tmp_path) == []
+
+
+def test_a_run_saved_from_a_frozen_copy_of_the_config_is_the_same_run_until_a_number_differs(
+        tmp_path) -> None:
+    """A long sweep reads a copy of config/ (``--config-dir``): its runs are resumed from
+    config/ itself, whose numbers they were made with, and are rerun from the copy once a number
+    there is edited."""
+    import dataclasses
+    import json
+    import shutil
+
+    from qg_common.params import config_file
+    from qg_experiments.runner import STACK_CONFIG_FILES, config_digest
+    from qg_experiments.tasks import result_path, unsaved
+
+    copy = tmp_path / "config"
+    copy.mkdir()
+    for name in STACK_CONFIG_FILES:
+        shutil.copy(config_file(name), copy / name)
+    frozen = StandardSpec("Pendulum-v1", "qgddpg", 100, config_dir=str(copy))
+    path = result_path(tmp_path / "runs", frozen)
+    path.parent.mkdir(parents=True)
+    path.write_text(json.dumps({"spec": dataclasses.asdict(frozen),
+                                "config_digest": config_digest(copy)}))
+    here = StandardSpec("Pendulum-v1", "qgddpg", 100)
+    assert unsaved([here, frozen], tmp_path / "runs") == []
+    learner = (copy / "learner.yaml").read_text()
+    assert "batch_size: 64" in learner
+    (copy / "learner.yaml").write_text(learner.replace("batch_size: 64", "batch_size: 32"))
+    assert unsaved([here, frozen], tmp_path / "runs") == [frozen]
