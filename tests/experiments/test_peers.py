@@ -123,30 +123,32 @@ def test_sb3_models_take_action_noise_where_the_registry_says_and_the_sparse_car
     assert spec.name == "QGSparseMountainCar_sb3_sac_250_s100"
 
 
+def _save_run(out, spec: StandardSpec, digest: str, **extra) -> None:
+    """A saved run of ``spec`` under ``out``, as ``run_specs`` leaves it (its spec and the
+    config digest it was made under), with ``extra`` fields."""
+    import dataclasses
+
+    from qg_experiments.tasks import result_path
+    path = result_path(out, spec)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"spec": dataclasses.asdict(spec), "config_digest": digest,
+                                **extra}))
+
+
 def test_a_saved_standard_run_without_its_tasks_settings_of_ours_is_not_reused(tmp_path) -> None:
     """MountainCar gives our agents the actor's pre-tanh penalty: a run saved before that (no
     ``task_settings``) is another run, SB3's and the other tasks' runs are unaffected."""
-    import dataclasses
-    import json
-
-    from qg_experiments.runner import config_digest
-    from qg_experiments.tasks import result_path, unsaved
-
-    def save(spec: StandardSpec, **extra) -> None:
-        path = result_path(tmp_path, spec)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps({"spec": dataclasses.asdict(spec),
-                                    "config_digest": config_digest(None), **extra}))
+    from qg_experiments.tasks import unsaved
 
     ours = StandardSpec("MountainCarContinuous-v0", "qgddpg", 100)
     sb3 = StandardSpec("MountainCarContinuous-v0", "sb3_td3", 100)
     pendulum = StandardSpec("Pendulum-v1", "qgddpg", 100)
     assert ours.task_settings == {"actor_preact_penalty": 0.1}
     assert sb3.task_settings == {} and pendulum.task_settings == {}
-    for spec in (ours, sb3, pendulum):
-        save(spec)                                     # saved as before the settings existed
+    for spec in (ours, sb3, pendulum):                 # saved as before the settings existed
+        _save_run(tmp_path, spec, config_digest(None))
     assert unsaved([ours, sb3, pendulum], tmp_path) == [ours]
-    save(ours, task_settings={"actor_preact_penalty": 0.1})
+    _save_run(tmp_path, ours, config_digest(None), task_settings={"actor_preact_penalty": 0.1})
     assert unsaved([ours, sb3, pendulum], tmp_path) == []
 
 
@@ -155,23 +157,18 @@ def test_a_run_saved_from_a_frozen_copy_of_the_config_is_the_same_run_until_a_nu
     """A long sweep reads a copy of config/ (``--config-dir``): its runs are resumed from
     config/ itself, whose numbers they were made with, and are rerun from the copy once a number
     there is edited."""
-    import dataclasses
-    import json
     import shutil
 
     from qg_common.params import config_file
-    from qg_experiments.runner import STACK_CONFIG_FILES, config_digest
-    from qg_experiments.tasks import result_path, unsaved
+    from qg_experiments.runner import STACK_CONFIG_FILES
+    from qg_experiments.tasks import unsaved
 
     copy = tmp_path / "config"
     copy.mkdir()
     for name in STACK_CONFIG_FILES:
         shutil.copy(config_file(name), copy / name)
     frozen = StandardSpec("Pendulum-v1", "qgddpg", 100, config_dir=str(copy))
-    path = result_path(tmp_path / "runs", frozen)
-    path.parent.mkdir(parents=True)
-    path.write_text(json.dumps({"spec": dataclasses.asdict(frozen),
-                                "config_digest": config_digest(copy)}))
+    _save_run(tmp_path / "runs", frozen, config_digest(copy))
     here = StandardSpec("Pendulum-v1", "qgddpg", 100)
     assert unsaved([here, frozen], tmp_path / "runs") == []
     learner = (copy / "learner.yaml").read_text()
