@@ -159,8 +159,11 @@ def _standard(out: Path) -> list[str]:
              "where SB3's SAC runs too. " + _task_settings() + "Why ours lost Pendulum seeds and "
              "QG-DDPG MountainCar seeds, and what the settings change: "
              "[learning.md](learning.md), section 13.", "",
+             "*Goal found*: per seed, the training episodes (noisy actions) that reached the "
+             "goal, of all it played; a seed at 0 never saw a reward but the step's cost.", "",
              "| task | algorithm | steps | seeds | final return [95 % CI] | final return per seed "
-             "| steps to TD3's final return, per seed |", "|---|---|---|---|---|---|---|"]
+             "| steps to TD3's final return, per seed | goal found in training, per seed |",
+             "|---|---|---|---|---|---|---|---|"]
     steps = {r["spec"]["task"]: r["evaluations"][-1]["steps"] for r in results}
     final = {(r["spec"]["task"], r["spec"]["algorithm"], r["spec"]["seed"]): r["final_return"]
              for r in results}
@@ -171,7 +174,9 @@ def _standard(out: Path) -> list[str]:
                      f"{steps[row['task']]} | {len(row['seeds'])} | "
                      f"{format_interval(Interval(**row['final_return']))} | {finals} | "
                      + ", ".join("inf" if math.isinf(v) else str(int(v))
-                                 for _, v in sorted(reach.items())) + " |")
+                                 for _, v in sorted(reach.items())) + " | "
+                     + ", ".join("-" if found is None else f"{found[0]}/{found[1]}"
+                                 for _, found in sorted(row["goal_found"].items())) + " |")
     lines += [""]
     for task in sorted({k[0] for k in final}):
         def of(algorithm: str) -> dict[int, float]:

@@ -42,11 +42,25 @@ from qg_experiments.stats import mean_interval
 from qg_learning_node.learner import algorithms
 from qg_learning_node.learner.gym_agent import QGDDPG, SB3_DDPG_SETTINGS
 
-__all__ = ["TASKS", "HIDDEN", "StandardSpec", "run_standard", "standard_table"]
+__all__ = ["TASKS", "HIDDEN", "StandardSpec", "run_standard", "standard_table", "goal_found"]
+
+
+def _car_goal(episode: dict[str, float]) -> bool:
+    """MountainCar pays +100 at the goal and at most 0.1 per step (999 steps: 99.9) otherwise,
+    so an episode's return is positive exactly when it reached the goal."""
+    return episode["return"] > 0.0
+
+
+def _sparse_goal(episode: dict[str, float]) -> bool:
+    """The sparse car pays -1 per step and 0 on the goal step: a return above minus the steps."""
+    return episode["return"] > -episode["steps"]
+
 
 #: Per task: steps, evaluation period and episodes, exploration noise, the known reward range
 #: QG-DDPG takes a priori (Pendulum: -(pi^2 + 0.1 * 8^2 + 0.001 * 2^2) .. 0; MountainCar:
-#: -0.1 * 1^2 per step .. +100 at the goal; the sparse car: -1 .. 0), and the algorithms a sweep
+#: -0.1 * 1^2 per step .. +100 at the goal; the sparse car: -1 .. 0), ``reached_goal``: whether
+#: a training episode (its steps and return) reached the task's goal (none on Pendulum: there is
+#: no goal to find, so exploration cannot miss it), and the algorithms a sweep
 #: runs by default (the registry's keys, ``learner/algorithms.py``; any registered one can run);
 #: ``ours``: settings of our agents (``AgentSettings``) for that task alone, as RL Zoo sets its
 #: noise per task. MountainCar: the actor's pre-tanh penalty 0.1, chosen on the tuning seeds
@@ -59,10 +73,11 @@ TASKS: dict[str, dict[str, Any]] = {
     "MountainCarContinuous-v0": {"steps": 20_000, "eval_every": 2_500, "eval_episodes": 3,
                                  "noise": ("ou", 0.5, 0.15), "reward_range": (-0.1, 100.0),
                                  "algorithms": ("qgddpg", "ddpg", "sb3_ddpg", "sb3_td3"),
-                                 "ours": {"actor_preact_penalty": 0.1}},
+                                 "ours": {"actor_preact_penalty": 0.1},
+                                 "reached_goal": _car_goal},
     "qg_experiments:QGSparseMountainCar-v0": {
         "steps": 20_000, "eval_every": 2_500, "eval_episodes": 3, "noise": ("ou", 0.5, 0.15),
-        "reward_range": (-1.0, 0.0),
+        "reward_range": (-1.0, 0.0), "reached_goal": _sparse_goal,
         "algorithms": ("qgddpg", "ddpg", "sb3_ddpg", "sb3_td3", "sb3_sac")},
 }
 #: Hidden layers of every actor and critic here.
@@ -182,9 +197,22 @@ def _steps_to_reach(result: dict[str, Any], target: float) -> float:
     return next((e["steps"] for e in result["evaluations"] if e["return"] >= target), np.inf)
 
 
+def goal_found(result: dict[str, Any]) -> tuple[int, int] | None:
+    """How many of a run's training episodes reached the task's goal, of how many (``None``: the
+    task has no goal). Under a sparse reward a seed whose exploration never finds the goal has
+    nothing but -1 to learn from, and the graph has no chain to bound: this tells that failure
+    apart from one of learning."""
+    reached = TASKS[result["spec"]["task"]].get("reached_goal")
+    if reached is None:
+        return None
+    episodes = result.get("train_episodes", [])
+    return sum(map(reached, episodes)), len(episodes)
+
+
 def standard_table(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per task and algorithm: final return over seeds with its interval, and the steps each
-    seed needed to reach SB3 TD3's mean final return on that task (inf: never)."""
+    """Per task and algorithm: final return over seeds with its interval, the steps each seed
+    needed to reach SB3 TD3's mean final return on that task (inf: never), and per seed the
+    training episodes that reached the goal (:func:`goal_found`)."""
     groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for r in results:
         groups.setdefault((r["spec"]["task"], r["spec"]["algorithm"]), []).append(r)
@@ -198,5 +226,6 @@ def standard_table(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
                      "td3_final_return": target,
                      "steps_to_td3": None if target is None else
                      {r["spec"]["seed"]: _steps_to_reach(r, target) for r in group},
+                     "goal_found": {r["spec"]["seed"]: goal_found(r) for r in group},
                      "wall_time": float(sum(r["wall_time"] for r in group))})
     return rows

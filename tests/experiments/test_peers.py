@@ -9,7 +9,7 @@ import pytest
 from qg_experiments import peers_report
 from qg_experiments.peers import PeerSpec, peer_table
 from qg_experiments.runner import config_digest
-from qg_experiments.standard_tasks import StandardSpec
+from qg_experiments.standard_tasks import StandardSpec, goal_found
 
 TINY = {"train_episodes": 2, "train_max_steps": 2, "test_episodes": 2, "test_max_steps": 3}
 
@@ -92,15 +92,30 @@ def test_the_standard_tasks_block_is_written_alone_and_leaves_the_peers_block_as
     assert first.startswith(f"# Results\n\n{shaft}\n## 9. The Franka\n")    # untouched
     block = first.split(peers_report.STANDARD_BEGIN, 1)[1].split(peers_report.STANDARD_END)[0]
     assert "| Pendulum-v1 | QG-DDPG (ours) | 10000 | 2 | -160.0 [" in block
-    assert "| -150.0, -170.0 | 10000, 10000 |" in block   # per seed; TD3's mean final: -180
+    assert "| -150.0, -170.0 | 10000, 10000 | -, - |" in block   # TD3's mean final: -180;
+    # Pendulum has no goal to find
     (out / "standard_tasks" / "Pendulum_qgddpg_s101.json").write_text(
         json.dumps(_standard_run("qgddpg", 101, -190.0)))
     peers_report.write_section(results_md, out)
     second = results_md.read_text()
     assert second.count(peers_report.STANDARD_BEGIN) == 1
-    assert "| -150.0, -190.0 | 10000, inf |" in second
+    assert "| -150.0, -190.0 | 10000, inf | -, - |" in second
     assert second.split(peers_report.STANDARD_BEGIN)[0] == first.split(
         peers_report.STANDARD_BEGIN)[0]
+
+
+def test_goal_found_counts_the_training_episodes_that_reached_each_cars_goal() -> None:
+    """Sparse car: -1 per step, 0 on the goal step, so only a goal episode returns more than
+    minus its steps (999 steps at -999: the time limit). MountainCar: +100 at the goal against
+    at most 99.9 of action cost, so only a goal episode returns more than 0."""
+    def run(task: str, episodes: list[tuple[int, float]]) -> dict:
+        return {"spec": {"task": task}, "train_episodes": [
+            {"steps": steps, "return": ret} for steps, ret in episodes]}
+    sparse = run("qg_experiments:QGSparseMountainCar-v0",
+                 [(999, -999.0), (162, -161.0), (497, -497.0), (1, 0.0)])
+    dense = run("MountainCarContinuous-v0", [(999, -99.9), (120, 88.5), (999, -0.01)])
+    assert goal_found(sparse) == (2, 4) and goal_found(dense) == (1, 3)
+    assert goal_found(run("Pendulum-v1", [(200, -1200.0)])) is None
 
 
 def test_a_standard_task_run_evaluates_along_the_way(tmp_path) -> None:

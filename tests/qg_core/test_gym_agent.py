@@ -131,6 +131,18 @@ def test_max_episodes_and_the_callback_stop_learning() -> None:
     assert agent.episodes == 3 and [e["steps"] for e in seen][0] >= 1
 
 
+
+def test_an_episode_spanning_two_learn_calls_is_reported_whole() -> None:
+    """A sweep evaluating every N steps calls ``learn`` in chunks: an episode cut by a chunk's
+    end goes on in the next call and is reported once, with all its steps (it was reported
+    with only the next call's steps, its return likewise)."""
+    seen: list[dict] = []
+    agent = QGDDPG(gymnasium.make("Pendulum-v1"), seed=0, **SMALL)
+    for chunk in (150, 150, 100):                  # Pendulum truncates every episode at 200
+        agent.learn(chunk, callback=lambda e: seen.append(e) or True)
+    assert [e["steps"] for e in seen] == [200, 200]
+    assert [e["timesteps"] for e in seen] == [200, 400]
+    assert all(-16.3 * 200 <= e["return"] < -1.0 for e in seen)   # every step costs
 def test_qgl_train_runs_on_pendulum(tmp_path) -> None:
     env = {**os.environ, "QG_RUNS_DIR": str(tmp_path)}
     out = subprocess.run([os.path.join(os.path.dirname(sys.executable), "qgl"), "train",

@@ -157,6 +157,9 @@ class QGDDPG:
         self.episodes = 0
         self.log: TrainingLog | None = None
         self._obs: np.ndarray | None = None
+        #: The running episode's steps and return: an episode may span calls of ``learn`` (a
+        #: sweep that evaluates every N steps calls it in chunks), and is reported whole.
+        self._episode_steps, self._episode_return = 0, 0.0
 
     # --- settings -> the learner core ------------------------------------------------------------
     @staticmethod
@@ -227,7 +230,6 @@ class QGDDPG:
         start, start_steps = time.perf_counter(), self.num_timesteps
         if self._obs is None:
             self._obs, _ = self.env.reset(seed=s.seed)
-        episode_steps, episode_return = 0, 0.0
         for _ in range(int(total_steps)):
             state = self._state(self._obs)
             if self.num_timesteps < s.learning_starts:
@@ -236,7 +238,8 @@ class QGDDPG:
                 action = self.noise.perturb(self.core.agent.act(state))
             obs, reward, terminated, truncated, info = self.env.step(self._to_env(action))
             self.num_timesteps += 1
-            episode_steps, episode_return = episode_steps + 1, episode_return + float(reward)
+            self._episode_steps += 1
+            self._episode_return += float(reward)
             self.core.add_transition(state, action, float(reward), self._state(obs),
                                      bool(terminated))
             if (self.num_timesteps > s.learning_starts
@@ -250,14 +253,14 @@ class QGDDPG:
                 success = bool(info.get("is_success", terminated))
                 fps = (self.num_timesteps - start_steps) / max(time.perf_counter() - start, 1e-9)
                 if self.log is not None:
-                    self.log.episode("train", episode_steps, success, episode_return,
-                                     self.num_timesteps, fps)
+                    self.log.episode("train", self._episode_steps, success,
+                                     self._episode_return, self.num_timesteps, fps)
                 go_on = callback is None or callback(
-                    {"steps": episode_steps, "return": episode_return, "success": success,
-                     "timesteps": self.num_timesteps}) is not False
+                    {"steps": self._episode_steps, "return": self._episode_return,
+                     "success": success, "timesteps": self.num_timesteps}) is not False
                 self.noise.reset(int(self.rng.integers(2**31)))
                 self._obs, _ = self.env.reset()
-                episode_steps, episode_return = 0, 0.0
+                self._episode_steps, self._episode_return = 0, 0.0
                 if not go_on or (max_episodes is not None and self.episodes >= max_episodes):
                     break
         return self
