@@ -6,6 +6,7 @@ until recovered, and an unreachable address is refused in time with its reason."
 from __future__ import annotations
 
 import os
+import re
 import time
 
 import mujoco
@@ -177,6 +178,10 @@ def test_a_missed_signal_timeout_is_a_fault_until_recovered(robot):
     time.sleep(0.15)
     with pytest.raises(FrankaFault, match="TorqueSignalTimeout"):
         arm.read()
+    # the reason says whether commands had been reaching the robot (here they had, until the
+    # silence: libfranka's rate over its last 100 commands)
+    assert re.search(r"command success rate (0\.9\d|1\.00) at the last state",
+                     arm.fault), arm.fault
     arm.read()
     with pytest.raises(FrankaFault, match="recover"):
         arm.write(arm.robot_gravity())

@@ -289,6 +289,9 @@ class FrankaArm:
             reason = "the torque motion ended"
         except Exception as exc:  # noqa: BLE001 - libfranka's and franky's exceptions alike
             reason = f"{type(exc).__name__}: {exc}"
+        # Whether commands were reaching the robot in time before it ended: below 1, the
+        # control thread was late (on a real arm, the network or a kernel without realtime).
+        reason += f" (command success rate {self.command_success_rate():.2f} at the last state)"
         self._fault = reason
         log.error("Franka at %s: %s", self.config.address, reason)
         raise FrankaFault(reason)
