@@ -15,7 +15,7 @@ from qg_common.types import NO_GROUND_TRUTH, GroundTruth, StepResult
 from qg_learning_node.executor.observation import observation_from_step
 from qg_experiments import grid, peg
 from qg_experiments.profile import load_profile
-from qg_experiments.runner import RunSpec, run_training
+from qg_experiments.runner import RunSpec, StackSettings, run_training
 from qg_experiments.suite import run_suite
 
 
@@ -78,6 +78,11 @@ def test_tiny_suite_writes_results_figures_and_report(tmp_path) -> None:
     for experiment, count in (("random", 2), ("grid", 2), ("variants", 4), ("state_grid", 2),
                               ("peg", 4), ("nextage", 4)):
         assert len(list((out / experiment).glob("*.json"))) == count, experiment
+    settings = StackSettings.load()
+    for experiment in ("random", "grid", "variants", "state_grid"):   # the robot's runs
+        for saved in (out / experiment).glob("*.json"):   # each says which step it measured
+            run = json.loads(saved.read_text())
+            assert (run["engine"], run["step_limit"]) == (settings.engine, settings.step_limit)
     for section in ("## 1. Random baselines", "## 2. The grid", "## 2b. The grid with the "
                     "thesis's 4-D wrench state", "## 3. Mean predicted Q", "## 4. Where the "
                     "thesis says the graph matters", "## 5. Clearance-fit peg", "## 6. The peg on "
