@@ -82,7 +82,7 @@ def run_baseline(spec: BaselineSpec) -> dict[str, Any]:
         episodes.append(run_episode(env, episode, zero_policy))
     return {"experiment": spec.experiment, "name": spec.name, "label": spec.label,
             "spec": dataclasses.asdict(spec), "config_digest": config_digest(spec.config_dir),
-            "engine": settings.engine, "step_limit": settings.step_limit,
+            **settings.step_record,
             "episodes": episodes, "rl_steps": env.steps,
             "step_timeouts": env.step_timeouts, "sim_time": env.sim_time,
             "wall_time": time.perf_counter() - start}

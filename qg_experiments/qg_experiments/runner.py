@@ -182,6 +182,12 @@ class StackSettings:
         """[s] the RL step's time limit (``rest.max_time``): a step not at rest by then ends."""
         return float(self.bridge.get("rest", {}).get("max_time", RestConfig().max_time))
 
+    @property
+    def step_record(self) -> dict[str, Any]:
+        """The step a robot run measured, as its saved record names it (``engine``,
+        ``step_limit``: what the report's ``step_label`` reads)."""
+        return {"engine": self.engine, "step_limit": self.step_limit}
+
     def with_arm_seed(self, seed: int) -> StackSettings:
         """The same settings on robot ``seed``: the arm's biases, housing error and noise
         streams (``<scene>.imperfections.seed``). A run's seed picks its arm, so DDPG and
@@ -475,8 +481,8 @@ def run_training(spec: RunSpec) -> dict[str, Any]:
         episodes += test_phase("test", test_env)
     envs = (env,) if test_env is env else (env, test_env)
     return {"experiment": spec.experiment, "name": spec.name, "spec": dataclasses.asdict(spec),
-            "config_digest": config_digest(spec.config_dir), "engine": settings.engine,
-            "step_limit": settings.step_limit, "episodes": episodes,
+            "config_digest": config_digest(spec.config_dir), **settings.step_record,
+            "episodes": episodes,
             "evaluations": evaluations, "cycles": cycles,
             "rl_steps": sum(e.steps for e in envs),
             "step_timeouts": sum(e.step_timeouts for e in envs),
