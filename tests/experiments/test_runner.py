@@ -13,7 +13,7 @@ import pytest
 from qg_common.types import NO_GROUND_TRUTH, GroundTruth, StepResult
 
 from qg_learning_node.executor.observation import observation_from_step
-from qg_experiments import grid, peg
+from qg_experiments import franka_report, grid, peg, peers_report
 from qg_experiments.profile import load_profile
 from qg_experiments.runner import RunSpec, StackSettings, run_training
 from qg_experiments.suite import run_suite
@@ -114,9 +114,17 @@ def test_tiny_suite_writes_results_figures_and_report(tmp_path) -> None:
     stale = json.loads(next((out / "grid").glob("ddpg_*.json")).read_text())
     stale["spec"]["critic_lr"] = 0.25
     (out / "grid" / "ddpg_stale_setting.json").write_text(json.dumps(stale))
+    # The sections made apart from the page (the peers', the Franka's), whose runs are not
+    # under this profile's folder, survive the page being written anew.
+    results = tmp_path / "docs" / "results.md"
+    apart = [f"{peers_report.BEGIN}\n## 8. Peers\n\nSB3 on the shaft\n{peers_report.END}",
+             f"{franka_report.BEGIN}\n## 9. The Franka\n\nfranky-sim\n{franka_report.END}"]
+    results.write_text(results.read_text() + "\n\n" + "\n\n".join(apart) + "\n")
     page = run_suite(profile, tmp_path / "runs", tmp_path / "docs", workers=1,
                      command="test").read_text()
     assert "| 0.25 |" not in page and "| 0.001 |" in page
+    assert all(page.count(block) == 1 for block in apart)
+    assert page.index("## 7b. Over all cells") < page.index(apart[0]) < page.index(apart[1])
 
 
 def test_monte_carlo_check_uses_exact_returns_of_goal_episodes_only() -> None:

@@ -13,7 +13,8 @@ from qg_experiments import stats
 from qg_experiments.random_baselines import Bar
 from qg_learning_node.learner.algorithms import label
 
-__all__ = ["fmt", "table", "speed", "bar_text", "grid_cell", "grid_table"]
+__all__ = ["fmt", "table", "marked_blocks", "write_marked_block", "speed", "bar_text",
+           "grid_cell", "grid_table"]
 
 
 def fmt(x: float | None, digits: int = 1) -> str:
@@ -82,6 +83,19 @@ def grid_table(rows: list[dict[str, Any]], caption: str) -> list[str]:
         ["critic lr", "iterations/cycle", *[label(a) for a in algorithms]],
         [[f"{lr:g}", str(it), *[grid_cell(by_key.get((a, lr, it))) for a in algorithms]]
          for lr, it in cells])
+
+
+def marked_blocks(text: str, markers: list[tuple[str, str]]) -> str:
+    """The blocks of ``text`` that lie between each (begin, end) pair of ``markers``, markers
+    included, in the order the page has them: what a page written anew must carry over, since
+    the sections made apart from it (the peers', the Franka's) have their runs elsewhere."""
+    found = []
+    for begin, end in markers:
+        start = text.find(begin)
+        stop = text.find(end, start + len(begin)) if start >= 0 else -1
+        if stop >= 0:
+            found.append((start, text[start:stop + len(end)]))
+    return "\n\n".join(block for _, block in sorted(found))
 
 
 def write_marked_block(page: Path, begin: str, end: str, block: str) -> None:

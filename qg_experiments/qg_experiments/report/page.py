@@ -13,7 +13,7 @@ from qg_experiments.report.aggregate_section import aggregate_section
 from qg_experiments.report.comparison import comparison, graph_section
 from qg_experiments.report.grid_sections import (grid_section, learning_curves_section,
                                                  q_section, random_section, variant_section)
-from qg_experiments.report.markdown import step_label, table
+from qg_experiments.report.markdown import marked_blocks, step_label, table
 from qg_experiments.report.peg_sections import peg_budget, peg_paired, peg_section
 from qg_experiments.report.tables import episodes_csv, write_bar, write_csv
 from qg_experiments.runner import StackSettings
@@ -174,12 +174,14 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
     lines += aggregate_section(settings_runs, bar, profile.statistics, figures)
     lines += comparison(random_rows, bar, grids, variant_results, peg_data, gamma)
     path = docs / "results.md"
-    path.write_text("\n".join(lines))
-    if (out / "peers").is_dir() or (out / "standard_tasks").is_dir():
-        # The peers' runs come from their own benchmarks; their section follows ours.
-        from qg_experiments import peers_report
-        peers_report.write_section(path, out)
-    # The Franka's runs are whole qgl runs (realtime, franky-sim): their data is kept beside.
-    from qg_experiments import franka_report
+    # The peers' runs come from their own benchmarks, the Franka's are whole qgl runs (realtime,
+    # franky-sim): their sections follow ours, kept from the old page unless their runs are here.
+    from qg_experiments import franka_report, peers_report
+    kept = marked_blocks(path.read_text() if path.exists() else "",
+                         [(peers_report.BEGIN, peers_report.END),
+                          (peers_report.STANDARD_BEGIN, peers_report.STANDARD_END),
+                          (franka_report.BEGIN, franka_report.END)])
+    path.write_text("\n".join(lines) + (f"\n\n{kept}\n" if kept else ""))
+    peers_report.write_section(path, out)
     franka_report.write_section(path, docs / "data" / franka_report.DATA.name)
     return path
