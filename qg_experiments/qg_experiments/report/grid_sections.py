@@ -72,7 +72,7 @@ def grid_section(title: str, rows: list[dict[str, Any]], results: list[dict[str,
     """Section 2 (or 2b): mean test steps per cell and algorithm, the cells beating random and
     the paired comparison."""
     if not rows:
-        return [title, "", "Not run in this profile.", ""]
+        return [title, "", "No runs saved (the budget above says what the profile plans).", ""]
     spec = results[0]["spec"]
     algorithms = sorted({r["algorithm"] for r in rows})
     wins = {a: sum(r["beats_random"] for r in rows if r["algorithm"] == a) for a in algorithms}

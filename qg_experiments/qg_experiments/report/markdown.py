@@ -18,8 +18,12 @@ __all__ = ["fmt", "table", "marked_blocks", "write_marked_block", "speed", "bar_
 
 
 def fmt(x: float | None, digits: int = 1) -> str:
-    """``x`` with ``digits`` decimals; ``n/a`` for a missing or NaN value."""
-    return "n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{digits}f}"
+    """``x`` with ``digits`` decimals; ``n/a`` for a missing or NaN value. From a million on,
+    in powers of ten (``7.87e+07``): a diverged critic's error reads as its size, not as a row
+    of digits."""
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "n/a"
+    return f"{x:.2e}" if abs(x) >= 1e6 else f"{x:.{digits}f}"
 
 
 def table(header: list[str], rows: list[list[str]]) -> list[str]:
