@@ -14,14 +14,13 @@ import json
 from pathlib import Path
 from typing import Any
 
-from qg_experiments.report.markdown import write_marked_block
+from qg_experiments.report.markdown import FRANKA_BLOCK, write_marked_block
 
 __all__ = ["franka_section", "write_section", "DATA", "BEGIN", "END"]
 
 #: Where the rehearsal's measured runs are kept (relative to the repository).
 DATA = Path("docs/data/franka_rehearsal.json")
-BEGIN = "<!-- franka section: python -m qg_experiments.franka_report -->"
-END = "<!-- end of the franka section -->"
+BEGIN, END = FRANKA_BLOCK
 COLUMNS = ("robot", "engine and step", "run", "training inserted", "test poses inserted",
            "mean test steps", "wall time", "command")
 

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from qg_experiments.peers import REPORT_SEEDS, peer_table
-from qg_experiments.report.markdown import write_marked_block
+from qg_experiments.report.markdown import PEERS_BLOCK, STANDARD_BLOCK, write_marked_block
 from qg_experiments.runner import config_digest
 from qg_experiments.standard_tasks import TASKS, standard_table
 from qg_experiments.stats import Interval, format_interval, paired_comparison
@@ -29,10 +29,8 @@ from qg_learning_node.learner.algorithms import REGISTRY, label
 __all__ = ["BEGIN", "END", "STANDARD_BEGIN", "STANDARD_END", "ours_rows", "peers_section",
            "standard_section", "write_section"]
 
-BEGIN = "<!-- peers: written by qg_experiments.peers_report -->"
-END = "<!-- /peers -->"
-STANDARD_BEGIN = "<!-- standard tasks: written by qg_experiments.peers_report -->"
-STANDARD_END = "<!-- /standard tasks -->"
+BEGIN, END = PEERS_BLOCK
+STANDARD_BEGIN, STANDARD_END = STANDARD_BLOCK
 #: The prefix :func:`ours_rows` gives our runner's runs in the peers' table.
 RUNNER = "runner_"
 

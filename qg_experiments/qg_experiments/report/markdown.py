@@ -13,8 +13,8 @@ from qg_experiments import stats
 from qg_experiments.random_baselines import Bar
 from qg_learning_node.learner.algorithms import label
 
-__all__ = ["fmt", "table", "marked_blocks", "write_marked_block", "speed", "bar_text",
-           "grid_cell", "grid_table"]
+__all__ = ["fmt", "table", "APART_BLOCKS", "marked_blocks", "write_marked_block", "speed",
+           "bar_text", "grid_cell", "grid_table"]
 
 
 def fmt(x: float | None, digits: int = 1) -> str:
@@ -87,6 +87,17 @@ def grid_table(rows: list[dict[str, Any]], caption: str) -> list[str]:
         ["critic lr", "iterations/cycle", *[label(a) for a in algorithms]],
         [[f"{lr:g}", str(it), *[grid_cell(by_key.get((a, lr, it))) for a in algorithms]]
          for lr, it in cells])
+
+
+#: The sections of results.md that their own commands write apart from the page, as (begin,
+#: end) markers: the peers' and the standard tasks' (``peers_report``), the Franka's
+#: (``franka_report``). A page written anew keeps them (``marked_blocks``).
+PEERS_BLOCK = ("<!-- peers: written by qg_experiments.peers_report -->", "<!-- /peers -->")
+STANDARD_BLOCK = ("<!-- standard tasks: written by qg_experiments.peers_report -->",
+                  "<!-- /standard tasks -->")
+FRANKA_BLOCK = ("<!-- franka section: python -m qg_experiments.franka_report -->",
+                "<!-- end of the franka section -->")
+APART_BLOCKS = [PEERS_BLOCK, STANDARD_BLOCK, FRANKA_BLOCK]
 
 
 def marked_blocks(text: str, markers: list[tuple[str, str]]) -> str:
