@@ -26,7 +26,7 @@ import numpy as np
 
 __all__ = ["CONFIDENCE", "Interval", "mean_interval", "beats", "PairedComparison",
            "paired_comparison", "PairedEvents", "paired_events", "format_interval", "holm",
-           "equivalence_p", "VERDICTS", "verdict"]
+           "equivalence_p", "pairs_to_detect", "VERDICTS", "verdict"]
 
 
 def _scipy_stats():
@@ -190,6 +190,25 @@ def equivalence_p(a: Sequence[float], b: Sequence[float], margin: float) -> floa
             return 1.0
         return float(_scipy_stats().wilcoxon(shifted, alternative=alternative).pvalue)
     return max(one_sided(d - margin, "less"), one_sided(d + margin, "greater"))
+
+
+def pairs_to_detect(a: Sequence[float], b: Sequence[float], level: float = 0.05,
+                    power: float = 0.8) -> tuple[float, float]:
+    """How many pairs would detect the observed mean difference of ``b - a`` with a two-sided
+    test at ``level`` and the given ``power``, and the differences' standard deviation, by the
+    normal approximation n = ((z(1 - level/2) + z(power)) sd / mean)^2: what an undecided
+    comparison would have needed, were the observed difference the true one (``inf`` for a mean
+    of 0 or a single pair, whose spread is unknown: ``nan``)."""
+    d = np.asarray(b, dtype=float) - np.asarray(a, dtype=float)
+    if d.ndim != 1 or d.size == 0:
+        raise ValueError("need paired 1-D samples")
+    if d.size == 1:
+        return math.inf, math.nan
+    norm = _scipy_stats().norm
+    sd, mean = float(np.std(d, ddof=1)), float(np.mean(d))
+    if mean == 0.0:
+        return math.inf, sd
+    return ((norm.ppf(1 - level / 2) + norm.ppf(power)) * sd / mean) ** 2, sd
 
 
 #: The verdicts of :func:`verdict`.

@@ -37,4 +37,10 @@ def test_each_setting_gets_a_verdict_and_the_family_is_holm_corrected() -> None:
     assert judged["better"].difference_p == smallest * 3
     assert "**QG-DDPG needs fewer test steps**" in verdict_sentence(judged["better"], statistics)
     assert "**equivalent within ±10 test steps**" in verdict_sentence(judged["same"], statistics)
-    assert "**undecided**" in verdict_sentence(judged["unclear"], statistics)
+    unclear = verdict_sentence(judged["unclear"], statistics)
+    assert "**undecided**" in unclear
+    # ... and says how many pairs its spread would need (40 pairs, noise 40: sd about 40).
+    j = judged["unclear"]
+    assert 30 < j.spread < 50 and j.pairs_needed > 40
+    assert f"spread by {j.spread:.1f} steps" in unclear and f"about {j.pairs_needed:.0f} pairs" \
+        in unclear

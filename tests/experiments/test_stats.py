@@ -1,10 +1,12 @@
 """The report's statistics on data whose answers are known."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from qg_experiments.stats import (Interval, beats, format_interval, mean_interval,
-                                                paired_comparison)
+                                  paired_comparison, pairs_to_detect)
 
 
 def test_the_interval_covers_the_mean_and_narrows_with_more_data():
@@ -155,3 +157,18 @@ def test_the_intervals_agree_with_the_ones_rliable_computes():
     assert profile.tolist() == [0.975, 0.675, 0.375, 0.125]
     assert low == pytest.approx([0.925, 0.55, 0.25, 0.025], abs=0.05)
     assert high == pytest.approx([1.0, 0.8, 0.5, 0.225], abs=0.05)
+
+
+def test_pairs_to_detect_is_the_normal_approximation_and_grows_as_the_difference_shrinks():
+    # Differences 0, 4, 8, ..., 36: mean 18, standard deviation 12.11; with z(0.975) = 1.960 and
+    # z(0.8) = 0.8416, n = ((1.960 + 0.8416) * 12.11 / 18)^2 = 3.55 pairs.
+    a = np.zeros(10)
+    b = np.arange(10) * 4.0
+    n, sd = pairs_to_detect(a, b)
+    assert sd == pytest.approx(12.1106, abs=1e-4)
+    assert n == pytest.approx(3.552, abs=1e-3)
+    # A quarter of the difference with the same spread needs 16 times the pairs.
+    n_small, _ = pairs_to_detect(a, b - 13.5)
+    assert n_small == pytest.approx(16 * n, rel=1e-9)
+    assert pairs_to_detect(a, b - 18.0)[0] == math.inf       # no difference to detect
+    assert pairs_to_detect([1.0], [2.0])[0] == math.inf      # one pair: spread unknown

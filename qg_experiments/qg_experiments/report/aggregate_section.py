@@ -4,6 +4,7 @@ profiles; ``aggregates``), one verdict per setting with Holm's correction over t
 robustness as the thesis frames it (each cell's mean test steps, the cells beating random)."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -35,6 +36,8 @@ class Judged:
     :param difference_p, equivalence_p: the Wilcoxon and TOST p-values after Holm's correction
         over the settings judged together.
     :param verdict: one of ``stats.VERDICTS``.
+    :param pairs_needed, spread: the pairs that would detect the observed difference at 80 %
+        power and the differences' standard deviation (``stats.pairs_to_detect``).
     """
     setting: str
     comparison: stats.PairedComparison
@@ -42,6 +45,8 @@ class Judged:
     difference_p: float
     equivalence_p: float
     verdict: str
+    pairs_needed: float
+    spread: float
 
 
 def judge(settings: dict[str, list[dict[str, Any]]], statistics: Statistics) -> list[Judged]:
@@ -52,13 +57,15 @@ def judge(settings: dict[str, list[dict[str, Any]]], statistics: Statistics) -> 
         qg, ddpg, keys = grid.pairs(results)
         if keys:
             compared.append((name, stats.paired_comparison(qg, ddpg),
-                             stats.equivalence_p(qg, ddpg, statistics.equivalence_margin)))
+                             stats.equivalence_p(qg, ddpg, statistics.equivalence_margin),
+                             stats.pairs_to_detect(qg, ddpg, statistics.level)))
     if not compared:
         return []
-    difference = stats.holm([c.wilcoxon_p for _, c, _ in compared])
-    equivalence = stats.holm([e for _, _, e in compared])
-    return [Judged(name, c, e, dp, ep, stats.verdict(c.difference.mean, dp, ep, statistics.level))
-            for (name, c, e), dp, ep in zip(compared, difference, equivalence)]
+    difference = stats.holm([c.wilcoxon_p for _, c, _, _ in compared])
+    equivalence = stats.holm([e for _, _, e, _ in compared])
+    return [Judged(name, c, e, dp, ep, stats.verdict(c.difference.mean, dp, ep, statistics.level),
+                   *needed)
+            for (name, c, e, needed), dp, ep in zip(compared, difference, equivalence)]
 
 
 def verdict_sentence(j: Judged, statistics: Statistics) -> str:
@@ -73,8 +80,13 @@ def verdict_sentence(j: Judged, statistics: Statistics) -> str:
         return f"- {j.setting}: **DDPG needs fewer test steps** ({numbers})."
     if j.verdict == stats.VERDICTS[2]:
         return f"- {j.setting}: **equivalent within ±{margin:g} test steps** ({numbers})."
+    needed = ("no number of pairs would detect a mean difference of 0"
+              if math.isinf(j.pairs_needed) else
+              f"about {j.pairs_needed:.0f} pairs would detect a difference this large at 80 % "
+              f"power")
     return (f"- {j.setting}: **undecided**, neither a difference nor an equivalence within "
-            f"±{margin:g} steps at {statistics.level * 100:g} % ({numbers}).")
+            f"±{margin:g} steps at {statistics.level * 100:g} % ({numbers}). The pairs' "
+            f"differences spread by {j.spread:.1f} steps (standard deviation): {needed}.")
 
 
 def aggregate_section(settings: dict[str, list[dict[str, Any]]], bar: Bar | None,
