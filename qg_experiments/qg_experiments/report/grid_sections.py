@@ -156,9 +156,15 @@ def variant_section(results: list[dict[str, Any]], bar: Bar | None,
     if not results:
         return lines + ["Not run in this profile (see the budget table).", ""]
     cells = sorted({(r["spec"]["critic_lr"], r["spec"]["iterations"]) for r in results})
-    lines += ["The grid's protocol with one setting changed, at the fixed cells "
-              + ", ".join(f"lr {lr:g} / {it} iterations" for lr, it in cells)
-              + ", both algorithms on the same seeds. Cells as in the grid's table.", ""]
+    lrs, its = sorted({lr for lr, _ in cells}), sorted({it for _, it in cells})
+    if len(cells) > 1 and len(cells) == len(lrs) * len(its):      # every cell of a grid
+        where = (f"on all {len(cells)} cells (critic lr {', '.join(f'{lr:g}' for lr in lrs)}; "
+                 f"{', '.join(map(str, its))} iterations per cycle)")
+    else:
+        where = "at the fixed cells " + ", ".join(f"lr {lr:g} / {it} iterations"
+                                                  for lr, it in cells)
+    lines += [f"The grid's protocol with one setting changed, {where}, both algorithms on the "
+              "same seeds. Cells as in the grid's table.", ""]
     for name, group in grid.by_variant(results, gamma).items():
         rows = grid.cell_table(group, None if bar is None else bar.mean)
         lines += grid_table(rows, f"**{name}**")

@@ -168,5 +168,6 @@ def cell_means(means: dict[str, dict[str, np.ndarray]], bar: Bar | None, path: P
     ax.set_xticks(range(len(means)), list(means), fontsize=7, rotation=15)
     ax.set_ylabel("mean test steps of a cell")
     ax.set_title("Mean test steps over the cells (dot: a cell; line: their mean)", fontsize=9)
-    ax.legend(fontsize=7)
+    # Beside the axes: inside, the dots of a whole column would hide under it.
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     _save(fig, path)

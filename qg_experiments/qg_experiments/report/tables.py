@@ -16,8 +16,10 @@ __all__ = ["write_csv", "episodes_csv", "write_bar"]
 
 
 def write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
-    """``rows`` as CSV, their list-valued columns left out (nothing when there are no rows)."""
+    """``rows`` as CSV, their list-valued columns left out. Without rows there is no file, and
+    one left by earlier runs goes: the data beside the page is the page's, never an older step's."""
     if not rows:
+        path.unlink(missing_ok=True)
         return
     path.parent.mkdir(parents=True, exist_ok=True)
     keys = [k for k in rows[0] if not isinstance(rows[0][k], (list, np.ndarray))]
