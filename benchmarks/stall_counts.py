@@ -3,8 +3,9 @@ section 15), counted from the saved per-episode data of docs/results.md.
 
 A run "trained" when at least ``--trained`` of its last 8 training episodes inserted; a stall is
 a test episode of such a run that did not insert (it ran to the test cap). Printed per
-experiment and algorithm: runs, runs trained, runs with a stall, stalled test episodes of the
-trained runs, and how many stalled poses the same run had inserted in training.
+experiment (the variants setting by setting) and algorithm: runs, runs trained, runs with a
+stall, stalled test episodes of the trained runs, and how many stalled poses the same run had
+inserted in training.
 
 Usage: python benchmarks/stall_counts.py [--data docs/data/thesis] [--trained 6]
 The last line is one JSON object.
@@ -18,6 +19,12 @@ import json
 from pathlib import Path
 
 EXPERIMENTS = ("grid", "state_grid", "variants")
+
+
+def setting_of(run: str) -> str:
+    """The setting a run's name carries between its cell and its seed (``sparse``, ``g0.99``,
+    ``cap300``; empty for the grid): the variants are counted setting by setting."""
+    return "_".join(run.split("_")[3:-1])
 
 
 def counts(rows: list[dict[str, str]], trained_at: int) -> dict[str, dict[str, int]]:
@@ -54,8 +61,12 @@ def main() -> None:
         path = args.data / f"{experiment}_episodes.csv"
         if path.exists():
             with open(path, newline="") as f:
-                result[experiment] = counts(list(csv.DictReader(f)), args.trained)
-            print(f"{experiment}: {result[experiment]}")
+                rows = list(csv.DictReader(f))
+            for setting in sorted({setting_of(r["run"]) for r in rows}):
+                key = f"{experiment} {setting}".strip()
+                result[key] = counts([r for r in rows if setting_of(r["run"]) == setting],
+                                     args.trained)
+                print(f"{key}: {result[key]}")
     print(json.dumps(result))
 
 
