@@ -1,5 +1,6 @@
 """How often the deterministic test actor stalls after a run that trained (docs/learning.md
-section 15), counted from the saved per-episode data of docs/results.md.
+section 15), counted from the saved per-episode data of docs/results.md by
+``qg_experiments.stalls`` (results.md section 7 counts them the same way).
 
 A run "trained" when at least ``--trained`` of its last 8 training episodes inserted; a stall is
 a test episode of such a run that did not insert (it ran to the test cap). Printed per
@@ -17,6 +18,9 @@ import collections
 import csv
 import json
 from pathlib import Path
+from typing import Any
+
+from qg_experiments.stalls import TRAINED_AT, stall_counts
 
 EXPERIMENTS = ("grid", "state_grid", "variants")
 
@@ -27,34 +31,20 @@ def setting_of(run: str) -> str:
     return "_".join(run.split("_")[3:-1])
 
 
-def counts(rows: list[dict[str, str]], trained_at: int) -> dict[str, dict[str, int]]:
-    """Per algorithm (the run name's first part), the stall counts of one experiment."""
-    runs: dict[str, list[dict[str, str]]] = collections.defaultdict(list)
+def runs_of(rows: list[dict[str, str]]) -> list[tuple[str, list[dict[str, Any]]]]:
+    """The CSV's rows as (algorithm, episodes) per run: the algorithm is the run name's first
+    part; pose and success read back from text."""
+    runs: dict[str, list[dict[str, Any]]] = collections.defaultdict(list)
     for row in rows:
-        runs[row["run"]].append(row)
-    out: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
-    for name, episodes in runs.items():
-        train = [e for e in episodes if e["mode"] == "train"]
-        test = [e for e in episodes if e["mode"] == "test"]
-        c = out[name.split("_")[0]]
-        c["runs"] += 1
-        if sum(e["success"] == "True" for e in train[-8:]) < trained_at:
-            continue
-        stalled = [e for e in test if e["success"] != "True"]
-        inserted_in_training = {e["pose"] for e in train if e["success"] == "True"}
-        c["trained"] += 1
-        c["trained_test_episodes"] += len(test)
-        c["stalled_test_episodes"] += len(stalled)
-        c["runs_with_a_stall"] += bool(stalled)
-        c["stalled_poses_inserted_in_training"] += sum(e["pose"] in inserted_in_training
-                                                       for e in stalled)
-    return {algorithm: dict(c) for algorithm, c in out.items()}
+        runs[row["run"]].append({"mode": row["mode"], "pose": int(row["pose"]),
+                                 "success": row["success"] == "True"})
+    return [(name.split("_")[0], episodes) for name, episodes in runs.items()]
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=Path("docs/data/thesis"))
-    parser.add_argument("--trained", type=int, default=6)
+    parser.add_argument("--trained", type=int, default=TRAINED_AT)
     args = parser.parse_args()
     result = {}
     for experiment in EXPERIMENTS:
@@ -64,8 +54,8 @@ def main() -> None:
                 rows = list(csv.DictReader(f))
             for setting in sorted({setting_of(r["run"]) for r in rows}):
                 key = f"{experiment} {setting}".strip()
-                result[key] = counts([r for r in rows if setting_of(r["run"]) == setting],
-                                     args.trained)
+                result[key] = stall_counts(
+                    runs_of([r for r in rows if setting_of(r["run"]) == setting]), args.trained)
                 print(f"{key}: {result[key]}")
     print(json.dumps(result))
 

@@ -12,6 +12,7 @@ from qg_experiments.random_baselines import Bar
 from qg_experiments.report.divergence import divergence_counts, run_divergence
 from qg_experiments.report.grid_sections import THESIS, divergence_text, paired_line
 from qg_experiments.report.markdown import fmt, table
+from qg_experiments.stalls import LAST_TRAINING, TRAINED_AT, stall_counts
 from qg_learning_node.learner.algorithms import COMPARED, label
 
 __all__ = ["graph_section", "comparison"]
@@ -35,6 +36,7 @@ def graph_section(settings: dict[str, list[dict[str, Any]]], bar: Bar | None,
         counts = divergence_counts(results, gamma)
         diag = {a: grid.graph_diagnostics([r for r in results if r["spec"]["algorithm"] == a])
                 for a in _PAIR}
+        stalls = stall_counts((r["spec"]["algorithm"], r["episodes"]) for r in results)
         rows_text.append([
             name, "—" if comparison is None else str(comparison.n),
             "—" if comparison is None else f"{comparison.wins_a} / {comparison.wins_b} / "
@@ -46,7 +48,9 @@ def graph_section(settings: dict[str, list[dict[str, Any]]], bar: Bar | None,
               for a in _PAIR],
             f"{diag['qgddpg']['targets_raised']:.1%}",
             f"{fmt(diag['qgddpg']['critic_mc_error'], 2)} / "
-            f"{fmt(diag['ddpg']['critic_mc_error'], 2)}"])
+            f"{fmt(diag['ddpg']['critic_mc_error'], 2)}",
+            " / ".join(f"{stalls.get(a, {}).get('stalled_test_episodes', 0)} of "
+                       f"{stalls.get(a, {}).get('trained_test_episodes', 0)}" for a in _PAIR)])
     lines = ["## 7. QG-DDPG against DDPG, setting by setting", "",
              "Per setting: the (cell, seed) pairs of both algorithms; QG-DDPG better / DDPG "
              "better / ties; DDPG minus QG-DDPG in mean test steps with its 95 % interval "
@@ -54,11 +58,15 @@ def graph_section(settings: dict[str, list[dict[str, Any]]], bar: Bar | None,
              "whose interval lies below the random bar; the runs whose mean Q diverged; the "
              "share of TD targets the graph's lower bound raised (mean over training cycles); "
              "the critic's mean |Q - Monte-Carlo return| on the goal-reaching training "
-             "episodes at the end of training (QG-DDPG / DDPG).", ""]
+             "episodes at the end of training (QG-DDPG / DDPG); the stalls of the deterministic "
+             f"test actor, the test episodes that failed in runs that trained ({TRAINED_AT} of "
+             f"their last {LAST_TRAINING} training episodes inserted), of those runs' test "
+             "episodes (QG-DDPG / DDPG; `qg_experiments/stalls.py`, "
+             "[learning.md](learning.md) sections 15 and 16).", ""]
     lines += table(["setting", "pairs", "QG / DDPG / ties", "DDPG - QG [95 % CI]",
                     "Wilcoxon p", "QG-DDPG beats random", "DDPG beats random",
                     "QG-DDPG diverged", "DDPG diverged", "targets raised",
-                    "critic error vs MC"], rows_text)
+                    "critic error vs MC", "stalled test episodes"], rows_text)
     divergence = _divergence_pairs([r for results in settings.values() for r in results], gamma)
     return lines + ([""] + [divergence] if divergence else []) + [""]
 
