@@ -100,17 +100,21 @@ FRANKA_BLOCK = ("<!-- franka section: python -m qg_experiments.franka_report -->
 APART_BLOCKS = [PEERS_BLOCK, STANDARD_BLOCK, FRANKA_BLOCK]
 
 
+def _block_span(text: str, begin: str, end: str) -> tuple[int, int] | None:
+    """Where the block from ``begin`` to the first ``end`` after it lies in ``text`` (markers
+    included), or ``None`` when the page has no such block."""
+    start = text.find(begin)
+    stop = text.find(end, start + len(begin)) if start >= 0 else -1
+    return None if stop < 0 else (start, stop + len(end))
+
+
 def marked_blocks(text: str, markers: list[tuple[str, str]]) -> str:
     """The blocks of ``text`` that lie between each (begin, end) pair of ``markers``, markers
     included, in the order the page has them: what a page written anew must carry over, since
     the sections made apart from it (the peers', the Franka's) have their runs elsewhere."""
-    found = []
-    for begin, end in markers:
-        start = text.find(begin)
-        stop = text.find(end, start + len(begin)) if start >= 0 else -1
-        if stop >= 0:
-            found.append((start, text[start:stop + len(end)]))
-    return "\n\n".join(block for _, block in sorted(found))
+    spans = sorted(span for begin, end in markers
+                   if (span := _block_span(text, begin, end)) is not None)
+    return "\n\n".join(text[start:stop] for start, stop in spans)
 
 
 def write_marked_block(page: Path, begin: str, end: str, block: str) -> None:
@@ -118,9 +122,9 @@ def write_marked_block(page: Path, begin: str, end: str, block: str) -> None:
     of the block between those markers, or append it: a section made apart from the rest of
     the page (the peers', the Franka's) survives the page being written anew around it."""
     text = page.read_text() if page.exists() else ""
-    if begin in text and end in text:
-        head, rest = text.split(begin, 1)
-        text = head + block.rstrip("\n") + rest.split(end, 1)[1]
+    span = _block_span(text, begin, end)
+    if span is not None:
+        text = text[:span[0]] + block.rstrip("\n") + text[span[1]:]
     else:
         text = text.rstrip("\n") + "\n\n" + block
     page.write_text(text)
