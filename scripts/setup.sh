@@ -21,6 +21,11 @@ fi
 
 hash_of() { cat "$@" 2>/dev/null | sha256sum | cut -c1-16; }
 
+# One setup at a time: test runs started together would otherwise build the same venv and
+# workspace at once (the second waits here, then finds the stamps current and returns).
+exec 9>"$ROOT/.setup.lock"
+flock 9
+
 # 1. The virtual environment.
 if [[ ! -x "$PY" ]]; then
   log "creating .venv"
