@@ -10,7 +10,7 @@ from robot_bridge_node.core.robot_loop import LoopConfig
 from robot_bridge_node.core.safety import SafetyLimits
 from qg_common.shaft_task import ShaftTaskGeometry
 from robot_bridge_node.core.start_motion import ResetConfig
-from sim_robot_node.core.shaft_scene import ShaftSceneConfig
+from sim_robot_node.core.shaft_scene_config import ShaftSceneConfig
 from qg_common.params import ConfigError, config_file, load_ros_params, unflatten
 
 

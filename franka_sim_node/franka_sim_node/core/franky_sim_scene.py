@@ -26,7 +26,7 @@ from franky_sim.mujoco_simulator import MujocoSimulator
 from qg_common.shaft_task import SHAFT_TASK_SECTION, ShaftTaskGeometry
 from sim_robot_node.core.arm_imperfections import RESIDUAL_FRICTION_SHARE
 from sim_robot_node.core.mujoco_world import add_shaft_cell, set_cell_physics
-from sim_robot_node.core.shaft_scene import ShaftSceneConfig
+from sim_robot_node.core.shaft_scene_config import ShaftSceneConfig
 
 from qg_common.shaft_task import TOOL_DOWN
 from robot_bridge_node.core.arm_model import ArmModel

@@ -32,7 +32,7 @@ from sim_robot_node.core.shaft_urdfs import (PAYLOAD_INERTIA, PLUNGER_INERTIA, b
                                              housing_boxes, plunger_box, shaft_inertia)
 
 if TYPE_CHECKING:
-    from sim_robot_node.core.shaft_scene import ShaftSceneConfig
+    from sim_robot_node.core.shaft_scene_config import ShaftSceneConfig
 
 __all__ = ["CELL_CONTACT_BIT", "ShaftCell", "add_shaft_cell", "set_cell_physics",
            "MujocoShaftWorld", "build"]

@@ -11,7 +11,6 @@ from __future__ import annotations
 import shutil
 import tempfile
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 import pybullet as p
@@ -19,10 +18,8 @@ from qg_common.arm_description import ArmDescription
 from qg_common.rotations import quaternion_from_matrix
 from qg_common.shaft_task import Fixture, ShaftTaskGeometry
 
+from sim_robot_node.core.shaft_scene_config import ShaftSceneConfig
 from sim_robot_node.core.shaft_urdfs import SHAFT_JOINT, arm_with_shaft_urdf, housing_urdf
-
-if TYPE_CHECKING:
-    from sim_robot_node.core.shaft_scene import ShaftSceneConfig
 
 __all__ = ["PybulletShaftWorld", "build"]
 

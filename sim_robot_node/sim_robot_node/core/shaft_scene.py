@@ -15,7 +15,8 @@ start jitter, the fixture's error), placing the arm at a start (inverse kinemati
 bridge's own model of the arm), and the ground truth. The engine contributes a ``ShaftWorld``:
 the bodies, one physics step, and what only it can tell (the true joint state, the tool pose,
 the plunger and the contact wrench). ``config/panda_scene.yaml`` holds the physics of the
-Panda's cell (``engine`` picks the world), ``config/shaft_task.yaml`` its geometry.
+Panda's cell (``shaft_scene_config``; ``engine`` picks the world), ``config/shaft_task.yaml`` its
+geometry.
 
 Withdrawing the shaft from the bore undoes the fit, as in the real task, where the robot pulls
 the shaft back out of the bearing's inner ring: whenever the tip is above the bearing face, the
@@ -25,167 +26,19 @@ moving to the next start) leaves the cell ready as a teleport does.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from qg_common.arm_description import ArmDescription
-from qg_common.params import config_from_dict
 from qg_common.rotations import axis_angle_matrix
 from qg_common.shaft_task import Fixture, ShaftTaskGeometry
 from qg_common.types import GroundTruth, JointState, StartPose
 from robot_bridge_node.core.arm_model import ArmModel
 
-from sim_robot_node.core.arm_imperfections import ArmImperfections, ImperfectArm
-from sim_robot_node.core.shaft_world import ENGINES, ShaftWorld, build_world
+from sim_robot_node.core.arm_imperfections import ImperfectArm
+from sim_robot_node.core.shaft_scene_config import ShaftSceneConfig
+from sim_robot_node.core.shaft_world import ShaftWorld, build_world
 
-__all__ = ["PybulletSettings", "MujocoSettings", "ShaftSceneConfig", "ShaftScene"]
-
-
-@dataclass(frozen=True)
-class PybulletSettings:
-    """What only pybullet has a setting for.
-
-    :param solver_iterations: constraint solver iterations per step (a light plunger needs 200,
-        or the friction motor acts as a damper; the 2 kg one is Coulomb-like at 50).
-    :param contact_breaking_threshold: [m] contacts kept this far apart (pybullet's default 0.02
-        keeps idle contacts around the ring and makes steps 5x slower).
-    """
-    solver_iterations: int = 50
-    contact_breaking_threshold: float = 0.001
-
-    def __post_init__(self) -> None:
-        if self.solver_iterations < 1 or not self.contact_breaking_threshold > 0.0:
-            raise ValueError("pybullet: solver_iterations must be >= 1 and "
-                             "contact_breaking_threshold > 0")
-
-
-@dataclass(frozen=True)
-class MujocoSettings:
-    """What only MuJoCo has a setting for (``mujoco_world``). MuJoCo's constraints are soft: each
-    is a spring-damper of time constant ``solref[0]`` (damping ratio ``solref[1]``) whose force
-    lets it give a little (``solimp``: the impedance rises from ``solimp[0]`` to ``solimp[1]``
-    over ``solimp[2]`` m of penetration). Its defaults (20 ms, 0.9-0.95 over 1 mm) let a pushed
-    shaft sink into the bore's wall and a held one creep; the task's 0.1 mm clearance and its
-    wedging need them stiffer.
-
-    :param integrator: MuJoCo's integrator: ``implicitfast`` (stable with the arm's damping at a
-        1 ms step), ``implicit``, ``Euler`` or ``RK4``.
-    :param cone: the friction cone, ``elliptic`` (Coulomb's) or ``pyramidal``.
-    :param impratio: tangential over normal impedance of elliptic cones: > 1 makes a contact's
-        friction stiffer than its normal, so a wedged shaft sticks instead of creeping.
-    :param iterations: the constraint solver's iterations per step.
-    :param noslip_iterations: iterations of MuJoCo's no-slip pass after the solver (0: none).
-    :param ccd_tolerance: [m] the convex collider's tolerance (the shaft is a cylinder: every
-        contact of it goes through it). At MuJoCo's 1e-6, a contact that penetrates less than
-        about 1 um can come out with its normal reversed: the wall then pulls the shaft in and
-        the squeeze holds it by friction (a landed shaft stuck at the bore's mouth).
-    :param rim_chamfer: [m] a 45 degree chamfer of the bore's rim (0: a sharp edge), each of its
-        boxes then a convex mesh. pybullet rounds every shape's edges by its URDF collision
-        margin, 1 mm (the bore's rim, the shaft's tip); MuJoCo's are sharp, and the shaft's
-        flat end resting on a sharp rim holds by friction where pybullet's slides in: without
-        it uniform random residuals needed 87 steps (5 of 8 starts in 200 steps, at rest);
-        with it 31.7 (32 of 32, docs/learning.md section 14). A chamfer of the tip instead did
-        as well (24 steps, 8 of 8) but its mesh doubles the collision time; the rim's costs
-        nothing (its boxes are tested anyway).
-    :param contact_solref: (time constant [s], damping ratio) of the shaft's contacts and the
-        inner ring's hard stop; MuJoCo clamps the time constant to at least 2 time steps.
-    :param contact_solimp: (d0, dwidth, width [m], midpoint, power) of the same.
-    :param fit_solref: (time constant [s], damping ratio) of the fit's friction (the inner
-        ring's joint ``frictionloss``): below the friction force the ring creeps at a speed
-        proportional to the force times the constraint's softness.
-    :param fit_solimp: (d0, dwidth, width [m], midpoint, power) of the same (only d0 counts:
-        friction has no penetration).
-    """
-    integrator: str = "implicitfast"
-    cone: str = "elliptic"
-    impratio: float = 10.0
-    iterations: int = 50
-    noslip_iterations: int = 0
-    ccd_tolerance: float = 1e-10
-    rim_chamfer: float = 0.001
-    contact_solref: tuple[float, ...] = (0.002, 1.0)
-    contact_solimp: tuple[float, ...] = (0.99, 0.999, 0.0001, 0.5, 2.0)
-    fit_solref: tuple[float, ...] = (0.002, 1.0)
-    fit_solimp: tuple[float, ...] = (0.999, 0.999, 0.001, 0.5, 2.0)
-
-    def __post_init__(self) -> None:
-        if self.integrator not in ("implicitfast", "implicit", "Euler", "RK4"):
-            raise ValueError(f"mujoco: integrator must be implicitfast, implicit, Euler or RK4, "
-                             f"got {self.integrator!r}")
-        if self.cone not in ("elliptic", "pyramidal"):
-            raise ValueError(f"mujoco: cone must be elliptic or pyramidal, got {self.cone!r}")
-        if self.iterations < 1 or self.noslip_iterations < 0:
-            raise ValueError(f"mujoco: iterations must be >= 1 and noslip_iterations >= 0, got "
-                             f"{self.iterations}, {self.noslip_iterations}")
-        if not 0.0 < self.ccd_tolerance <= 1e-6:
-            raise ValueError(f"mujoco: ccd_tolerance must be in (0, 1e-6] m, got "
-                             f"{self.ccd_tolerance}")
-        if not 0.0 <= self.rim_chamfer < 0.003:
-            raise ValueError(f"mujoco: rim_chamfer must be in [0, 3 mm), got {self.rim_chamfer}")
-        if not self.impratio >= 1.0:
-            raise ValueError(f"mujoco: impratio must be >= 1, got {self.impratio}")
-        for name in ("contact_solref", "fit_solref"):
-            value = getattr(self, name)
-            if len(value) != 2 or not value[0] > 0.0 or not value[1] > 0.0:
-                raise ValueError(f"mujoco: {name} must be (time constant > 0, damping ratio "
-                                 f"> 0), got {value}")
-        for name in ("contact_solimp", "fit_solimp"):
-            value = getattr(self, name)
-            if (len(value) != 5 or not 0.0 < value[0] < 1.0 or not 0.0 < value[1] < 1.0
-                    or not value[2] > 0.0):
-                raise ValueError(f"mujoco: {name} must be (d0, dwidth in (0, 1), width > 0, "
-                                 f"midpoint, power), got {value}")
-
-
-@dataclass(frozen=True)
-class ShaftSceneConfig:
-    """The simulated cell's physics and the arm's imperfections (the geometry is the task's,
-    ``ShaftTaskGeometry``). The defaults are the Panda's (``config/panda_scene.yaml``); another
-    arm's config file names what differs.
-
-    :param engine: the physics engine (``shaft_world.ENGINES``).
-    :param time_step: [s] one physics step = one control tick.
-    :param gravity: [m/s^2].
-    :param bore_segments: boxes in the bore's ring (24 or 32 change what random residuals need).
-    :param counterbore_segments: boxes in the counterbore's wall.
-    :param plunger_mass: [kg] the inner ring: heavy, so the friction stays Coulomb-like.
-    :param plunger_friction: [N] the fit's Coulomb friction.
-    :param shaft_mass: [kg] steel, 11.8 mm x 100 mm.
-    :param friction: the combined lateral friction coefficient of shaft and housing.
-    :param imperfections: the real arm's departures from the bridge's model.
-    :param pybullet: pybullet's own settings; :param mujoco: MuJoCo's own settings.
-    """
-    engine: str = "mujoco"
-    time_step: float = 0.001
-    gravity: float = 9.81
-    bore_segments: int = 48
-    counterbore_segments: int = 32
-    plunger_mass: float = 2.0
-    plunger_friction: float = 11.0
-    shaft_mass: float = 0.086
-    friction: float = 0.5
-    imperfections: ArmImperfections = field(default_factory=ArmImperfections)
-    pybullet: PybulletSettings = field(default_factory=PybulletSettings)
-    mujoco: MujocoSettings = field(default_factory=MujocoSettings)
-
-    def __post_init__(self) -> None:
-        if self.engine not in ENGINES:
-            raise ValueError(f"engine must be one of {sorted(ENGINES)}, got {self.engine!r}")
-        if not 0.0 < self.time_step <= 0.01:
-            raise ValueError(f"time_step must be in (0, 0.01] s, got {self.time_step}")
-        for name in ("bore_segments", "counterbore_segments", "plunger_mass",
-                     "plunger_friction", "shaft_mass", "friction"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
-        if not self.gravity >= 0.0:
-            raise ValueError(f"gravity must be >= 0, got {self.gravity}")
-
-    @classmethod
-    def from_dict(cls, params: dict[str, Any]) -> ShaftSceneConfig:
-        """From a scene section (``panda_scene`` of ``config/panda_scene.yaml``, ``xarm_scene``
-        of ``config/xarm_scene.yaml``; ``imperfections``, ``pybullet``, ``mujoco`` nested)."""
-        return config_from_dict(cls, params)
+__all__ = ["ShaftSceneConfig", "ShaftScene"]
 
 
 def _all_finite(values: np.ndarray) -> bool:

@@ -14,15 +14,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 from xml.etree import ElementTree
 
 from qg_common.arm_description import ArmDescription
-
 from qg_common.shaft_task import ShaftTaskGeometry
 
-if TYPE_CHECKING:                      # (shaft_scene imports this module's users)
-    from sim_robot_node.core.shaft_scene import ShaftSceneConfig
+from sim_robot_node.core.shaft_scene_config import ShaftSceneConfig
 
 __all__ = ["bare_arm_urdf", "arm_with_shaft_urdf", "housing_urdf", "SHAFT_JOINT", "Box",
            "shaft_inertia", "housing_boxes", "plunger_box"]

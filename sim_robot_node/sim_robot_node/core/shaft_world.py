@@ -6,27 +6,23 @@ kinematics, the arm's imperfections (friction, sensor errors, jitter), the groun
 ``ShaftWorld`` is all an engine contributes: the arm (its URDF) holding the shaft, the housing
 with its bore, counterbore and the bearing's inner ring (the "plunger") on its sliding joint, one
 physics step, and the states and forces only an engine can tell. ``build_world`` makes the world
-of the engine a scene config names: ``pybullet`` (``pybullet_world``) or ``mujoco``
-(``mujoco_world``); the engine modules are imported only when built, so one engine's absence or
-start-up cost never reaches a process that runs the other.
+of the engine a scene config names (``shaft_scene_config.ENGINES``): ``pybullet``
+(``pybullet_world``) or ``mujoco`` (``mujoco_world``); the engine modules are imported only
+when built, so one engine's absence or start-up cost never reaches a process that runs the
+other.
 """
 from __future__ import annotations
 
 import importlib
-from typing import TYPE_CHECKING, Protocol
+from typing import Protocol
 
 import numpy as np
 from qg_common.arm_description import ArmDescription
 from qg_common.shaft_task import Fixture, ShaftTaskGeometry
 
-if TYPE_CHECKING:                      # (shaft_scene imports this module)
-    from sim_robot_node.core.shaft_scene import ShaftSceneConfig
+from sim_robot_node.core.shaft_scene_config import ENGINES, ShaftSceneConfig
 
-__all__ = ["ShaftWorld", "ENGINES", "build_world"]
-
-#: The engines a shaft scene can run on, and the module whose ``build`` makes its world.
-ENGINES = {"pybullet": "sim_robot_node.core.pybullet_world",
-           "mujoco": "sim_robot_node.core.mujoco_world"}
+__all__ = ["ShaftWorld", "build_world"]
 
 
 class ShaftWorld(Protocol):
