@@ -17,10 +17,11 @@ from qg_common.shaft_task import SHAFT_TASK_FILE, SHAFT_TASK_SECTION, ShaftTaskG
 from qg_learning_node.executor.noise import NoiseConfig
 from qg_learning_node.executor.peg_task import PegTaskConfig
 from qg_learning_node.executor.residual_task import TaskConfig
+from qg_learning_node.executor.stall_recovery import StallRecoveryConfig
 
 __all__ = ["ExecutorConfig", "TaskChoice", "EXECUTOR_SECTIONS", "NOISE_SECTION", "TASK_SECTIONS",
            "CELL_SECTIONS", "TASK_CHOICE_SECTION", "TIMING_SECTION", "load_noise", "load_task",
-           "load_geometry"]
+           "load_geometry", "STALL_RECOVERY_SECTION", "load_stall_recovery"]
 
 
 @dataclass(frozen=True)
@@ -89,8 +90,16 @@ NOISE_SECTION = ParameterSection("noise", NoiseConfig, ranges={
     "sigma": (0.0, 10.0), "theta": (0.0, 100.0), "dt": POSITIVE},
     runtime=frozenset(f.name for f in fields(NoiseConfig)), applies="from the next episode")
 
+#: Stall recovery in test episodes (off: the thesis protocol); an episode keeps the recovery it
+#: began with.
+STALL_RECOVERY_SECTION = ParameterSection("stall_recovery", StallRecoveryConfig, ranges={
+    "window": (2, 100000), "state_tolerance": (0.0, 10.0), "action_tolerance": (0.0, 10.0),
+    "steps": (1, 100000), "dither": (0.0, 2.0), "max_recoveries": (0, 100000)},
+    runtime=frozenset(f.name for f in fields(StallRecoveryConfig)),
+    applies="from the next episode")
+
 #: The executor's parameters besides its task's.
-EXECUTOR_SECTIONS = (TIMING_SECTION, NOISE_SECTION)
+EXECUTOR_SECTIONS = (TIMING_SECTION, NOISE_SECTION, STALL_RECOVERY_SECTION)
 
 #: Each task kind's section. The default reward and the step caps may change between episodes
 #: (a running episode keeps its own); everything else defines the learner's MDP. Each kind's
@@ -127,6 +136,12 @@ def load_task(params: dict[str, Any], source: str = "") -> TaskConfig:
 def load_noise(params: dict[str, Any], source: str = "") -> NoiseConfig:
     """The exploration noise of the executor's parameters, checked as the node checks it."""
     return NoiseConfig.from_dict(check_section(NOISE_SECTION, params.get("noise") or {}, source))
+
+
+def load_stall_recovery(params: dict[str, Any], source: str = "") -> StallRecoveryConfig:
+    """The stall recovery of the executor's parameters, checked as the node checks it."""
+    return StallRecoveryConfig.from_dict(check_section(
+        STALL_RECOVERY_SECTION, params.get("stall_recovery") or {}, source))
 
 
 def load_geometry(params: dict[str, Any], source: str = "") -> ShaftTaskGeometry:

@@ -1,0 +1,170 @@
+"""Stall recovery at deployment: notice the test actor's fixed point and shake it loose.
+
+Why: without exploration noise the trained actor can hold the shaft at its own fixed point
+(docs/learning.md section 15): the arm comes to rest at the same state step after step and the
+actor repeats the same action until the step cap, while the same actor with the training noise
+inserts. :class:`StallRecovery` watches an episode's (state, action) pairs; when over ``window``
+steps neither moved more than its tolerance, it perturbs the next ``steps`` actions with seeded
+noise (the training noise of ``noise.py``, or a dither) and counts one recovery.
+
+Off by default: the thesis protocol tests the deterministic actor, and its numbers never
+include a recovery (the runner runs recovered test episodes apart, mode ``recovery``). Pure
+(no rclpy): the executor node and the in-process runner share it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from qg_learning_node.executor.noise import ActionNoise, NoiseConfig
+
+__all__ = ["StallRecoveryConfig", "StallRecovery", "PERTURBATIONS", "stalled", "first_stall"]
+
+#: ``noise``: the executor's training noise (section ``noise``) on the actor's action;
+#: ``dither``: +-``dither`` per dimension, the signs drawn at random.
+PERTURBATIONS = ("noise", "dither")
+
+
+@dataclass(frozen=True)
+class StallRecoveryConfig:
+    """When an episode counts as stalled and what is done about it (``stall_recovery``).
+
+    :param enabled: recover in test episodes (training has its noise already); off by default,
+        the thesis protocol.
+    :param window: [steps] the stretch over which no progress means a stall.
+    :param state_tolerance: [state units, the actor's input] a stall's largest peak-to-peak
+        change of any state dimension over the window. Measured stalls: <= 1.4e-4.
+    :param action_tolerance: [actor-output units, 1 = full residual] the same for the actor's
+        own (unperturbed) action. Measured stalls: <= 3.7e-4.
+    :param steps: [steps] perturbed actions per recovery.
+    :param perturbation: ``noise`` | ``dither`` (:data:`PERTURBATIONS`).
+    :param dither: [actor-output units] the dither's amplitude (``dither`` only).
+    :param max_recoveries: recoveries per episode at most; 0 = no limit.
+    """
+    enabled: bool = False
+    window: int = 10
+    state_tolerance: float = 1e-3
+    action_tolerance: float = 1e-3
+    steps: int = 5
+    perturbation: str = "noise"
+    dither: float = 0.3
+    max_recoveries: int = 0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.enabled, bool):
+            raise ValueError(f"stall_recovery.enabled must be true or false, got "
+                             f"{self.enabled!r}")
+        for name in ("window", "steps"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"stall_recovery.{name} must be an integer >= 1 [steps], "
+                                 f"got {value!r}")
+        if self.window < 2:
+            raise ValueError(f"stall_recovery.window must be >= 2 steps (a change needs two), "
+                             f"got {self.window}")
+        for name in ("state_tolerance", "action_tolerance"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value < 0.0:
+                raise ValueError(f"stall_recovery.{name} must be finite and >= 0, got {value!r}")
+        if self.perturbation not in PERTURBATIONS:
+            raise ValueError(f"stall_recovery.perturbation must be one of {PERTURBATIONS}, "
+                             f"got {self.perturbation!r}")
+        if not 0.0 < self.dither <= 2.0:
+            raise ValueError(f"stall_recovery.dither must be in (0, 2] actor-output units, "
+                             f"got {self.dither!r}")
+        if (isinstance(self.max_recoveries, bool) or not isinstance(self.max_recoveries, int)
+                or self.max_recoveries < 0):
+            raise ValueError(f"stall_recovery.max_recoveries must be an integer >= 0 "
+                             f"(0 = no limit), got {self.max_recoveries!r}")
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> StallRecoveryConfig:
+        """From the ``stall_recovery`` section; an unknown key is refused with its name."""
+        unknown = sorted(set(values) - set(cls.__dataclass_fields__))
+        if unknown:
+            raise ValueError(f"stall_recovery: unknown parameters {unknown}; known: "
+                             f"{sorted(cls.__dataclass_fields__)}")
+        return cls(**values)
+
+
+def stalled(states: np.ndarray, actions: np.ndarray, config: StallRecoveryConfig) -> bool:
+    """Whether the last ``config.window`` (state, action) pairs show no progress: every state
+    and every action dimension moved at most its tolerance, peak to peak."""
+    states = np.asarray(states, dtype=np.float64)
+    actions = np.asarray(actions, dtype=np.float64)
+    if len(states) != len(actions):
+        raise ValueError(f"{len(states)} states but {len(actions)} actions")
+    if len(states) < config.window:
+        return False
+    s, a = states[-config.window:], actions[-config.window:]
+    return bool(np.ptp(s, axis=0).max(initial=0.0) <= config.state_tolerance
+                and np.ptp(a, axis=0).max(initial=0.0) <= config.action_tolerance)
+
+
+def first_stall(states: np.ndarray, actions: np.ndarray, config: StallRecoveryConfig
+                ) -> int | None:
+    """The first step index at which a recorded episode (state ``t`` and the action chosen on
+    it, one row per step) is stalled by :func:`stalled`; ``None`` if it never is."""
+    for end in range(config.window, len(states) + 1):
+        if stalled(states[end - config.window:end], actions[end - config.window:end], config):
+            return end - 1
+    return None
+
+
+class StallRecovery:
+    """One episode's stall watch: :meth:`act` between the actor and the robot.
+
+    :param action_dim: the action's length.
+    :param seed: the perturbation's seed (one stream per episode: the same seed, the same
+        perturbations).
+    :param noise: the training noise (``perturbation: noise``); the executor's ``noise``
+        section.
+    """
+
+    def __init__(self, config: StallRecoveryConfig, action_dim: int, seed: int,
+                 noise: NoiseConfig | None = None) -> None:
+        self.config = config
+        self.action_dim = action_dim
+        self.noise = ActionNoise(noise or NoiseConfig(), action_dim, seed)
+        self.rng = np.random.default_rng(seed)
+        self.step = 0
+        #: How many recoveries began, and at which steps.
+        self.recoveries = 0
+        self.started_at: list[int] = []
+        self._remaining = 0
+        #: Whether the last action :meth:`act` returned was perturbed.
+        self.perturbed = False
+        self._states: list[np.ndarray] = []
+        self._actions: list[np.ndarray] = []
+
+    def act(self, state: np.ndarray, action: np.ndarray) -> np.ndarray:
+        """The action to send for the actor's ``action`` on ``state``: the same action, or,
+        while recovering, a perturbed one in [-1, 1]. A stall starts a recovery here."""
+        step, self.step = self.step, self.step + 1
+        action = np.asarray(action, dtype=np.float64)
+        self.perturbed = self._remaining > 0
+        if self.perturbed:
+            self._remaining -= 1
+            return self._perturb(action)
+        self._states.append(np.asarray(state, dtype=np.float64).copy())
+        self._actions.append(action.copy())
+        del self._states[:-self.config.window], self._actions[:-self.config.window]
+        limit = self.config.max_recoveries
+        if (not stalled(np.array(self._states), np.array(self._actions), self.config)
+                or (limit and self.recoveries >= limit)):
+            return action
+        self.recoveries += 1
+        self.started_at.append(step)
+        self._states.clear()             # after it, a stall needs a whole window again
+        self._actions.clear()
+        self._remaining = self.config.steps - 1
+        self.perturbed = True
+        return self._perturb(action)
+
+    def _perturb(self, action: np.ndarray) -> np.ndarray:
+        if self.config.perturbation == "noise":
+            return self.noise.perturb(action)
+        signs = self.rng.choice((-1.0, 1.0), self.action_dim)
+        return np.clip(action + self.config.dither * signs, -1.0, 1.0)
