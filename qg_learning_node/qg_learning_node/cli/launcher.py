@@ -7,6 +7,15 @@ name, and stopping sends SIGINT, then SIGTERM, then SIGKILL, each after a grace 
 Each child runs in a session of its own (a Ctrl-C in the terminal reaches the launcher, which
 stops the children in order) but asks the kernel for SIGTERM when the launcher dies
 (``qg_common.process_guard``), so a killed launcher leaves no node behind.
+
+Respawn, as ros2 launch's ``respawn``/``respawn_delay``: a process whose spec says ``respawn``
+is started again when it exits on its own, after ``respawn_delay`` seconds, doubled for each
+further exit within the policy's window (:class:`RespawnPolicy`); with ``respawn_args`` added
+(the learner's ``-p resume:=true``: it comes back from its checkpoint). One that exits more
+than ``max_restarts`` times within ``window`` seconds, or with code 2 (the nodes' "bad
+parameters": a restart would fail alike), is given up on: ``poll()`` reports it as dead, with
+the reason in ``reasons``, and the caller stops the stack. Each restart is announced in
+``respawns`` (``take_respawns()``), so a supervisor can end the episode the process was in.
 """
 from __future__ import annotations
 
@@ -21,13 +30,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+from collections import deque
+
 import yaml
 
 from ament_index_python.packages import (PackageNotFoundError, get_package_prefix,
                                          get_package_share_directory)
 from qg_common.process_guard import die_with_parent
 
-__all__ = ["ProcessSpec", "Launcher", "load_stack_config", "StackConfigError"]
+__all__ = ["ProcessSpec", "Launcher", "load_stack_config", "load_stack", "StackConfigError",
+           "RespawnPolicy", "Respawn", "CONFIG_ERROR_EXIT"]
+
+#: The exit code of a node whose parameters are refused (``run_nodes``): never respawned.
+CONFIG_ERROR_EXIT = 2
 
 
 class StackConfigError(ValueError):
@@ -35,16 +50,58 @@ class StackConfigError(ValueError):
 
 
 @dataclass(frozen=True)
+class RespawnPolicy:
+    """How often respawning processes may die before the stack is stopped (stack file's
+    ``respawn:`` section).
+
+    :param max_restarts: a process that exits more often than this within ``window`` seconds
+        is not restarted again (the stack stops with the reason).
+    :param window: [s] the window those exits are counted in.
+    :param backoff: each further exit within the window multiplies the delay by this.
+    :param max_delay: [s] the longest delay before a restart.
+    """
+    max_restarts: int = 5
+    window: float = 60.0
+    backoff: float = 2.0
+    max_delay: float = 30.0
+
+    def __post_init__(self) -> None:
+        if self.max_restarts < 0 or self.window <= 0 or self.backoff < 1 or self.max_delay < 0:
+            raise StackConfigError(f"respawn: max_restarts >= 0, window > 0, backoff >= 1 and "
+                                   f"max_delay >= 0 needed, got {self}")
+
+    def delay(self, base: float, exits_in_window: int) -> float:
+        """[s] before the restart after the ``exits_in_window``-th exit (1 = the first)."""
+        return min(base * self.backoff ** max(0, exits_in_window - 1), self.max_delay)
+
+
+@dataclass(frozen=True)
 class ProcessSpec:
-    """One node process: ``ros2 run <package> <executable> <args>``."""
+    """One node process: ``ros2 run <package> <executable> <args>``.
+
+    ``package`` "" runs ``executable`` as a program (a path or a name on ``PATH``) with
+    ``args``: tools and tests (a process that always fails).
+    :param respawn: start it again when it exits on its own (ros2 launch's ``respawn``).
+    :param respawn_delay: [s] before the first restart (ros2 launch's ``respawn_delay``).
+    :param respawn_args: ROS arguments added when it is restarted (``-p resume:=true``).
+    """
     name: str
     package: str
     executable: str
     args: tuple[str, ...] = ()
+    respawn: bool = False
+    respawn_delay: float = 1.0
+    respawn_args: tuple[str, ...] = ()
 
-    def command(self) -> list[str]:
+    def command(self, respawned: bool = False) -> list[str]:
         """What ``ros2 run`` runs: ``lib/<package>/<executable>`` under the package's prefix in
-        the ament index (the launcher's environment is the stack's, ``ros_env.stack_env``)."""
+        the ament index (the launcher's environment is the stack's, ``ros_env.stack_env``);
+        ``respawned``: with ``respawn_args`` among its ROS arguments."""
+        args = list(self.args)
+        if respawned and self.respawn_args:
+            args += ([] if "--ros-args" in args else ["--ros-args"]) + list(self.respawn_args)
+        if not self.package:
+            return [self.executable, *args]
         try:
             prefix = Path(get_package_prefix(self.package))
         except (PackageNotFoundError, LookupError, EnvironmentError):
@@ -54,7 +111,7 @@ class ProcessSpec:
         if not exe.is_file():
             raise StackConfigError(f"{self.package}/{self.executable} is not built ({exe} missing): "
                                    "run scripts/setup.sh")
-        return [str(exe), *self.args]
+        return [str(exe), *args]
 
 
 #: ``$(find-pkg-share <package>)`` in an argument, as in a ROS 2 launch file.
@@ -75,6 +132,35 @@ def _substitute(arg: str) -> str:
 def load_stack_config(path: Path) -> list[ProcessSpec]:
     """The ``processes:`` list of a stack file such as ``config/stack.yaml``; arguments may
     name installed files as ``$(find-pkg-share <package>)/config/<file>``."""
+    return load_stack(path)[0]
+
+
+#: The keys of the ``respawn:`` section: the defaults of every process, then the policy.
+_RESPAWN_KEYS = {"enabled", "delay", "args", "max_restarts", "window", "backoff", "max_delay"}
+
+
+def _number(path: Path, where: str, value: Any, kind: type) -> Any:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+            (kind is int and not isinstance(value, int)):
+        raise StackConfigError(f"{path}: {where} must be a{'n integer' if kind is int else ' number'}"
+                               f", got {value!r}")
+    return kind(value)
+
+
+def _str_list(path: Path, where: str, value: Any) -> tuple[str, ...]:
+    if not isinstance(value, list):
+        raise StackConfigError(f"{path}: {where} must be a list")
+    return tuple(_substitute(str(a)) for a in value)
+
+
+def load_stack(path: Path) -> tuple[list[ProcessSpec], RespawnPolicy]:
+    """The processes of a stack file and its respawn policy.
+
+    The optional ``respawn:`` section gives every process's defaults (``enabled``, ``delay``,
+    ``args``) and the policy (``max_restarts``, ``window``, ``backoff``, ``max_delay``); a
+    process overrides the defaults with its own ``respawn``, ``respawn_delay`` and
+    ``respawn_args``. Without the section nothing respawns.
+    """
     if not path.is_file():
         raise StackConfigError(f"config file not found: {path}")
     try:
@@ -87,20 +173,53 @@ def load_stack_config(path: Path) -> list[ProcessSpec]:
     if not isinstance(data, dict) or not isinstance(data.get("processes"), list) \
             or not data["processes"]:
         raise StackConfigError(f"{path}: expected a non-empty 'processes:' list")
+    section = data.get("respawn") or {}
+    if not isinstance(section, dict) or not set(section) <= _RESPAWN_KEYS:
+        raise StackConfigError(f"{path}: 'respawn:' takes {sorted(_RESPAWN_KEYS)}, got "
+                               f"{sorted(section) if isinstance(section, dict) else section!r}")
+    enabled = section.get("enabled", False)
+    if not isinstance(enabled, bool):
+        raise StackConfigError(f"{path}: respawn.enabled must be true or false, got {enabled!r}")
+    delay = _number(path, "respawn.delay", section.get("delay", 1.0), float)
+    default_args = _str_list(path, "respawn.args", section.get("args", []))
+    policy = RespawnPolicy(**{key: _number(path, f"respawn.{key}", section[key],
+                                           int if key == "max_restarts" else float)
+                              for key in ("max_restarts", "window", "backoff", "max_delay")
+                              if key in section})
     specs = []
     for i, entry in enumerate(data["processes"]):
         if not isinstance(entry, dict) or not {"name", "package", "executable"} <= entry.keys():
             raise StackConfigError(f"{path}: processes[{i}] needs name, package and executable")
-        args = entry.get("args", [])
-        if not isinstance(args, list):
-            raise StackConfigError(f"{path}: processes[{i}].args must be a list")
+        args = _str_list(path, f"processes[{i}].args", entry.get("args", []))
+        respawn = entry.get("respawn", enabled)
+        if not isinstance(respawn, bool):
+            raise StackConfigError(f"{path}: processes[{i}].respawn must be true or false")
+        own_delay = _number(path, f"processes[{i}].respawn_delay",
+                            entry.get("respawn_delay", delay), float)
+        if own_delay < 0:
+            raise StackConfigError(f"{path}: processes[{i}].respawn_delay must be >= 0")
+        respawn_args = (_str_list(path, f"processes[{i}].respawn_args", entry["respawn_args"])
+                        if "respawn_args" in entry else default_args)
         specs.append(ProcessSpec(str(entry["name"]), str(entry["package"]),
-                                 str(entry["executable"]),
-                                 tuple(_substitute(str(a)) for a in args)))
+                                 str(entry["executable"]), args, respawn, own_delay,
+                                 respawn_args))
     names = [s.name for s in specs]
     if len(set(names)) != len(names):
         raise StackConfigError(f"{path}: process names must be unique, got {names}")
-    return specs
+    return specs, policy
+
+
+@dataclass(frozen=True)
+class Respawn:
+    """A process exited on its own and will be started again (``Launcher.take_respawns``)."""
+    name: str
+    code: int
+    restart: int        # its how-many-th restart within the policy's window (1 = the first)
+    delay: float        # [s] until it starts again
+
+    @property
+    def reason(self) -> str:
+        return f"process '{self.name}' exited with code {self.code}; restarting"
 
 
 @dataclass
@@ -109,6 +228,9 @@ class _Running:
     popen: subprocess.Popen
     pump: threading.Thread
     reported: bool = False
+    exits: deque = field(default_factory=deque)   # monotonic times of exits within the window
+    restart_at: float | None = None               # when a respawn is due
+    restarts: int = 0                             # restarts so far
 
 
 @dataclass
@@ -117,30 +239,54 @@ class Launcher:
 
     :param env: environment of the children (see :func:`ros_env.stack_env`).
     :param out: where prefixed lines go (default stdout); ``None`` silences them.
-    :param log_dir: if set, each process's output is also written to ``<log_dir>/<name>.log``.
+    :param log_dir: if set, each process's output is also written to ``<log_dir>/<name>.log``
+        (a restarted process's is appended).
+    :param policy: how often a respawning process may die (:class:`RespawnPolicy`).
     """
     env: dict[str, str]
     out: IO[str] | None = field(default_factory=lambda: sys.stdout)
     log_dir: Path | None = None
+    policy: RespawnPolicy = field(default_factory=RespawnPolicy)
     running: list[_Running] = field(default_factory=list)
+    #: name -> why a process that died is not restarted (its last words for the user).
+    reasons: dict[str, str] = field(default_factory=dict)
+    respawns: list[Respawn] = field(default_factory=list)
     _lock: threading.Lock = field(default_factory=threading.Lock)
+    _width: int = 0
+    _stopping: bool = False
 
     def start(self, specs: list[ProcessSpec]) -> None:
-        width = max(len(s.name) for s in specs)
+        self._width = max([self._width, *(len(s.name) for s in specs)])
         for spec in specs:
-            popen = subprocess.Popen(spec.command(), env=self.env, stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, text=True, bufsize=1,
-                                     start_new_session=True,
-                                     preexec_fn=die_with_parent(os.getpid()))
-            pump = threading.Thread(target=self._pump, args=(spec, popen, width), daemon=True)
-            pump.start()
+            popen, pump = self._spawn(spec, respawned=False)
             self.running.append(_Running(spec, popen, pump))
 
-    def _pump(self, spec: ProcessSpec, popen: subprocess.Popen, width: int) -> None:
+    def _spawn(self, spec: ProcessSpec, respawned: bool
+               ) -> tuple[subprocess.Popen, threading.Thread]:
+        popen = subprocess.Popen(spec.command(respawned), env=self.env, stdout=subprocess.PIPE,
+                                 stderr=subprocess.STDOUT, text=True, bufsize=1,
+                                 start_new_session=True,
+                                 preexec_fn=die_with_parent(os.getpid()))
+        pump = threading.Thread(target=self._pump, args=(spec, popen, self._width, respawned),
+                                daemon=True)
+        pump.start()
+        return popen, pump
+
+    def _say(self, line: str) -> None:
+        """A launcher line among the processes' (``[qgl] ...``)."""
+        if self.out is not None:
+            with self._lock:
+                self.out.write(f"[qgl] {line}\n")
+                self.out.flush()
+
+    def _pump(self, spec: ProcessSpec, popen: subprocess.Popen, width: int,
+              append: bool = False) -> None:
         log = None
         if self.log_dir is not None:
             self.log_dir.mkdir(parents=True, exist_ok=True)
-            log = open(self.log_dir / f"{spec.name}.log", "w")
+            log = open(self.log_dir / f"{spec.name}.log", "a" if append else "w")
+            if append:
+                log.write(f"--- restarted by the launcher (pid {popen.pid})\n")
         assert popen.stdout is not None
         for line in popen.stdout:
             if log is not None:
@@ -154,14 +300,64 @@ class Launcher:
             log.close()
 
     def poll(self) -> list[tuple[str, int]]:
-        """Processes that exited since the last call, as (name, exit code)."""
+        """Processes that exited since the last call and stay dead, as (name, exit code).
+
+        A respawning process is restarted instead (when its delay is over: call this often),
+        unless it has exited too often (``reasons`` says why it is not).
+        """
         died = []
+        now = time.monotonic()
         for r in self.running:
+            if r.reported:
+                continue
+            if r.restart_at is not None:
+                if now >= r.restart_at and not self._stopping:
+                    r.pump.join(timeout=1.0)
+                    r.popen, r.pump = self._spawn(r.spec, respawned=True)
+                    r.restart_at, r.restarts = None, r.restarts + 1
+                    self._say(f"restarted '{r.spec.name}' (pid {r.popen.pid})")
+                continue
             code = r.popen.poll()
-            if code is not None and not r.reported:
+            if code is None:
+                continue
+            reason = self._why_not_respawned(r, code, now)
+            if reason is not None:
                 r.reported = True
+                self.reasons[r.spec.name] = reason
                 died.append((r.spec.name, code))
+                continue
+            delay = self.policy.delay(r.spec.respawn_delay, len(r.exits))
+            r.restart_at = now + delay
+            self.respawns.append(Respawn(r.spec.name, code, len(r.exits), delay))
+            self._say(f"process '{r.spec.name}' exited with code {code}; restarting it in "
+                      f"{delay:.1f} s (exit {len(r.exits)} of at most "
+                      f"{self.policy.max_restarts + 1} within {self.policy.window:.0f} s)")
         return died
+
+    def _why_not_respawned(self, r: _Running, code: int, now: float) -> str | None:
+        """None if ``r`` is to be restarted after this exit (counted), else the reason."""
+        if not r.spec.respawn or self._stopping:
+            return f"process '{r.spec.name}' exited with code {code}"
+        if code == CONFIG_ERROR_EXIT:
+            return (f"process '{r.spec.name}' exited with code {code} (refused its "
+                    "parameters): not restarted")
+        r.exits.append(now)
+        while r.exits and now - r.exits[0] > self.policy.window:
+            r.exits.popleft()
+        if len(r.exits) > self.policy.max_restarts:
+            return (f"process '{r.spec.name}' keeps dying: it exited {len(r.exits)} times "
+                    f"within {self.policy.window:.0f} s (last code {code}); respawn gives up "
+                    f"after {self.policy.max_restarts} restarts")
+        return None
+
+    def take_respawns(self) -> list[Respawn]:
+        """The restarts announced since the last call (a process exited, and will be back)."""
+        taken, self.respawns = self.respawns, []
+        return taken
+
+    def restarts(self) -> dict[str, int]:
+        """How many times each process has been restarted."""
+        return {r.spec.name: r.restarts for r in self.running}
 
     def wait_any(self, period: float = 0.2) -> tuple[str, int]:
         """Block until some process exits; return its name and exit code."""
@@ -177,7 +373,9 @@ class Launcher:
         SIGINT goes in reverse start order, each process given until the wave's deadline to end
         before the next is signalled: what a later process says at its end (the executor's
         final ``aborted`` status) still reaches the earlier ones (the robot process's recorder).
+        Nothing is restarted from now on.
         """
+        self._stopping = True
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
             alive = [r for r in reversed(self.running) if r.popen.poll() is None]
             if not alive:
@@ -202,4 +400,5 @@ class Launcher:
             time.sleep(0.05)
 
     def pids(self) -> dict[str, Any]:
+        """Each process's current pid (a restarted one's new pid)."""
         return {r.spec.name: r.popen.pid for r in self.running}
