@@ -11,16 +11,23 @@ With ``learner.schedule: cycle`` (the thesis) it trains ``iterations_per_cycle``
 training while the robot moves (``updates_per_step`` per transition, see ``learner_core``).
 Each time it publishes the new actor (latched, so a restarted executor gets it at once) and its
 diagnostics. At the end of
-every episode it checkpoints networks, optimizers, Q-Graph and replay memory; with
-``resume: true`` a restarted learner continues from the last checkpoint. Only episodes it saw
-running are checkpointed: the latched final status of an episode that ended before it started
-is not news. Its heartbeat has a callback group of its own, so a long training cycle never
+every episode that ended ``done`` (training or test: it learns from both) it checkpoints
+networks, optimizers, Q-Graph and replay memory, then writes ``learner.json`` beside the
+checkpoint (the episode it follows, the transitions in it), which a training run's journal
+waits for (``cli/run_journal.py``); with ``resume: true`` a restarted learner continues from
+the last checkpoint. An ``aborted`` episode is not checkpointed: a training run reruns its slot,
+and a learner restarted from the checkpoint then holds exactly the completed episodes'
+transitions (one that runs on keeps the aborted part in memory, and in its next checkpoint).
+Only episodes it saw running are checkpointed: the latched final status of an episode that
+ended before it started is not news. Its heartbeat has a callback group of its own, so a long training cycle never
 silences it (the executor would run degraded). ``ros2 param set`` changes the training settings
 of ``learner_config.RUNTIME_FIELDS`` from the next cycle on. PyTorch is loaded only to build
 the networks, so a learner whose parameters are refused says so within a second.
 """
 from __future__ import annotations
 
+import json
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -47,6 +54,8 @@ if TYPE_CHECKING:     # torch is loaded only to build the networks: see _core_cl
     from qg_learning_node.learner.learner_core import LearnerCore
 
 CHECKPOINT_NAME = "learner.pt"
+#: Beside the checkpoint: what it holds (the episode it was written after, its transitions).
+CHECKPOINT_INFO_NAME = "learner.json"
 #: [s] how long an ended episode may go without one of its transitions taken before the
 #: checkpoint is written without the rest (they were published while the learner was down).
 CHECKPOINT_GRACE = 3.0
@@ -83,6 +92,7 @@ class LearnerNode(Node):
         self.last_taken: dict[str, float] = {}    # episode id -> when its last one was taken
         self.seen_running: set[str] = set()       # episodes with a status before their end
         self.pending_checkpoint: dict[str, tuple[int, float]] = {}  # id -> (final steps, ended at)
+        self.ended: dict[str, dict[str, Any]] = {}     # id -> its final status, for learner.json
         self.checkpointed: set[str] = set()
         self.last_diagnostics: dict = {}
 
@@ -194,14 +204,24 @@ class LearnerNode(Node):
                 stop.wait(0.002)
 
     def _on_status(self, msg: EpisodeStatus) -> None:
-        if not msg.episode_id or msg.mode != "train":
+        if not msg.episode_id or msg.mode not in ("train", "test"):
             return
         if msg.state not in ("done", "aborted"):
             self.seen_running.add(msg.episode_id)
             return
+        if msg.state == "aborted":          # not a completed episode: its slot is rerun
+            if msg.episode_id in self.seen_running:
+                self.seen_running.discard(msg.episode_id)
+                self.get_logger().info(f"{msg.episode_id} aborted ({msg.message}): not "
+                                       "checkpointed")
+            return
         seen = msg.episode_id in self.seen_running or msg.episode_id in self.received
         if seen and msg.episode_id not in self.checkpointed:
             self.pending_checkpoint.setdefault(msg.episode_id, (int(msg.step), time.monotonic()))
+            self.ended.setdefault(msg.episode_id, {
+                "episode_id": msg.episode_id, "mode": msg.mode, "state": msg.state,
+                "steps": int(msg.step), "episode_return": float(msg.episode_return),
+                "success": bool(msg.success), "initial_pose": int(msg.initial_pose)})
             self._maybe_checkpoint(msg.episode_id)
 
     def _checkpoint_pending(self) -> None:
@@ -235,7 +255,12 @@ class LearnerNode(Node):
         tmp = self.checkpoint.with_suffix(".tmp")
         with self.lock:
             self.core.save(tmp)
+            info = {**self.ended.pop(episode_id, {"episode_id": episode_id}),
+                    "received": got, "transitions": self.core.steps,
+                    "actor_version": self.core.actor_version, "updates": self.core.updates,
+                    "saved_at": time.time()}
         tmp.replace(self.checkpoint)          # atomic: a crash never leaves half a checkpoint
+        _write_json_atomically(self.checkpoint.with_name(CHECKPOINT_INFO_NAME), info)
         self.get_logger().info(f"checkpoint after {episode_id}: {self.core.steps} transitions")
 
     def _publish_actor(self) -> None:
@@ -258,6 +283,16 @@ class LearnerNode(Node):
         for key in ("directly_connected", "connected", "disconnected", "loose_end"):
             setattr(msg, key, int(d.get(key, 0)))
         self.diagnostics_pub.publish(msg)
+
+
+def _write_json_atomically(path: Path, data: dict[str, Any]) -> None:
+    """``path`` holds ``data`` whole or its old content, whatever stops the process when."""
+    tmp = path.with_suffix(".tmp")
+    with open(tmp, "w") as f:
+        json.dump(data, f, indent=1)
+        f.flush()
+        os.fsync(f.fileno())
+    tmp.replace(path)
 
 
 def _start_training_thread(nodes: list[Node]) -> Callable[[], None]:

@@ -76,3 +76,30 @@ def test_transitions_that_stop_coming_are_checkpointed_without_the_rest(learner)
     learner._checkpoint_pending()
     assert _saved_steps(learner) == 2
     assert "down" in learner.checkpointed and "down" not in learner.pending_checkpoint
+
+
+def test_an_aborted_episode_is_not_checkpointed_a_completed_test_episode_is(learner) -> None:
+    import json
+
+    from qg_interfaces.msg import EpisodeStatus
+
+    from qg_learning_node.learner_node import CHECKPOINT_INFO_NAME
+    for step in range(3):
+        _take(learner, "cut", step)
+    for state in ("running", "aborted"):
+        learner._on_status(EpisodeStatus(episode_id="cut", state=state, mode="train", step=3,
+                                         message="shutdown"))
+    learner._checkpoint_pending()
+    assert _saved_steps(learner) is None                  # the aborted one: no checkpoint
+    learner._on_status(EpisodeStatus(episode_id="exam", state="running", mode="test"))
+    for step in range(2):
+        _take(learner, "exam", step)
+    learner._on_status(EpisodeStatus(episode_id="exam", state="done", mode="test", step=2,
+                                     episode_return=-1.5, success=True, initial_pose=4))
+    assert _saved_steps(learner) == 5                     # the aborted part stays in memory
+    info = json.loads((learner.checkpoint.parent / CHECKPOINT_INFO_NAME).read_text())
+    assert {k: info[k] for k in ("episode_id", "mode", "state", "steps", "episode_return",
+                                 "success", "initial_pose", "received", "transitions")} == {
+        "episode_id": "exam", "mode": "test", "state": "done", "steps": 2,
+        "episode_return": -1.5, "success": True, "initial_pose": 4, "received": 2,
+        "transitions": 5}
