@@ -38,7 +38,9 @@ from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
 from qg_learning_node.executor.episode import Actor, Episode, TransitionRecord
 from qg_learning_node.learner.learner_params import learner_config_from_params
 from qg_learning_node.executor.noise import ActionNoise, NoiseConfig
-from qg_learning_node.executor.parameters import load_geometry, load_noise, load_task
+from qg_learning_node.executor.parameters import (load_geometry, load_noise,
+                                                  load_stall_recovery, load_task)
+from qg_learning_node.executor.stall_recovery import StallRecovery, StallRecoveryConfig
 from qg_learning_node.executor.observation import observation_from_step
 from qg_learning_node.executor.residual_task import (ACTION_DIM, Observation,
                                                      ResidualTask, TaskConfig)
@@ -51,7 +53,7 @@ __all__ = ["ALGORITHMS", "ARMS", "ESTIMATORS", "DEFAULT_ROBOT", "StackSettings",
            "LivePolicy",
            "RunSpec", "MonteCarloCheck",
            "algorithm_config", "run_episode", "run_training", "episode_noise_seed", "zero_policy",
-           "config_digest", "STACK_CONFIG_FILES"]
+           "config_digest", "STACK_CONFIG_FILES", "recovery_seed", "stall_recovery_config"]
 
 #: Our learner's algorithms, as the registry names them (``learner/algorithms.py``): vanilla
 #: DDPG (no bounds, no zero-action loops), QG-DDPG (graph + a-priori bounds, the zero residual as
@@ -275,18 +277,45 @@ def zero_policy(state: np.ndarray) -> np.ndarray:
 
 
 def run_episode(env: InsertionRobot, episode: Episode, actor: Actor,
-                on_transition: Callable[[TransitionRecord], None] | None = None
-                ) -> dict[str, Any]:
-    """Drive ``episode`` to its end on ``env``; ``on_transition(record)`` after every step."""
+                on_transition: Callable[[TransitionRecord], None] | None = None,
+                recovery: StallRecovery | None = None) -> dict[str, Any]:
+    """Drive ``episode`` to its end on ``env``; ``on_transition(record)`` after every step.
+
+    :param recovery: stall recovery between the actor and the robot, as the executor node
+        runs it in test episodes; the result then counts its ``recoveries`` and their steps.
+    """
     episode.begin(env.reset(episode.initial_pose))
     while not episode.done:
         action = episode.choose_action(actor)
+        if recovery is not None:
+            action = recovery.act(episode.state, action)
         record: TransitionRecord = episode.observe(action, env.step(action))
         if on_transition is not None:
             on_transition(record)
-    return {"episode": episode.episode_id, "mode": episode.mode, "pose": episode.initial_pose,
-            "steps": episode.step, "success": episode.success, "end_reason": episode.end_reason,
-            "return": episode.episode_return, "truly_inserted": episode.truly_inserted}
+    result = {"episode": episode.episode_id, "mode": episode.mode, "pose": episode.initial_pose,
+              "steps": episode.step, "success": episode.success,
+              "end_reason": episode.end_reason, "return": episode.episode_return,
+              "truly_inserted": episode.truly_inserted}
+    if recovery is not None:
+        result.update(recoveries=recovery.recoveries, recovered_at=list(recovery.started_at))
+    return result
+
+
+#: Recovery episodes' perturbation seeds start here (``recovery_seed``): apart from training's.
+_RECOVERY_SEEDS = 100_000
+
+
+def recovery_seed(run_seed: int, index: int) -> int:
+    """Perturbation seed of recovery episode ``index`` of a run (distinct from every training
+    episode's noise seed of the same run)."""
+    return episode_noise_seed(run_seed, _RECOVERY_SEEDS + index)
+
+
+def stall_recovery_config(config_dir: str | None = None) -> StallRecoveryConfig:
+    """``executor.yaml``'s ``stall_recovery`` section, checked as the node checks it, switched
+    on (a run asks for recovery by ``RunSpec.stall_recovery``)."""
+    params = load_ros_params(config_file("executor.yaml", config_dir))
+    return dataclasses.replace(load_stall_recovery(params, "executor.yaml"), enabled=True)
 
 
 @dataclass(frozen=True)
@@ -313,6 +342,10 @@ class RunSpec:
     :param arm: ``realistic`` | ``ideal`` (:data:`ARMS`); the arm's seed is ``seed``.
     :param gamma: the discount; ``None`` keeps ``learner.yaml``'s.
     :param robot: the robot plugin (:data:`DEFAULT_ROBOT`; ``sim_panda_mujoco``, ...).
+    :param stall_recovery: after the test episodes (the thesis protocol, untouched), the same
+        poses again with stall recovery (``executor.yaml``'s ``stall_recovery``), as episodes
+        of mode ``recovery``, each with its ``recoveries``: counted apart, never in the test
+        numbers.
     """
     algorithm: str
     critic_lr: float
@@ -339,6 +372,7 @@ class RunSpec:
     arm: str = "realistic"
     gamma: float | None = None
     robot: str = DEFAULT_ROBOT
+    stall_recovery: bool = False
 
     def __post_init__(self) -> None:
         if self.arm not in ARMS:
@@ -368,6 +402,7 @@ class RunSpec:
         extra += f"_g{self.gamma:g}" if self.gamma is not None else ""
         extra += "_ideal" if self.arm == "ideal" else ""
         extra += f"_{self.robot}" if self.robot != DEFAULT_ROBOT else ""
+        extra += "_recovery" if self.stall_recovery else ""
         return f"{self.algorithm}_lr{self.critic_lr:g}_it{self.iterations}{extra}_s{self.seed}"
 
     def learner_config(self, base: LearnerConfig) -> LearnerConfig:
@@ -479,9 +514,19 @@ def run_training(spec: RunSpec) -> dict[str, Any]:
                            housing_tilt=spec.test_housing_tilt), spec.estimator)
     if not spec.eval_every:
         episodes += test_phase("test", test_env)
+    recovery = stall_recovery_config(spec.config_dir) if spec.stall_recovery else None
+    if recovery is not None:        # apart from the test episodes: mode ``recovery``
+        for index in range(spec.test_episodes):
+            watch = StallRecovery(recovery, ACTION_DIM, recovery_seed(spec.seed, index),
+                                  settings.noise)
+            result = run_episode(test_env, Episode(f"recovery{index:03d}", "test",
+                                                   index % N_START_POSES, spec.reward,
+                                                   test_env.residual), policy, recovery=watch)
+            episodes.append({**result, "mode": "recovery"})
     envs = (env,) if test_env is env else (env, test_env)
     return {"experiment": spec.experiment, "name": spec.name, "spec": dataclasses.asdict(spec),
             "config_digest": config_digest(spec.config_dir), **settings.step_record,
+            **({} if recovery is None else {"stall_recovery": dataclasses.asdict(recovery)}),
             "episodes": episodes,
             "evaluations": evaluations, "cycles": cycles,
             "rl_steps": sum(e.steps for e in envs),

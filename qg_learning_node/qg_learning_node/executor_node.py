@@ -46,6 +46,7 @@ from qg_learning_node.executor.parameters import (CELL_SECTIONS, EXECUTOR_SECTIO
                                                   ExecutorConfig)
 from qg_learning_node.executor.peg_task import PegTask, PegTaskConfig
 from qg_learning_node.executor.residual_task import ResidualTask, TaskConfig
+from qg_learning_node.executor.stall_recovery import StallRecovery, StallRecoveryConfig
 from qg_learning_node.learner.actor_mlp import ActorMLP
 
 
@@ -126,6 +127,8 @@ class ExecutorNode(Node):
         self.at_rest_event = threading.Event()
         self.seq = 0
         self.episode: Episode | None = None
+        #: The running test episode's stall recovery (``stall_recovery.enabled``), else None.
+        self.recovery: StallRecovery | None = None
         self.state = "idle"
         self.message = ""
         self.degraded = False
@@ -143,6 +146,7 @@ class ExecutorNode(Node):
         noise = NoiseConfig.from_dict(params["noise"])
         config = ExecutorConfig.from_dict(params)
         self.task, self.noise_config, self.config = task, noise, config
+        self.recovery_config = StallRecoveryConfig.from_dict(params["stall_recovery"])
 
     # --- inputs ---------------------------------------------------------------------------
     def _on_actor(self, msg: ActorParameters) -> None:
@@ -244,6 +248,9 @@ class ExecutorNode(Node):
         # Under many robots the id names its robot (robot0_..., executor/episode_id.py).
         episode_id = make_episode_id(self.get_namespace(), index, req.mode, pose)
         seed = req.seed if req.seed != 0 else 1000 + index
+        self.recovery = (StallRecovery(self.recovery_config, self.task.action_dim, seed,
+                                       self.noise_config)
+                         if req.mode == "test" and self.recovery_config.enabled else None)
         self.episode = Episode(episode_id, req.mode, pose, reward, self.task,
                                ActionNoise(self.noise_config, self.task.action_dim, seed))
         self.stop_requested.clear()
@@ -308,6 +315,8 @@ class ExecutorNode(Node):
                 with self.lock:
                     actor = self.actor if alive else None
                 action = episode.choose_action(actor)
+                if actor is not None:
+                    action = self._recover(episode, action)
                 at_rest = self._execute(episode.task.command(action, observation))
                 observation = observation_from_msg(at_rest)
                 record = episode.observe(action, observation)
@@ -392,6 +401,21 @@ class ExecutorNode(Node):
         self.seq += 1
         self._send(self.task.hold())
 
+    def _recover(self, episode: Episode, action: Any) -> Any:
+        """The action through the episode's stall recovery, if it has one; a recovery that
+        starts here is logged and in the status (``message``, ``recoveries``)."""
+        recovery = self.recovery
+        if recovery is None:
+            return action
+        before = recovery.recoveries
+        action = recovery.act(episode.state, action)
+        if recovery.recoveries > before:
+            text = (f"stall recovery {recovery.recoveries} at step {episode.step}: "
+                    f"{recovery.config.steps} {recovery.config.perturbation} steps")
+            self.get_logger().info(f"episode {episode.episode_id}: {text}")
+            self._set_state("running", text)
+        return action
+
     # --- status ---------------------------------------------------------------------------
     def _set_degraded(self, degraded: bool) -> None:
         """Say so (log and status) when the learner goes silent or comes back."""
@@ -415,6 +439,8 @@ class ExecutorNode(Node):
             msg.episode_id, msg.mode, msg.reward_type = ep.episode_id, ep.mode, ep.reward_kind
             msg.initial_pose, msg.step, msg.max_steps = ep.initial_pose, ep.step, ep.max_steps
             msg.episode_return, msg.success = ep.episode_return, ep.success
+            recovery = self.recovery
+            msg.recoveries = recovery.recoveries if recovery is not None else 0
         self.status_pub.publish(msg)
 
 
