@@ -48,6 +48,7 @@ from qg_learning_node.executor.peg_task import PegTask, PegTaskConfig
 from qg_learning_node.executor.residual_task import ResidualTask, TaskConfig
 from qg_learning_node.executor.stall_recovery import StallRecovery, StallRecoveryConfig
 from qg_learning_node.learner.actor_mlp import ActorMLP
+from qg_learning_node.policy_file import Policy, frozen_policy
 
 
 
@@ -86,9 +87,15 @@ class ExecutorNode(Node):
             raise ValueError(f"task.kind must be one of {sorted(TASKS)}, got {self.task_kind!r}")
         self.task_section, self.make_task, observation = TASKS[self.task_kind]
         self.cell_section, cell_file = CELL_SECTIONS[self.task_kind]
-        self._configure(declare_parameters(
+        params = declare_parameters(
             self, [*EXECUTOR_SECTIONS, self.task_section, self.cell_section],
-            (("qg_learning_node", "executor.yaml"), cell_file)))
+            (("qg_learning_node", "executor.yaml"), cell_file))
+        self._configure(params)
+        # policy.file: a frozen actor, checked against this task and robot now (a file that
+        # does not fit stops the start with the reasons, exit code 2), never a learner's.
+        self.frozen: Policy | None = frozen_policy(params["policy"]["file"],
+                                                   params["policy"]["robot"], self.task_kind,
+                                                   self.task)
         on_parameter_change(self, self._configure, "from the next episode (timeouts: next step)")
 
         # The learner builds its networks from this: the state is set here, and only here.
@@ -103,8 +110,9 @@ class ExecutorNode(Node):
         self.setpoint_pub = self.create_publisher(WrenchSetpoint, topics.WRENCH_SETPOINT,
                                                   topics.COMMAND_QOS)
         callbacks = ReentrantCallbackGroup()
-        self.create_subscription(ActorParameters, topics.ACTOR_PARAMETERS, self._on_actor, LATCHED,
-                                 callback_group=callbacks)
+        if self.frozen is None:
+            self.create_subscription(ActorParameters, topics.ACTOR_PARAMETERS, self._on_actor,
+                                     LATCHED, callback_group=callbacks)
         self.create_subscription(LearnerDiagnostics, topics.LEARNER_DIAGNOSTICS, self._on_learner,
                                  10, callback_group=callbacks)
         self.create_subscription(AtRest, topics.EE_AT_REST, self._on_at_rest, 10,
@@ -120,8 +128,12 @@ class ExecutorNode(Node):
         self.create_timer(0.5, self._publish_status, callback_group=callbacks)
 
         self.lock = threading.Lock()
-        self.actor: ActorMLP | None = None
+        self.actor: ActorMLP | Policy | None = self.frozen
         self.actor_version = 0
+        if self.frozen is not None:
+            self.actor_version = int(self.frozen.spec.provenance.get("actor_version", 0))
+            self.get_logger().info(f"frozen policy {params['policy']['file']}: "
+                                   f"{self.frozen.spec.describe()}; no learner is waited for")
         self.last_learner_time = -float("inf")
         self.at_rest: dict[int, AtRest] = {}
         self.at_rest_event = threading.Event()
@@ -304,13 +316,14 @@ class ExecutorNode(Node):
         try:
             observation = observation_from_msg(self._reset(episode))
             episode.begin(observation)
-            self._await_first_learner_contact(self.config.learner_grace)
-            self._await_learner_reading_transitions(self.config.learner_grace)
+            if self.frozen is None:
+                self._await_first_learner_contact(self.config.learner_grace)
+                self._await_learner_reading_transitions(self.config.learner_grace)
             self._set_state("running")
             while not episode.done:
                 if self.stop_requested.is_set():
                     raise EpisodeAborted(self.stop_reason)
-                alive = self.learner_alive()
+                alive = self.frozen is not None or self.learner_alive()
                 self._set_degraded(not alive)
                 with self.lock:
                     actor = self.actor if alive else None

@@ -23,6 +23,9 @@ __all__ = ["main", "build_parser"]
 def _cmd_up(args: argparse.Namespace) -> int:
     specs = load_stack_config(Path(args.config) if args.config else config_file("stack.yaml"))
     specs = fleet_specs(specs, args.robots)
+    if args.policy:     # the actor of a policy file, frozen: no learner (cli/policy.py)
+        from qg_learning_node.cli.policy import frozen_stack
+        specs = frozen_stack(specs, Path(args.policy))
     launcher = Launcher(env=stack_env(), log_dir=Path(args.log_dir) if args.log_dir else None)
     stopping = False
 
@@ -121,6 +124,9 @@ def build_parser() -> argparse.ArgumentParser:
     up.add_argument("--robots", type=int, default=1,
                     help="N > 1: N robot stacks in the namespaces /robot0../robot<N-1> and one "
                          "learner at the root that learns from all of them (see cli/fleet.py)")
+    up.add_argument("--policy", default=None, metavar="FILE",
+                    help="run this policy file's actor frozen (`qgl export-policy`), without "
+                         "the learner; a file that does not fit the stack is refused at start")
     up.set_defaults(func=_cmd_up)
 
     ep = sub.add_parser("episode", help="start or stop an episode")
@@ -148,8 +154,9 @@ def build_parser() -> argparse.ArgumentParser:
     # (answered before qgl enters the stack's environment, see main())
     sub.add_parser("env", help='print the stack\'s environment as exports: eval "$(qgl env)"')
 
-    from qg_learning_node.cli import demo, render, train
+    from qg_learning_node.cli import demo, policy, render, train
     demo.add_parser(sub)
+    policy.add_parser(sub)
     train.add_parser(sub)
     render.add_parser(sub)
     try:

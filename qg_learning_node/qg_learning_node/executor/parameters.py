@@ -19,7 +19,8 @@ from qg_learning_node.executor.peg_task import PegTaskConfig
 from qg_learning_node.executor.residual_task import TaskConfig
 from qg_learning_node.executor.stall_recovery import StallRecoveryConfig
 
-__all__ = ["ExecutorConfig", "TaskChoice", "EXECUTOR_SECTIONS", "NOISE_SECTION", "TASK_SECTIONS",
+__all__ = ["ExecutorConfig", "TaskChoice", "PolicyChoice", "EXECUTOR_SECTIONS", "NOISE_SECTION",
+           "POLICY_SECTION", "TASK_SECTIONS",
            "CELL_SECTIONS", "TASK_CHOICE_SECTION", "TIMING_SECTION", "load_noise", "load_task",
            "load_geometry", "STALL_RECOVERY_SECTION", "load_stall_recovery"]
 
@@ -90,6 +91,27 @@ NOISE_SECTION = ParameterSection("noise", NoiseConfig, ranges={
     "sigma": (0.0, 10.0), "theta": (0.0, 100.0), "dt": POSITIVE},
     runtime=frozenset(f.name for f in fields(NoiseConfig)), applies="from the next episode")
 
+
+@dataclass(frozen=True)
+class PolicyChoice:
+    """Which actor the executor runs: the learner's, or a frozen one from a policy file.
+
+    :param file: a policy file (``qgl export-policy``); "" runs the learner's actor from
+        ``/actor_parameters``. Set, the executor runs this actor frozen, never waits for a
+        learner, and refuses at start a file whose task, observation, sizes, settings or robot
+        do not fit its own (``qg_learning_node/policy_file.py``).
+    :param robot: the robot plugin this stack drives (the robot process's ``robot``), which a
+        policy file's robot is checked against; ``qgl up --policy`` sets it from the stack file.
+    """
+    file: str = ""
+    robot: str = "sim_panda"
+
+
+#: The frozen policy: read and checked once, at start.
+POLICY_SECTION = ParameterSection("policy", PolicyChoice, fixed=(
+    "read-only: the policy file is loaded and checked once, at start; restart the executor "
+    "to run another"))
+
 #: Stall recovery in test episodes (off: the thesis protocol); an episode keeps the recovery it
 #: began with.
 STALL_RECOVERY_SECTION = ParameterSection("stall_recovery", StallRecoveryConfig, ranges={
@@ -99,7 +121,8 @@ STALL_RECOVERY_SECTION = ParameterSection("stall_recovery", StallRecoveryConfig,
     applies="from the next episode")
 
 #: The executor's parameters besides its task's.
-EXECUTOR_SECTIONS = (TIMING_SECTION, NOISE_SECTION, STALL_RECOVERY_SECTION)
+EXECUTOR_SECTIONS = (TIMING_SECTION, NOISE_SECTION, POLICY_SECTION,
+                     STALL_RECOVERY_SECTION)
 
 #: Each task kind's section. The default reward and the step caps may change between episodes
 #: (a running episode keeps its own); everything else defines the learner's MDP. Each kind's
