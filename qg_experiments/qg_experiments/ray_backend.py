@@ -1,6 +1,6 @@
 """The experiment runs on Ray: a local Ray on this machine, or a cluster of machines.
 
-Each run is one Ray task of one CPU that calls the same ``tasks.run_one`` as a worker of the
+Each run is one Ray task of one CPU that calls the same ``run_worker.run_one`` as a worker of the
 process pool (single-threaded torch, then ``spec.run()``), so a seed gives the same result on
 either backend; results come back as the tasks end, and ``tasks.run_specs`` saves each at once.
 
@@ -17,13 +17,10 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterator, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+from qg_experiments.run_worker import RunnableSpec, run_one
 from qg_experiments.runner import config_digest
-from qg_experiments.tasks import run_one
-
-if TYPE_CHECKING:
-    from qg_experiments.tasks import RunnableSpec
 
 __all__ = ["CONFIG_ENV", "ray_results"]
 

@@ -5,8 +5,8 @@ to ``<out>/<experiment>/<name>.json`` the moment it finishes, so an interrupted 
 it did, and a second call with the same specs skips runs whose saved spec and config digest
 (see ``runner.config_digest``) are identical. Only where a run executes depends on the backend:
 ``process`` (the default) is a pool of one process per core on this machine, ``ray`` hands the
-runs to a Ray cluster (``ray_backend``); skipping, saving, the progress bar and the results are
-the same code for both.
+runs to a Ray cluster (``ray_backend``); a worker of either calls ``run_worker.run_one``.
+Skipping, saving, the progress bar and the results are the same code for both.
 """
 from __future__ import annotations
 
@@ -16,11 +16,11 @@ import multiprocessing
 import os
 from collections.abc import Collection, Iterable, Sequence
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
-import torch
 from tqdm import tqdm
 
+from qg_experiments.run_worker import RunnableSpec, run_one
 from qg_experiments.runner import config_digest
 
 __all__ = ["RunnableSpec", "BACKENDS", "DEFAULT_WORKERS", "result_path", "run_specs",
@@ -30,14 +30,6 @@ __all__ = ["RunnableSpec", "BACKENDS", "DEFAULT_WORKERS", "result_path", "run_sp
 BACKENDS = ("process", "ray")
 #: One single-threaded run per core: more processes only thrash.
 DEFAULT_WORKERS = os.cpu_count() or 1
-
-
-class RunnableSpec(Protocol):
-    name: str
-    experiment: str
-    config_dir: str | None
-
-    def run(self) -> dict[str, Any]: ...
 
 
 def result_path(out: Path, spec: RunnableSpec) -> Path:
@@ -65,12 +57,6 @@ def _saved(out: Path, spec: RunnableSpec) -> dict[str, Any] | None:
             and result.get("config_digest") == config_digest(spec.config_dir)
             and result.get("task_settings", {}) == settings)
     return result if same else None
-
-
-def run_one(spec: RunnableSpec) -> tuple[RunnableSpec, dict[str, Any]]:
-    """One run in a worker of either backend: single-threaded torch, as every worker runs."""
-    torch.set_num_threads(1)
-    return spec, spec.run()
 
 
 def _pool_results(todo: Sequence[RunnableSpec], workers: int
