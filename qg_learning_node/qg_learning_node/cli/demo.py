@@ -29,7 +29,7 @@ from qg_learning_node.cli.episode_schedule import (EpisodeJob, EpisodeOutcome, r
                                                    run_episode_by_service, run_lanes,
                                                    split_over_robots)
 from qg_learning_node.cli.fleet import fleet_specs, robot_namespace
-from qg_learning_node.cli.launcher import Launcher, ProcessSpec, load_stack_config
+from qg_learning_node.cli.launcher import Launcher, ProcessSpec, load_stack
 from qg_learning_node.cli.ros_env import install_dir, stack_env
 from qg_learning_node.learner.learner_config import SCHEDULES
 from qg_learning_node.learner.training_log import TrainingLog
@@ -264,19 +264,29 @@ def _with_demo_settings(spec: ProcessSpec, settings: DemoSettings,
 
 def start_stack(run_dir: Path, settings: DemoSettings, config: Path,
                 domain_id: str | None = None, robots: int = 1,
-                robot: str | None = None) -> tuple[Launcher, dict[str, str]]:
+                robot: str | None = None, resume: bool = False
+                ) -> tuple[Launcher, dict[str, str]]:
     """Start the processes of ``config`` with ``settings`` (``robots`` > 1: that many robots and
     one learner, ``cli/fleet.py``); episodes, checkpoints, logs and ROS logs go under
-    ``run_dir``. :param robot: the robot plugin to run (``None``: the processes' default).
-    :returns: the launcher (stop it) and the stack's environment."""
+    ``run_dir``; processes respawn as the stack file says. :param robot: the robot plugin to
+    run (``None``: the processes' default). :param resume: the learner starts from the
+    checkpoint in ``run_dir`` if there is one (a training run that continues).
+    :returns: the launcher (stop it, its ``running`` specs) and the stack's environment."""
     env = stack_env(log_dir=run_dir / "ros_log")
     env["QG_RUNS_DIR"] = str(run_dir)     # episodes/ (MCAP) and checkpoints/ go here
     if domain_id is not None:
         env["ROS_DOMAIN_ID"] = domain_id
-    launcher = Launcher(env=env, out=None, log_dir=run_dir / "logs")
-    launcher.start(fleet_specs([_with_demo_settings(spec, settings, robot)
-                                for spec in load_stack_config(config)], robots))
+    specs, policy = load_stack(config)
+    launcher = Launcher(env=env, out=None, log_dir=run_dir / "logs", policy=policy)
+    specs = [_with_demo_settings(spec, settings, robot) for spec in specs]
+    if resume:
+        specs = [_with_parameters(s, {"resume": "true"}) if _is_learner(s) else s for s in specs]
+    launcher.start(fleet_specs(specs, robots))
     return launcher, env
+
+
+def _is_learner(spec: ProcessSpec) -> bool:
+    return (spec.package, spec.executable) == ("qg_learning_node", "learner")
 
 
 def demo_schedule(train_episodes: int, test_poses: int, seed: int,
@@ -322,6 +332,11 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     from qg_learning_node.cli.ros_client import CliNode
     if args.robots < 1:
         print(f"qgl demo: --robots must be >= 1, got {args.robots}", file=sys.stderr)
+        return 2
+    if args.robots == 1:          # the demo is a training run with the demo's numbers
+        return _demo_as_run(args)
+    if args.run_dir:
+        print("qgl demo: --run-dir (a run that continues) is for one robot", file=sys.stderr)
         return 2
     run_dir = Path(args.runs_dir or runs_dir()) / time.strftime("demo_%Y%m%d_%H%M%S")
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -379,6 +394,22 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0 if all(c == 0 for c in codes.values()) else 1
 
 
+def _demo_as_run(args: argparse.Namespace) -> int:
+    """``qgl run`` with the demo's numbers (``cli/training_run.py``): in a new
+    ``<runs>/demo_<time>`` folder, or continuing the one ``--run-dir`` names."""
+    from qg_learning_node.cli import training_run
+    from qg_learning_node.cli.run_journal import RunMismatch
+    try:
+        plan, settings, config = training_run.plan_from_args(args, args.train_episodes, 0)
+        run_dir = Path(args.run_dir) if args.run_dir else \
+            Path(args.runs_dir or runs_dir()) / time.strftime("demo_%Y%m%d_%H%M%S")
+        return training_run.run_training(run_dir, plan, settings, config, args.episode_timeout,
+                                         args.random_bar, label="qgl demo")
+    except (ValueError, RunMismatch) as exc:
+        print(f"qgl demo: {exc}", file=sys.stderr)
+        return 2
+
+
 def _render_last_test(outcomes: list[EpisodeOutcome], run_dir: Path) -> None:
     """The last test episode as a video beside the learning curve (``qgl render``); a demo
     without a renderer or that bag says why and goes on."""
@@ -402,6 +433,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                       help="stack file (default: the stack.yaml qg_learning_node installs)")
     demo.add_argument("--runs-dir", default=None,
                       help="parent of the run folder (default: $QG_RUNS_DIR, else ./runs)")
+    demo.add_argument("--run-dir", default=None,
+                      help="the run's own folder: an interrupted demo continues there with the "
+                           "same command (one robot; `qgl run`)")
     demo.add_argument("--train-episodes", type=int, default=40, help="(thesis: 40)")
     demo.add_argument("--test-poses", type=int, default=8)
     demo.add_argument("--train-max-steps", type=int, default=DemoSettings.train_max_steps,

@@ -15,7 +15,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-__all__ = ["EpisodeJob", "EpisodeOutcome", "EpisodeObserver", "robot_name", "split_over_robots",
+__all__ = ["EpisodeJob", "EpisodeOutcome", "EpisodeObserver", "Lane", "robot_name",
+           "split_over_robots",
            "run_lanes", "run_episode_by_service"]
 
 #: [s] how long a lane waits for its robot's start_episode service to appear and answer.
@@ -44,6 +45,8 @@ class EpisodeOutcome:
     wall_time: float
     robot: str = ""          # its namespace ("" = one robot at the root)
     started: float = 0.0     # [s] Unix time of the start request
+    state: str = "done"      # the final state: done | aborted
+    message: str = ""        # the executor's reason (why it ended, why it was aborted)
 
 
 def robot_name(robot: str, name: str) -> str:
@@ -54,7 +57,9 @@ def robot_name(robot: str, name: str) -> str:
 
 
 class EpisodeObserver(Protocol):
-    """What follows the lanes (the demo's progress bar and training log)."""
+    """What follows the lanes (the demo's progress bar and training log). An observer may also
+    have ``started(index, episode_id, robot)``, called when the executor has named the episode
+    (a training run's journal notes which episode its slot is running)."""
 
     def begin(self, index: int, mode: str, robot: str = "") -> None: ...
 
@@ -141,6 +146,9 @@ class _Lane:
             if not response.success:
                 raise RuntimeError(f"StartEpisode refused ({self.service}): {response.message}")
             self.episode_id = response.episode_id
+            started = getattr(self.observer, "started", None)
+            if started is not None:
+                started(self.job.index, self.episode_id, self.robot)
         if self.episode_id and self.episode_id in self.final:
             outcome = self._outcome(self.final.pop(self.episode_id))
             self.job, self.episode_id = None, ""
@@ -164,10 +172,21 @@ class _Lane:
         job = self.job
         return EpisodeOutcome(job.index, job.mode, msg.episode_id, msg.initial_pose,
                               int(msg.step), float(msg.episode_return), bool(msg.success),
-                              time.monotonic() - self.t0, self.robot, self.started)
+                              time.monotonic() - self.t0, self.robot, self.started,
+                              str(msg.state), str(msg.message))
+
+    def forget(self) -> EpisodeJob | None:
+        """Give up on the running episode (its executor died: no final status will come);
+        the job it was running, for the caller to queue again."""
+        job, self.job, self.episode_id, self.future = self.job, None, "", None
+        return job
 
     def close(self) -> None:
         self.cli.node.destroy_subscription(self.subscription)
+
+
+#: One robot's queue of episodes, for a caller that runs its own loop (``cli/training_run.py``).
+Lane = _Lane
 
 
 def run_lanes(cli: Any, lanes: dict[str, Sequence[EpisodeJob]],

@@ -355,6 +355,10 @@ class Launcher:
         taken, self.respawns = self.respawns, []
         return taken
 
+    def restarting(self) -> list[str]:
+        """The processes waiting for their restart (their delay is not over)."""
+        return [r.spec.name for r in self.running if r.restart_at is not None and not r.reported]
+
     def restarts(self) -> dict[str, int]:
         """How many times each process has been restarted."""
         return {r.spec.name: r.restarts for r in self.running}

@@ -14,19 +14,21 @@ from pathlib import Path
 from qg_common.params import ConfigError, config_file
 
 from qg_learning_node.cli.fleet import fleet_specs
-from qg_learning_node.cli.launcher import Launcher, StackConfigError, load_stack_config
+from qg_learning_node.cli.launcher import Launcher, StackConfigError, load_stack
 from qg_learning_node.cli.ros_env import exports, stack_env
 
 __all__ = ["main", "build_parser"]
 
 
 def _cmd_up(args: argparse.Namespace) -> int:
-    specs = load_stack_config(Path(args.config) if args.config else config_file("stack.yaml"))
+    from qg_learning_node.cli.episode_guard import supervise
+    specs, policy = load_stack(Path(args.config) if args.config else config_file("stack.yaml"))
     specs = fleet_specs(specs, args.robots)
     if args.policy:     # the actor of a policy file, frozen: no learner (cli/policy.py)
         from qg_learning_node.cli.policy import frozen_stack
         specs = frozen_stack(specs, Path(args.policy))
-    launcher = Launcher(env=stack_env(), log_dir=Path(args.log_dir) if args.log_dir else None)
+    launcher = Launcher(env=stack_env(), log_dir=Path(args.log_dir) if args.log_dir else None,
+                        policy=policy)
     stopping = False
 
     def on_signal(signum: int, frame: object) -> None:
@@ -39,8 +41,9 @@ def _cmd_up(args: argparse.Namespace) -> int:
     print(f"[qgl] started {', '.join(f'{n} (pid {p})' for n, p in launcher.pids().items())}; "
           "Ctrl-C stops all", flush=True)
     try:
-        name, code = launcher.wait_any()
-        print(f"[qgl] process '{name}' exited with code {code}; stopping the stack", flush=True)
+        name, code = supervise(launcher, specs)     # restarts what respawns (stack file)
+        print(f"[qgl] {launcher.reasons.get(name, f'process {name!r} exited with code {code}')}"
+              "; stopping the stack", flush=True)
         launcher.stop()
         return code if code != 0 else 1
     except KeyboardInterrupt:
@@ -154,8 +157,9 @@ def build_parser() -> argparse.ArgumentParser:
     # (answered before qgl enters the stack's environment, see main())
     sub.add_parser("env", help='print the stack\'s environment as exports: eval "$(qgl env)"')
 
-    from qg_learning_node.cli import demo, policy, render, train
+    from qg_learning_node.cli import demo, policy, render, train, training_run
     demo.add_parser(sub)
+    training_run.add_parser(sub)
     policy.add_parser(sub)
     train.add_parser(sub)
     render.add_parser(sub)
