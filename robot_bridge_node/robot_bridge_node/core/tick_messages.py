@@ -7,10 +7,11 @@ the robot's own estimate where it has one (``/franka/external_wrench``, base fra
 its URDF's root link), and the ticks
 the loop computed the ground truth for are messages on ``/sim/ground_truth`` and
 ``/sim/ground_truth_wrench``, each stamped with its tick's stamp. A block of the sample ring's
-records becomes one row of numbers per message (a few numpy operations and one quaternion per
-tick). The bag writer's thread encodes the rows it is handed; the robot process publishes the
-same rows encoded as serialized messages (``TopicRows.encode``), so the live messages and the
-recorded ones are the same bytes, and no tick costs a Python message object per topic
+records becomes one row of numbers per message (a few numpy operations for the whole block,
+quaternions included). The bag writer's thread encodes the rows it is handed; the robot process
+publishes the same rows encoded as serialized messages (``TopicRows.encode``), so the live
+messages and the recorded ones are the same bytes, and no tick costs a Python message object per
+topic
 (`benchmarks/publish_bench.py`: 108 µs of the publishing thread per tick with message objects,
 16 µs with the serialized rows).
 """
@@ -20,7 +21,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
-from qg_common.rotations import quaternion_from_matrix
+from qg_common.rotations import quaternions_from_matrices
 from qg_common.types import TOOL_FRAME
 from qg_recording.cdr import FixedLayout, fixed_layout, joint_state_layout
 from qg_recording.episode_recorder import TOPICS, EpisodeRecorder, ground_truth_columns
@@ -105,7 +106,7 @@ def tick_rows(records: np.ndarray, names: TickNames) -> list[TopicRows]:
                               fixed_layout=fixed_layout(_WRENCH_STAMPED, names.base_frame)))
     has_tool = (flags & HAS_TOOL) != 0
     tool = records[has_tool]
-    quaternions = np.reshape([quaternion_from_matrix(r) for r in tool["tool_rotation"]], (-1, 4))
+    quaternions = quaternions_from_matrices(tool["tool_rotation"])
     rows.append(TopicRows("/ee_pose", has_tool, tool["t_ns"],
                           np.hstack([tool["tool_position"], quaternions]), names.base_frame))
     rows.append(TopicRows("/ee_twist", has_tool, tool["t_ns"], tool["tool_twist"],

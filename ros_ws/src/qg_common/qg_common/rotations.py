@@ -3,7 +3,8 @@ conversions.
 
 Thin names over Pinocchio's SO(3) maps, which the controller already uses (`pin.log3` in the
 impedance law): `log3` (right up to and at pi, where a formula through ``acos`` and the skew part
-loses the axis' signs) and Eigen's quaternion of a matrix; Pinocchio is imported by those
+loses the axis' signs), and Eigen's quaternion of a matrix, its algorithm in NumPy
+(``quaternions_from_matrices``: eigenpy leaks a copy there); Pinocchio is imported by those
 functions only, so the task's geometry (``shaft_task``, which the executor's core uses on a
 machine without the robot's libraries) needs NumPy alone: a rotation from an axis and an angle
 is Rodrigues' formula. Eigen picks
@@ -20,7 +21,8 @@ import math
 import numpy as np
 
 __all__ = ["axis_angle_matrix", "housing_rotation", "matrix_from_quaternion",
-           "quaternion_from_matrix", "rotation_log", "tilt_from_down"]
+           "quaternion_from_matrix", "quaternions_from_matrices", "rotation_log",
+           "tilt_from_down"]
 
 
 def axis_angle_matrix(axis: np.ndarray, angle: float) -> np.ndarray:
@@ -52,9 +54,47 @@ def rotation_log(rotation: np.ndarray) -> np.ndarray:
 
 def quaternion_from_matrix(rotation: np.ndarray) -> tuple[float, float, float, float]:
     """Unit quaternion ``(x, y, z, w)`` of a rotation matrix, with Eigen's sign (see above)."""
-    import pinocchio as pin
-    x, y, z, w = pin.Quaternion(np.asarray(rotation, float)).coeffs().tolist()
+    x, y, z, w = quaternions_from_matrices(np.asarray(rotation, float)[None])[0].tolist()
     return x, y, z, w
+
+
+def quaternions_from_matrices(rotations: np.ndarray) -> np.ndarray:
+    """(n, 4) unit quaternions ``(x, y, z, w)`` of (n, 3, 3) rotation matrices: Eigen's
+    algorithm and sign (``Quaternion(const MatrixBase&)``), in NumPy for a whole block at once.
+
+    Not ``pin.Quaternion(matrix)``: eigenpy 3.13 leaks the copy it makes of a C-ordered NumPy
+    matrix there (80 bytes a call), and the robot process made one per recorded and per
+    published tick, 0.45 MiB an episode (``tests/robot_nodes/test_robot_process_memory.py``).
+
+    :raises ValueError: if ``rotations`` is not (n, 3, 3).
+    """
+    m = np.asarray(rotations, float)
+    if m.ndim != 3 or m.shape[1:] != (3, 3):
+        raise ValueError(f"rotations must be (n, 3, 3), got shape {m.shape}")
+    out = np.empty((len(m), 4))
+    trace = np.trace(m, axis1=1, axis2=2)
+    positive = trace > 0.0
+    if positive.any():        # w is the largest component: taken from the trace
+        p = m[positive]
+        t = np.sqrt(trace[positive] + 1.0)
+        out[positive, 3] = 0.5 * t
+        h = 0.5 / t
+        out[positive, 0] = (p[:, 2, 1] - p[:, 1, 2]) * h
+        out[positive, 1] = (p[:, 0, 2] - p[:, 2, 0]) * h
+        out[positive, 2] = (p[:, 1, 0] - p[:, 0, 1]) * h
+    for i in range(3):        # else the component of the largest diagonal entry (first of ties)
+        rows = ~positive & (np.argmax(np.diagonal(m, axis1=1, axis2=2), axis=1) == i)
+        if not rows.any():
+            continue
+        j, k = (i + 1) % 3, (i + 2) % 3
+        p = m[rows]
+        t = np.sqrt(p[:, i, i] - p[:, j, j] - p[:, k, k] + 1.0)
+        out[rows, i] = 0.5 * t
+        h = 0.5 / t
+        out[rows, 3] = (p[:, k, j] - p[:, j, k]) * h
+        out[rows, j] = (p[:, j, i] + p[:, i, j]) * h
+        out[rows, k] = (p[:, k, i] + p[:, i, k]) * h
+    return out
 
 
 def matrix_from_quaternion(x: float, y: float, z: float, w: float) -> np.ndarray:
