@@ -12,7 +12,7 @@ from qg_experiments.random_baselines import Bar
 from qg_experiments.report.divergence import divergence_counts, run_divergence
 from qg_experiments.report.grid_sections import THESIS, divergence_text, paired_line
 from qg_experiments.report.markdown import fmt, table
-from qg_experiments.stalls import LAST_TRAINING, TRAINED_AT, stall_counts
+from qg_experiments.stalls import LAST_TRAINING, TRAINED_AT, recovery_text, stall_counts
 from qg_learning_node.learner.algorithms import COMPARED, label
 
 __all__ = ["graph_section", "comparison"]
@@ -50,7 +50,8 @@ def graph_section(settings: dict[str, list[dict[str, Any]]], bar: Bar | None,
             f"{fmt(diag['qgddpg']['critic_mc_error'], 2)} / "
             f"{fmt(diag['ddpg']['critic_mc_error'], 2)}",
             " / ".join(f"{stalls.get(a, {}).get('stalled_test_episodes', 0)} of "
-                       f"{stalls.get(a, {}).get('trained_test_episodes', 0)}" for a in _PAIR)])
+                       f"{stalls.get(a, {}).get('trained_test_episodes', 0)}" for a in _PAIR),
+            " / ".join(recovery_text(stalls.get(a, {})) for a in _PAIR)])
     lines = ["## 7. QG-DDPG against DDPG, setting by setting", "",
              "Per setting: the (cell, seed) pairs of both algorithms; QG-DDPG better / DDPG "
              "better / ties; DDPG minus QG-DDPG in mean test steps with its 95 % interval "
@@ -62,11 +63,16 @@ def graph_section(settings: dict[str, list[dict[str, Any]]], bar: Bar | None,
              f"test actor, the test episodes that failed in runs that trained ({TRAINED_AT} of "
              f"their last {LAST_TRAINING} training episodes inserted), of those runs' test "
              "episodes (QG-DDPG / DDPG; `qg_experiments/stalls.py`, "
-             "[learning.md](learning.md) sections 15 and 16).", ""]
+             "[learning.md](learning.md) sections 15 and 16); apart from every other number "
+             "here, the same runs' test poses once more with stall recovery "
+             "(`executor/stall_recovery.py`; only runs saved with `RunSpec.stall_recovery`, "
+             "episodes of mode `recovery` that no test number reads): inserted of those "
+             "episodes, and the recoveries applied (a dash: no run with recovery).", ""]
     lines += table(["setting", "pairs", "QG / DDPG / ties", "DDPG - QG [95 % CI]",
                     "Wilcoxon p", "QG-DDPG beats random", "DDPG beats random",
                     "QG-DDPG diverged", "DDPG diverged", "targets raised",
-                    "critic error vs MC", "stalled test episodes"], rows_text)
+                    "critic error vs MC", "stalled test episodes (deterministic actor)",
+                    "inserted with stall recovery"], rows_text)
     divergence = _divergence_pairs([r for results in settings.values() for r in results], gamma)
     return lines + ([""] + [divergence] if divergence else []) + [""]
 

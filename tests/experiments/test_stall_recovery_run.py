@@ -1,0 +1,82 @@
+"""Stall recovery in process: a recorded stalling actor inserts with it, counted; a run saved
+with recovery keeps its test episodes the thesis protocol's and counts recovery apart.
+
+The actor is the one of ``tests/fixtures/stalled_test_episodes_seed0.npz`` (the stall probe's
+learning on seed 0), run on the real in-process robot of seed 0 (sim, bridge loop, EKF).
+"""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+from qg_learning_node.executor.episode import Episode
+from qg_learning_node.executor.residual_task import ACTION_DIM
+from qg_learning_node.executor.stall_recovery import StallRecovery
+from qg_learning_node.learner.actor_mlp import ActorMLP
+
+from qg_experiments import grid
+from qg_experiments.runner import (InsertionRobot, RunSpec, StackSettings, recovery_seed,
+                                   run_episode, run_training, stall_recovery_config)
+from qg_experiments.stalls import run_recoveries, stall_counts
+
+FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "stalled_test_episodes_seed0.npz"
+POSE = 1          # a fixed point in the recording
+
+
+def _stalling_actor() -> ActorMLP:
+    data = np.load(FIXTURE)
+    return ActorMLP.from_tensors([(str(name), data[f"actor_{i}"])
+                                  for i, name in enumerate(data["actor_names"])])
+
+
+def test_recovery_turns_a_stalled_test_pose_into_an_inserted_one_counted() -> None:
+    settings = StackSettings.load().with_arm_seed(0)
+    settings = dataclasses.replace(settings, task=dataclasses.replace(settings.task,
+                                                                      test_max_steps=60))
+    env = InsertionRobot(settings)
+    actor = _stalling_actor()
+    records: list = []
+    plain = run_episode(env, Episode("test", "test", POSE, "dense", env.residual), actor,
+                        records.append)
+    assert not plain["success"] and plain["steps"] == 60          # the deterministic actor stalls
+    assert "recoveries" not in plain
+    tail = np.array([r.state for r in records[-10:]])
+    assert np.abs(np.diff(tail, axis=0)).max() < 1e-3               # ... at a fixed point
+    config = stall_recovery_config()
+    watch = StallRecovery(config, ACTION_DIM, recovery_seed(0, POSE), settings.noise)
+    recovered = run_episode(env, Episode("recovery", "test", POSE, "dense", env.residual),
+                            actor, recovery=watch)
+    assert recovered["success"] and recovered["steps"] < 60
+    assert recovered["recoveries"] >= 1 and recovered["recoveries"] == len(
+        recovered["recovered_at"])
+    # The first recovery starts once a whole window of no progress has passed.
+    assert recovered["recovered_at"][0] >= config.window - 1
+
+
+@pytest.mark.slow
+def test_a_run_with_recovery_counts_it_apart_from_its_test_episodes() -> None:
+    spec = RunSpec(algorithm="qgddpg", critic_lr=1e-2, iterations=2, seed=4, train_episodes=1,
+                   test_episodes=2, train_max_steps=4, test_max_steps=3, cycle_steps=2)
+    plain, with_recovery = run_training(spec), run_training(
+        dataclasses.replace(spec, stall_recovery=True))
+    assert with_recovery["name"] == "qgddpg_lr0.01_it2_recovery_s4" != plain["name"]
+    modes = [e["mode"] for e in with_recovery["episodes"]]
+    assert modes == ["train", "test", "test", "recovery", "recovery"]
+    # The thesis protocol's episodes are those of the run without recovery, bit for bit, and
+    # the test numbers read only them.
+    assert with_recovery["episodes"][:3] == plain["episodes"]
+    assert grid.test_steps(with_recovery) == grid.test_steps(plain)
+    recovery = with_recovery["episodes"][3:]
+    assert all("recoveries" in e for e in recovery)
+    assert with_recovery["stall_recovery"]["enabled"] is True
+    assert "stall_recovery" not in plain
+    # Counted apart: a run that trained shows its recovery episodes beside its stalls.
+    trained = [{"mode": "train", "pose": p, "success": True} for p in range(8)]
+    episodes = trained + with_recovery["episodes"][1:]
+    assert run_recoveries(episodes) == {
+        "recovery_episodes": 2, "inserted_with_recovery": sum(e["success"] for e in recovery),
+        "recoveries": sum(e["recoveries"] for e in recovery)}
+    counts = stall_counts([("qgddpg", episodes)])["qgddpg"]
+    assert counts["trained_test_episodes"] == 2 and counts["recovery_episodes"] == 2
