@@ -95,7 +95,7 @@ class Episode:
         if not np.all(np.isfinite(action)):
             action = zero
         if self.mode == "train" and self.noise is not None and actor is not None:
-            action = self.noise.perturb(action)
+            action = self.noise.explore(action)
         return np.clip(action, -1.0, 1.0)
 
     def observe(self, action: np.ndarray, obs: Observation) -> TransitionRecord:

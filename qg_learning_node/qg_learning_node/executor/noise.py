@@ -21,17 +21,26 @@ class NoiseConfig:
     """:param kind: none | gaussian | ou | uniform.
     :param sigma: standard deviation (gaussian, ou); ignored by uniform (the whole box).
     :param theta: OU mean reversion; :param dt: OU time step.
+    :param clean_fraction: share of training steps that send the actor's own action without
+        noise (0: every step noisy, the thesis). Why: a deterministic test actor can stall at a
+        fixed point where its own action, repeated at rest, leaves the state unchanged; with
+        noise on every step that action never reaches replay, and the critic never learns
+        what it is worth (docs/learning.md section 17). A random policy (a zero actor) has no
+        action of its own: its baselines keep 0.
     """
     kind: str = "gaussian"
     sigma: float = 0.3
     theta: float = 1.0
     dt: float = 0.01
+    clean_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
             raise ValueError(f"noise kind must be one of {KINDS}, got {self.kind!r}")
         if self.sigma < 0 or self.theta < 0 or self.dt <= 0:
             raise ValueError(f"noise needs sigma >= 0, theta >= 0, dt > 0; got {self}")
+        if not 0.0 <= self.clean_fraction <= 1.0:
+            raise ValueError(f"noise clean_fraction must lie in [0, 1], got {self.clean_fraction}")
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> "NoiseConfig":
@@ -52,6 +61,8 @@ class ActionNoise:
     def reset(self, seed: int) -> None:
         """Start a new episode's noise sequence (OU state back to 0)."""
         self.rng = np.random.default_rng(seed)
+        # the clean steps draw from their own stream: the noise samples stay those of the seed
+        self.clean_rng = np.random.default_rng([seed, 1])
         self.ou_state = np.zeros(self.dim)
 
     def sample(self) -> np.ndarray:
@@ -69,3 +80,16 @@ class ActionNoise:
     def perturb(self, action: np.ndarray) -> np.ndarray:
         """``action`` plus one noise sample, clipped to [-1, 1]."""
         return np.clip(action + self.sample(), -1.0, 1.0)
+
+    def clean_step(self) -> bool:
+        """Whether this training step goes without noise (``clean_fraction`` of them, drawn
+        from their own seeded stream)."""
+        return self.config.clean_fraction > 0 and bool(
+            self.clean_rng.random() < self.config.clean_fraction)
+
+    def explore(self, action: np.ndarray) -> np.ndarray:
+        """A training step's action: ``action`` itself on a clean step, else :meth:`perturb`;
+        clipped to [-1, 1]. With ``clean_fraction`` 0 exactly :meth:`perturb`."""
+        if self.clean_step():
+            return np.clip(action, -1.0, 1.0)
+        return self.perturb(action)

@@ -12,6 +12,10 @@ the only thing the variants change (``DDPGConfig.bounds``):
 * ``he2017`` - He et al. (2017): n-step lower/upper bounds from the current critic along the
   trajectory, enforced as a penalty ``lambda * relu(L - Q)^2 + lambda * relu(Q - U)^2``.
 
+With ``DDPGConfig.self_loop_tol`` set, a transition whose state did not move (at rest, in a
+deterministic world, a self-loop) takes ``r / (1 - gamma)`` as its TD target before the bounds:
+the exact value of repeating its action forever.
+
 The actor's loss is ``-Q(s, pi(s))``, plus, if ``DDPGConfig.actor_preact_penalty`` is set, that
 weight times the mean squared pre-tanh output: a bound that lifts a whole goal-reaching chain at
 once can drive the tanh into saturation on every state, where it passes no gradient back.
@@ -134,6 +138,12 @@ class DDPG:
             lower = np.maximum(np.asarray(batch.lower_bounds, dtype=np.float64), lower)
         return lower, upper
 
+    def _self_loops(self, batch: Batch) -> torch.Tensor:
+        """The batch's non-terminal transitions whose state moved by at most ``self_loop_tol``."""
+        moved = np.abs(np.asarray(batch.next_states) - np.asarray(batch.states)).max(axis=1)
+        return torch.as_tensor((moved <= self.config.self_loop_tol)
+                               & ~np.asarray(batch.terminals, dtype=bool))
+
     def _he_bounds(self, batch: Batch, context: NStepContext
                    ) -> tuple[torch.Tensor, torch.Tensor]:
         """Tightest n-step lower and upper bound from the current critic (He et al. 2017)."""
@@ -166,6 +176,8 @@ class DDPG:
         with torch.no_grad():
             y_td = r + self.config.gamma * (1.0 - done) * self.critic_target(
                 s2, self.actor_target(s2))
+            if self.config.self_loop_tol > 0:
+                y_td = torch.where(self._self_loops(batch), r / (1.0 - self.config.gamma), y_td)
         lower, upper = self._target_bounds(batch, reward_range)
         lower_t = torch.broadcast_to(f(lower), y_td.shape)
         y = torch.clamp(torch.maximum(y_td, lower_t), max=upper)

@@ -64,6 +64,13 @@ class DDPGConfig:
         saturates at one end on every state; saturated, tanh passes almost no gradient back, so
         the actor stays a constant push (MountainCarContinuous-v0: docs/learning.md section 13).
         The penalty keeps the pre-activations near the range where tanh still has a slope.
+    :param self_loop_tol: > 0: a non-terminal transition whose state moved by at most this (max
+        norm, scaled units) is a self-loop, and its TD target is the value of repeating its
+        action forever, ``r / (1 - gamma)`` (0: none, the thesis). Why: at rest the world is
+        deterministic, so an action that leaves the state unchanged leaves it unchanged every
+        time; a deterministic actor that chose it stays there, and ``r / (1 - gamma)`` is
+        that actor's exact value (docs/learning.md section 17). Bootstrapping the same loop
+        from the critic only shrinks its error by ``gamma`` per pass.
     :param seed: seed of the network initialisation.
     """
 
@@ -83,6 +90,7 @@ class DDPGConfig:
     he_horizon: int = 8
     he_lambda: float = 0.01
     actor_preact_penalty: float = 0.0
+    self_loop_tol: float = 0.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -108,6 +116,8 @@ class DDPGConfig:
             raise ValueError(f'tau must lie in (0, 1], got {self.tau}')
         if self.he_horizon < 1 or self.he_lambda < 0:
             raise ValueError('he_horizon must be >= 1 and he_lambda >= 0')
+        if not 0.0 <= self.self_loop_tol < math.inf:
+            raise ValueError(f'self_loop_tol must be a finite number >= 0, got {self.self_loop_tol}')
         if not 0.0 <= self.actor_preact_penalty < math.inf:
             raise ValueError('actor_preact_penalty must be a finite number >= 0, got '
                              f'{self.actor_preact_penalty}')
