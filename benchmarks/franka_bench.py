@@ -33,8 +33,8 @@ import time
 
 import numpy as np
 from franka_robot_node.core.franka_arm import FrankaConnectError, FrankaFault
-from franka_sim_node.franka_sim import spawn
 from franka_robot_node.plugin import FRANKA
+from franka_sim_node.franka_sim import spawn
 from qg_common.params import load_ros_params, merge_params, package_config
 from qg_common.types import WrenchSetpoint
 from robot_bridge_node.core.hardware_interface import robot_defaults

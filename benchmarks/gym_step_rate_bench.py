@@ -18,7 +18,6 @@ import time
 
 import numpy as np
 import torch
-
 from qg_experiments.gym_envs.insertion import InsertionEnv
 from qg_experiments.runner import InsertionRobot, StackSettings, run_episode
 from qg_learning_node.executor.episode import Episode

@@ -15,9 +15,9 @@ import json
 import time
 
 import numpy as np
+from qg_common.types import WrenchSetpoint
 from robot_bridge_node.core.hardware_interface import load_robot
 from robot_bridge_node.core.robot_loop import MeasuredWrench, build_loop
-from qg_common.types import WrenchSetpoint
 
 
 def main() -> None:

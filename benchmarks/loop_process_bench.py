@@ -29,7 +29,6 @@ import numpy as np
 from qg_common.types import N_START_POSES, WrenchSetpoint
 from qg_recording.bag_reader import bag_info
 from qg_recording.episode_recorder import EpisodeRecorder
-
 from robot_bridge_node.core.hardware_interface import robot_plugin
 from robot_bridge_node.core.interface_kinds import interface_kind
 from robot_bridge_node.core.loop_link import LoopLink

@@ -25,14 +25,13 @@ import json
 from pathlib import Path
 
 from qg_experiments.grid import grid_specs
-from qg_experiments.peers import (PEER_ALGORITHMS, REPORT_SEEDS, SETTINGS, peer_specs,
-                                  peer_table)
+from qg_experiments.peers import PEER_ALGORITHMS, REPORT_SEEDS, SETTINGS, peer_specs, peer_table
 from qg_experiments.profile import GridBudget
 from qg_experiments.runner import ALGORITHMS
-from qg_learning_node.learner.algorithms import COMPARED
 from qg_experiments.stats import Interval, format_interval
 from qg_experiments.tasks import load_results, run_specs
 from qg_experiments.tensorboard_log import export_runs
+from qg_learning_node.learner.algorithms import COMPARED
 
 #: The grid's cells (critic learning rate, gradient steps per 20 robot steps).
 GRID_CELLS = ((1e-5, 10), (1e-5, 50), (1e-4, 10), (1e-4, 50), (1e-3, 10), (1e-3, 50),

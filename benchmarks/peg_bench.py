@@ -19,13 +19,13 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 for package in ("sim_robot_node", "robot_bridge_node"):
     sys.path.insert(0, str(ROOT / package))
 
-from robot_bridge_node.core.position_control import (  # noqa: E402
-    PositionControlConfig, TaskSpacePositionController)
-from sim_robot_node.core.nextage_scene import nextage_urdf_path  # noqa: E402
 from qg_common.params import config_file, load_ros_params  # noqa: E402
+from robot_bridge_node.core.position_control import (  # noqa: E402
+    PositionControlConfig,
+    TaskSpacePositionController,
+)
+from sim_robot_node.core.nextage_scene import nextage_urdf_path  # noqa: E402
 from sim_robot_node.core.peg_env import PegEnv, PegEnvConfig, toward_goal  # noqa: E402
-
-
 
 
 def measure(env: PegEnv, episodes: int, steps: int, policy: str) -> dict:

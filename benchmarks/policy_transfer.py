@@ -23,8 +23,14 @@ from pathlib import Path
 
 import torch
 from qg_common.types import N_START_POSES
-from qg_experiments.runner import (InsertionRobot, LivePolicy, RunSpec, StackSettings,
-                                   episode_noise_seed, run_episode)
+from qg_experiments.runner import (
+    InsertionRobot,
+    LivePolicy,
+    RunSpec,
+    StackSettings,
+    episode_noise_seed,
+    run_episode,
+)
 from qg_learning_node.cli.policy import export_core
 from qg_learning_node.executor.episode import Episode
 from qg_learning_node.executor.noise import ActionNoise

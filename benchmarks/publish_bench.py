@@ -38,17 +38,28 @@ def main() -> None:
 
     import rclpy
     from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
-    from qg_common.conversions import (ground_truth_msg, joint_state_msg, pose_stamped,
-                                       time_msg, twist_stamped, wrench_stamped)
+    from qg_common.conversions import (
+        ground_truth_msg,
+        joint_state_msg,
+        pose_stamped,
+        time_msg,
+        twist_stamped,
+        wrench_stamped,
+    )
     from qg_common.types import JointState
     from qg_interfaces.msg import GroundTruth
     from qg_recording.cdr import CdrBuffer
+    from robot_bridge_node.core.sample_ring import (
+        HAS_TOOL,
+        HAS_TRUTH,
+        HAS_WRENCH,
+        PUBLISH,
+        record_dtype,
+        truth_from_array,
+    )
+    from robot_bridge_node.core.tick_messages import TickNames, serialized_ticks
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import JointState as JointStateMsg
-
-    from robot_bridge_node.core.sample_ring import (HAS_TOOL, HAS_TRUTH, HAS_WRENCH, PUBLISH,
-                                                    record_dtype, truth_from_array)
-    from robot_bridge_node.core.tick_messages import TickNames, serialized_ticks
 
     rclpy.init()
     node = rclpy.create_node("publish_bench")

@@ -22,9 +22,8 @@ import numpy as np
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'tests' / 'qg_core'))
 sys.path.insert(0, str(ROOT / 'qg_learning_node'))
-from reference_solver import exact_edge_values  # noqa: E402
-
 from qg_learning_node.learner.qgraph import QGraph  # noqa: E402
+from reference_solver import exact_edge_values  # noqa: E402
 
 GAMMA = 0.99
 GRID = 120

@@ -78,7 +78,6 @@ def process_cpu(pids: dict[str, int]) -> dict[str, float]:
 
 def main() -> None:
     from diagnostic_msgs.msg import DiagnosticArray
-
     from robot_bridge_node.loop_diagnostics import STATUS_NAME, snapshot_from_status
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=60.0, help="measured wall seconds")

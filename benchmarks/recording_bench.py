@@ -25,7 +25,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from qg_recording.bag_reader import bag_info
 from qg_recording.episode_recorder import EpisodeRecorder
 

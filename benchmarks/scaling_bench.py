@@ -37,12 +37,11 @@ import yaml
 from qg_common import topics
 from qg_common.params import config_file
 from qg_common.topics import LATCHED
-from qg_recording.bag_reader import bag_info
-
 from qg_learning_node.cli.demo import DemoSettings, start_stack
 from qg_learning_node.cli.episode_wait import FINAL_STATES
 from qg_learning_node.cli.fleet import robot_namespace
 from qg_learning_node.cli.ros_client import CliNode, call_service
+from qg_recording.bag_reader import bag_info
 
 
 def cpu_seconds(pid: int) -> float:

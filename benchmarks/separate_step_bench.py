@@ -28,12 +28,12 @@ WRENCHES = ((0.0, 0.0, -8.0, 0.0, 0.3, 0.0), (0.0, 0.0, -8.0, 0.3, 0.0, 0.0),
 
 
 def run(steps: int, domain_id: str) -> dict:
-    from qg_interfaces.msg import AtRest, WrenchSetpoint
-    from qg_interfaces.srv import MoveToStart
     from qg_common.conversions import setpoint_msg, start_pose_request, time_msg
     from qg_common.params import config_file, load_ros_params
     from qg_common.shaft_task import ShaftTaskGeometry
     from qg_common.types import WrenchSetpoint as Setpoint
+    from qg_interfaces.msg import AtRest, WrenchSetpoint
+    from qg_interfaces.srv import MoveToStart
     from qg_learning_node.cli.launcher import Launcher, ProcessSpec
     from qg_learning_node.cli.ros_client import CliNode, call_service
     from qg_learning_node.cli.ros_env import stack_env

@@ -36,11 +36,11 @@ import json
 
 import numpy as np
 import yaml
+from qg_common.types import N_START_POSES
+from qg_experiments.runner import StackSettings
 from robot_bridge_node.core.arm_model import ArmModel
 from robot_bridge_node.core.hardware_interface import load_robot
 from robot_bridge_node.core.impedance import ImpedanceConfig
-from qg_common.types import N_START_POSES
-from qg_experiments.runner import StackSettings
 
 AXES = ("x", "y", "z", "rx", "ry", "rz")
 

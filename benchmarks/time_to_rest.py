@@ -35,8 +35,8 @@ import time
 
 import numpy as np
 import yaml
-from qg_learning_node.executor.residual_task import ACTION_DIM
 from qg_experiments.runner import ARMS, InsertionRobot, StackSettings
+from qg_learning_node.executor.residual_task import ACTION_DIM
 
 
 def _override(params: dict, assignment: str) -> None:

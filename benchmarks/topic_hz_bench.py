@@ -42,8 +42,8 @@ def main() -> None:
     import rclpy
     from qg_learning_node.cli.launcher import Launcher, ProcessSpec
     from qg_learning_node.cli.ros_env import stack_env
-    from qg_recording.player import message_class
     from qg_recording.episode_recorder import TOPICS
+    from qg_recording.player import message_class
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import qos_profile_sensor_data
     from rclpy.serialization import deserialize_message

@@ -30,13 +30,20 @@ import numpy as np
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "robot"))
-from ekf_harness import (DT, PandaTorqueHarness, Trace, descend_reference, rmse,  # noqa: E402
-                         settling_time, sine_reference, step_wrench)
-
+from ekf_harness import (  # noqa: E402
+    DT,
+    PandaTorqueHarness,
+    Trace,
+    descend_reference,
+    rmse,
+    settling_time,
+    sine_reference,
+    step_wrench,
+)
 from qg_common.panda_description import Q_READY, panda_arm  # noqa: E402
+from qg_common.params import config_file, load_ros_params  # noqa: E402
 from robot_bridge_node.core.arm_model import ArmModel  # noqa: E402
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig  # noqa: E402
-from qg_common.params import config_file, load_ros_params  # noqa: E402
 
 W = np.array([5.0, -3.0, -15.0, 0.5, -0.3, 0.2])
 TOLERANCE = (0.3, 0.03)          # [N], [Nm]: the accuracy target of the issue

@@ -36,9 +36,8 @@ class LiveCapture:
                                          self.received[topic].append, live_qos(topic), raw=True)
 
     def decoded(self, topic: str) -> list:
-        from rclpy.serialization import deserialize_message
-
         from qg_recording.player import message_class
+        from rclpy.serialization import deserialize_message
         cls = message_class(TOPICS[topic].type_name)
         return [deserialize_message(data, cls) for data in self.received[topic]]
 

@@ -3,8 +3,7 @@ describe and set, from a test's ``CliNode``."""
 from __future__ import annotations
 
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
-from rcl_interfaces.srv import (DescribeParameters, GetParameters, ListParameters,
-                                SetParameters)
+from rcl_interfaces.srv import DescribeParameters, GetParameters, ListParameters, SetParameters
 
 
 def listed(cli, node: str) -> set[str]:

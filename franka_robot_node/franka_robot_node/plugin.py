@@ -12,8 +12,12 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from robot_bridge_node.core.hardware_interface import (Robot, RobotDescription, RobotPlugin,
-                                                       ToolDescription)
+from robot_bridge_node.core.hardware_interface import (
+    Robot,
+    RobotDescription,
+    RobotPlugin,
+    ToolDescription,
+)
 
 from franka_robot_node.core.fr3_description import fr3_arm
 from franka_robot_node.core.franka_arm import FrankaArm

@@ -25,18 +25,16 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
-from typing import Any
-
+from franka_robot_node.core.franka_config import FrankaConfig
+from franka_robot_node.plugin import describe_franka
 from qg_common.params import ConfigError, load_ros_params, merge_params, package_config
 from qg_common.shaft_task import SHAFT_TASK_SECTION, ShaftTaskGeometry
 from robot_bridge_node.core.arm_model import ArmModel
 
-from franka_robot_node.core.franka_config import FrankaConfig
 from franka_sim_node.core.franky_sim_host import FrankySimHost, SceneExtension
 from franka_sim_node.core.franky_sim_scene import SCENE_CONFIG_FILES, parked_q
-from franka_robot_node.plugin import describe_franka
 
 __all__ = ["main", "scene_params", "scene_extensions", "spawn", "DEFAULT_SCENE"]
 

@@ -22,9 +22,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
 from qg_learning_node.executor.episode import Episode
 from qg_learning_node.executor.residual_task import ACTION_DIM
+
 from qg_experiments.figures import pyplot
 from qg_experiments.runner import ARMS, InsertionRobot, StackSettings, run_episode
 

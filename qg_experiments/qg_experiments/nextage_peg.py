@@ -20,12 +20,11 @@ import numpy as np
 from qg_common.params import config_file, load_ros_params, merge_params
 from qg_common.peg_task import PegCell
 from qg_common.types import StepResult
-from robot_bridge_node.core.hardware_interface import load_robot
-from robot_bridge_node.core.position_loop import PositionLoop, build_position_loop
-
 from qg_learning_node.executor.observation import observation_from_step
 from qg_learning_node.executor.peg_task import PEG_ACTION_DIM, PEG_STATE_DIM, PegTask, PegTaskConfig
 from qg_learning_node.executor.residual_task import Observation
+from robot_bridge_node.core.hardware_interface import load_robot
+from robot_bridge_node.core.position_loop import PositionLoop, build_position_loop
 
 __all__ = ["NextagePeg"]
 

@@ -27,13 +27,13 @@ from typing import Any
 import gymnasium
 import numpy as np
 import torch
+from qg_learning_node.learner.algorithms import COMPARED, REGISTRY, keys
+from qg_learning_node.learner.gym_agent import QGDDPG, SB3_DDPG_SETTINGS
 
 from qg_experiments.gym_envs.insertion import TRAIN_MAX_STEPS, InsertionEnv
 from qg_experiments.runner import config_digest
 from qg_experiments.sb3_models import sb3_model
 from qg_experiments.stats import Interval, mean_interval
-from qg_learning_node.learner.algorithms import COMPARED, REGISTRY, keys
-from qg_learning_node.learner.gym_agent import QGDDPG, SB3_DDPG_SETTINGS
 
 __all__ = ["PEER_ALGORITHMS", "SETTINGS", "REPORT_SEEDS", "PeerSpec", "EpisodeLog", "run_peer",
            "peer_specs", "peer_table"]

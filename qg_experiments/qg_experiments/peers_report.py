@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from qg_learning_node.learner.algorithms import REGISTRY, label
 
 from qg_experiments.peers import REPORT_SEEDS, peer_table
 from qg_experiments.report.markdown import PEERS_BLOCK, STANDARD_BLOCK, write_marked_block
@@ -24,7 +25,6 @@ from qg_experiments.runner import config_digest
 from qg_experiments.standard_tasks import TASKS, standard_table
 from qg_experiments.stats import Interval, format_interval, paired_comparison
 from qg_experiments.tasks import load_results
-from qg_learning_node.learner.algorithms import REGISTRY, label
 
 __all__ = ["BEGIN", "END", "STANDARD_BEGIN", "STANDARD_END", "ours_rows", "peers_section",
            "standard_section", "write_section"]

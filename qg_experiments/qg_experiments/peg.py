@@ -22,16 +22,15 @@ from typing import Any
 import numpy as np
 import torch
 from qg_common.params import config_file, load_ros_params
-
-from qg_learning_node.learner.learner_params import learner_config_from_params
 from qg_learning_node.executor.noise import ActionNoise
 from qg_learning_node.executor.parameters import load_noise
+from qg_learning_node.learner.learner_core import LearnerCore
+from qg_learning_node.learner.learner_params import learner_config_from_params
+
 from qg_experiments.environments import make_environment
 from qg_experiments.nextage_peg import NextagePeg
 from qg_experiments.profile import PegBudget
-from qg_experiments.runner import (ALGORITHMS, algorithm_config, config_digest,
-                                   episode_noise_seed)
-from qg_learning_node.learner.learner_core import LearnerCore
+from qg_experiments.runner import ALGORITHMS, algorithm_config, config_digest, episode_noise_seed
 
 __all__ = ["PegRunSpec", "peg_specs", "run_peg", "GRID_STATES", "GRID_ACTIONS",
            "learning_curves", "q_spread", "PEG_ROBOTS"]

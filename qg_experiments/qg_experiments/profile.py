@@ -13,9 +13,9 @@ from pathlib import Path
 from typing import Any
 
 from qg_common.params import config_file, load_yaml
-
 from qg_learning_node.executor.residual_task import state_dim
 from qg_learning_node.learner.algorithms import COMPARED
+
 from qg_experiments.runner import ALGORITHMS, ARMS, ESTIMATORS
 
 __all__ = ["RandomBudget", "GridBudget", "VariantBudget", "PegBudget", "Profile", "Seeds",

@@ -14,15 +14,21 @@ from typing import Any
 
 import numpy as np
 from qg_common.types import N_START_POSES
-
 from qg_learning_node.executor.episode import Episode
 from qg_learning_node.executor.noise import KINDS, ActionNoise
 from qg_learning_node.executor.residual_task import ACTION_DIM
+
 from qg_experiments import stats
 from qg_experiments.profile import RandomBudget
-from qg_experiments.runner import (ESTIMATORS, InsertionRobot, StackSettings,
-                                   config_digest, episode_noise_seed, run_episode,
-                                   zero_policy)
+from qg_experiments.runner import (
+    ESTIMATORS,
+    InsertionRobot,
+    StackSettings,
+    config_digest,
+    episode_noise_seed,
+    run_episode,
+    zero_policy,
+)
 
 __all__ = ["BaselineSpec", "baseline_specs", "run_baseline", "summarize_baselines", "random_bar",
            "Bar", "random_bar_of"]

@@ -11,7 +11,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-
 from qg_learning_node.learner.algorithms import algorithm
 
 __all__ = ["OU_DT", "sb3_model"]

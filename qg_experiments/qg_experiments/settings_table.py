@@ -54,19 +54,20 @@ class Setting:
 
 def node_settings() -> list[NodeSettings]:
     """The nodes of the stack and of the experiments, with what they declare and read."""
+    from qg_common.peg_task import PEG_TASK_FILE, PEG_TASK_SECTION
+    from qg_common.shaft_task import SHAFT_TASK_FILE, SHAFT_TASK_SECTION
+    from qg_learning_node.executor.parameters import (
+        EXECUTOR_SECTIONS,
+        TASK_CHOICE_SECTION,
+        TASK_SECTIONS,
+    )
+    from qg_learning_node.learner.learner_params import LEARNER_SECTIONS
     from robot_bridge_node.core.hardware_interface import ROBOT_SECTION, robot_plugin
     from robot_bridge_node.core.position_kind import POSITION
     from robot_bridge_node.core.torque_kind import EKF_SECTION, TORQUE
+    from robot_bridge_node.hardware_node import HARDWARE_SECTION
     from robot_bridge_node.recorder_node import RECORDER_SECTION
     from robot_bridge_node.simulation_node import SIM_SECTION
-
-    from qg_common.peg_task import PEG_TASK_FILE, PEG_TASK_SECTION
-    from qg_common.shaft_task import SHAFT_TASK_FILE, SHAFT_TASK_SECTION
-
-    from qg_learning_node.executor.parameters import (EXECUTOR_SECTIONS, TASK_CHOICE_SECTION,
-                                                      TASK_SECTIONS)
-    from qg_learning_node.learner.learner_params import LEARNER_SECTIONS
-    from robot_bridge_node.hardware_node import HARDWARE_SECTION
     panda, nextage = robot_plugin("sim_panda"), robot_plugin("sim_nextage")
     franka = robot_plugin("franka")
     cells = (SHAFT_TASK_FILE, PEG_TASK_FILE)     # the tasks' cells: the robot's and the task's

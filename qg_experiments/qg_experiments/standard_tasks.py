@@ -35,12 +35,12 @@ from typing import Any
 import gymnasium
 import numpy as np
 import torch
+from qg_learning_node.learner import algorithms
+from qg_learning_node.learner.gym_agent import QGDDPG, SB3_DDPG_SETTINGS
 
 from qg_experiments.runner import config_digest
 from qg_experiments.sb3_models import sb3_model
 from qg_experiments.stats import mean_interval
-from qg_learning_node.learner import algorithms
-from qg_learning_node.learner.gym_agent import QGDDPG, SB3_DDPG_SETTINGS
 
 __all__ = ["TASKS", "HIDDEN", "StandardSpec", "run_standard", "standard_table", "goal_found"]
 

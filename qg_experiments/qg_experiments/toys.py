@@ -20,7 +20,6 @@ import pathlib
 
 import numpy as np
 import torch
-
 from qg_learning_node.learner.adam import Adam
 from qg_learning_node.learner.qgraph import QGraph
 

@@ -2,9 +2,9 @@
 from __future__ import annotations
 
 import numpy as np
-from qg_interfaces.msg import ActorParameters, AtRest, Transition
 from qg_common.conversions import ground_truth_from_msg
 from qg_common.rotations import matrix_from_quaternion
+from qg_interfaces.msg import ActorParameters, AtRest, Transition
 
 from qg_learning_node.executor.episode import TransitionRecord
 from qg_learning_node.executor.residual_task import Observation

@@ -40,8 +40,13 @@ from qg_common.node_parameters import declare_parameters, on_parameter_change
 from qg_common.node_runtime import run_nodes
 from qg_common.params import runs_dir
 from qg_common.topics import LATCHED, RELIABLE_DEEP
-from qg_interfaces.msg import (ActorParameters, EpisodeStatus, LearnerDiagnostics, TaskSpec,
-                               Transition)
+from qg_interfaces.msg import (
+    ActorParameters,
+    EpisodeStatus,
+    LearnerDiagnostics,
+    TaskSpec,
+    Transition,
+)
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 

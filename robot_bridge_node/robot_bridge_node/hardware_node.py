@@ -14,10 +14,10 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from geometry_msgs.msg import WrenchStamped
 from qg_common import topics
 from qg_common.node_parameters import declare_parameters
 from qg_common.params import ParameterSection, config_from_dict
-from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from sensor_msgs.msg import JointState as JointStateMsg
 

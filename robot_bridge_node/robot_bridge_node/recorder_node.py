@@ -22,7 +22,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
 from qg_common import topics
 from qg_common.node_parameters import declare_parameters, on_parameter_change
 from qg_common.params import ParameterSection, config_from_dict, runs_dir

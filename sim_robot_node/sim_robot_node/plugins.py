@@ -20,12 +20,15 @@ from qg_common.peg_task import PEG_TASK_FILE, PEG_TASK_SECTION, PegCell
 from qg_common.shaft_task import SHAFT_TASK_FILE, SHAFT_TASK_SECTION, ShaftTaskGeometry
 from qg_common.types import GroundTruth, JointState, StartPose
 from qg_common.xarm_description import xarm7_arm
-from robot_bridge_node.core.hardware_interface import (Robot, RobotDescription, RobotPlugin,
-                                                       ToolDescription)
+from robot_bridge_node.core.hardware_interface import (
+    Robot,
+    RobotDescription,
+    RobotPlugin,
+    ToolDescription,
+)
 
 from sim_robot_node.core.arm_imperfections import ArmImperfections
-from sim_robot_node.core.nextage_scene import (NextagePegScene, NextageSceneConfig,
-                                               nextage_urdf_path)
+from sim_robot_node.core.nextage_scene import NextagePegScene, NextageSceneConfig, nextage_urdf_path
 from sim_robot_node.core.shaft_scene import ShaftScene, ShaftSceneConfig
 
 __all__ = ["SimShaftArm", "shaft_arm_plugin", "shaft_scene_section", "SIM_PANDA",

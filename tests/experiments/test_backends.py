@@ -13,7 +13,6 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from qg_experiments import grid, peg
 from qg_experiments.__main__ import main
 from qg_experiments.profile import load_profile
@@ -56,7 +55,6 @@ def test_ray_runs_give_the_pools_results_and_resume(tmp_path: Path) -> None:
 def test_a_ray_worker_that_reads_other_config_files_saves_nothing(tmp_path: Path) -> None:
     """A cluster whose workers see other config files than this machine: the sweep stops."""
     import ray
-
     from qg_common.params import config_file
     edited = tmp_path / "config"
     edited.mkdir()

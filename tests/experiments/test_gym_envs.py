@@ -5,9 +5,8 @@ from __future__ import annotations
 import gymnasium
 import numpy as np
 import pytest
-from gymnasium.utils.env_checker import check_env
-
 import qg_experiments.gym_envs as gym_envs
+from gymnasium.utils.env_checker import check_env
 from qg_experiments.gym_envs.insertion import InsertionEnv
 from qg_experiments.runner import InsertionRobot, StackSettings, run_episode
 from qg_learning_node.executor.episode import Episode

@@ -4,7 +4,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from qg_common.params import config_file, load_ros_params
-
 from qg_experiments.nextage_peg import NextagePeg
 
 

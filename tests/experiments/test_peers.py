@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 
 import pytest
-
 from qg_experiments import peers_report
 from qg_experiments.peers import PeerSpec, peer_table
 from qg_experiments.runner import config_digest

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 from qg_common.params import config_file, load_ros_params
-
 from qg_experiments.peg import peg_specs
 from qg_experiments.profile import PegBudget, load_profile
 

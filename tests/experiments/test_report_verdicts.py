@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import numpy as np
-
 from qg_experiments.profile import Statistics
 from qg_experiments.report.aggregate_section import judge, verdict_sentence
 

@@ -11,12 +11,11 @@ import json
 import numpy as np
 import pytest
 from qg_common.types import NO_GROUND_TRUTH, GroundTruth, StepResult
-
-from qg_learning_node.executor.observation import observation_from_step
-from qg_experiments import franka_report, grid, peg, peers_report
+from qg_experiments import franka_report, grid, peers_report, peg
 from qg_experiments.profile import load_profile
 from qg_experiments.runner import RunSpec, StackSettings, run_training
 from qg_experiments.suite import run_suite
+from qg_learning_node.executor.observation import observation_from_step
 
 
 def _truth(success: bool) -> GroundTruth:
@@ -128,8 +127,8 @@ def test_tiny_suite_writes_results_figures_and_report(tmp_path) -> None:
 
 
 def test_monte_carlo_check_uses_exact_returns_of_goal_episodes_only() -> None:
-    from qg_learning_node.executor.episode import TransitionRecord
     from qg_experiments.runner import MonteCarloCheck
+    from qg_learning_node.executor.episode import TransitionRecord
 
     def step(i, r, terminal=False, timeout=False):
         return TransitionRecord("e", i, np.full(2, float(i)), np.zeros(2), r, np.zeros(2),

@@ -7,12 +7,18 @@ from pathlib import Path
 
 import pytest
 from qg_common.node_parameters import describe, leaves, shipped_defaults
+from qg_experiments.settings_table import (
+    TABLE_END,
+    TABLE_START,
+    NodeSettings,
+    disagreements,
+    markdown,
+    node_settings,
+    settings,
+)
 from qg_learning_node.learner.ddpg import DDPGConfig
 from qg_learning_node.learner.learner_core import LearnerConfig
 from qg_learning_node.learner.learner_params import LEARNER_SECTION
-
-from qg_experiments.settings_table import (TABLE_END, TABLE_START, NodeSettings, disagreements,
-                                           markdown, node_settings, settings)
 
 DESIGN = Path(__file__).resolve().parents[2] / "docs" / "design.md"
 

@@ -8,7 +8,6 @@ from pathlib import Path
 import pytest
 import yaml
 from qg_common.params import ConfigError, config_file
-
 from qg_experiments.runner import StackSettings
 
 FILES = ("shaft_task.yaml", "panda_scene.yaml", "panda_ideal.yaml", "bridge.yaml",

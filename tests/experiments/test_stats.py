@@ -5,8 +5,14 @@ import math
 
 import numpy as np
 import pytest
-from qg_experiments.stats import (Interval, beats, format_interval, mean_interval,
-                                  paired_comparison, pairs_to_detect)
+from qg_experiments.stats import (
+    Interval,
+    beats,
+    format_interval,
+    mean_interval,
+    paired_comparison,
+    pairs_to_detect,
+)
 
 
 def test_the_interval_covers_the_mean_and_narrows_with_more_data():

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import torch
-
 from qg_experiments import toys
 
 torch.set_num_threads(1)

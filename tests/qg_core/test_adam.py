@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import pytest
 import torch
-
 from qg_learning_node.learner.adam import Adam
 
 

@@ -3,7 +3,6 @@ ours switches on in the learner, wherever it runs (the runner's Panda task, a Gy
 from __future__ import annotations
 
 import pytest
-
 from qg_learning_node.learner.algorithms import COMPARED, REGISTRY, algorithm, keys, label
 from qg_learning_node.learner.learner_config import LearnerConfig
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-
 from qg_learning_node.learner.actor_mlp import ActorMLP
 from qg_learning_node.learner.ddpg import DDPG, DDPGConfig, realisable_range
 from qg_learning_node.learner.replay import Batch, ReplayMemory

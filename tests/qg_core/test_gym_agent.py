@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 import torch
 from gymnasium import spaces
-
 from qg_learning_node.learner.gym_agent import QGDDPG, SB3_DDPG_SETTINGS
 
 SMALL = {"actor_hidden": (16, 16), "critic_hidden": (16, 16), "batch_size": 8}
@@ -217,10 +216,10 @@ def test_our_ddpg_train_step_is_sb3_ddpgs() -> None:
     """From the same weights on the same minibatch, our DDPG at SB3 DDPG's settings updates as
     SB3's DDPG does (float32 rounding through Adam apart): what differs between the two on
     Pendulum is the random streams, not the algorithm (docs/learning.md, section 13)."""
+    from qg_learning_node.learner.replay import Batch
     from stable_baselines3 import DDPG
     from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.type_aliases import ReplayBufferSamples
-    from qg_learning_node.learner.replay import Batch
     env = gymnasium.make("Pendulum-v1")
     sb3 = DDPG("MlpPolicy", env, seed=0, device="cpu", policy_kwargs={"net_arch": [64, 64]})
     sb3.set_logger(Logger(None, []))

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-
 from qg_learning_node.learner.ddpg import DDPGConfig
 from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore
 

@@ -13,15 +13,21 @@ import pytest
 import torch
 from qg_common.peg_task import PegCell
 from qg_common.shaft_task import ShaftTaskGeometry
-
-from qg_learning_node.cli.policy import export_core, frozen_stack, stack_robot
 from qg_learning_node.cli.launcher import ProcessSpec, StackConfigError
+from qg_learning_node.cli.policy import export_core, frozen_stack, stack_robot
 from qg_learning_node.executor.peg_task import PegTask, PegTaskConfig
 from qg_learning_node.executor.residual_task import ResidualTask, TaskConfig
 from qg_learning_node.learner.actor_mlp import ActorMLP
 from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore
-from qg_learning_node.policy_file import (FORMAT_VERSION, PolicyFileError, frozen_policy,
-                                          load_policy, mismatches, save_policy, spec_for_task)
+from qg_learning_node.policy_file import (
+    FORMAT_VERSION,
+    PolicyFileError,
+    frozen_policy,
+    load_policy,
+    mismatches,
+    save_policy,
+    spec_for_task,
+)
 
 torch.set_num_threads(1)
 CELL = ShaftTaskGeometry()

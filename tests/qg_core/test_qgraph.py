@@ -8,12 +8,12 @@ import sys
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
-from reference_solver import exact_edge_values  # noqa: E402
-
 from qg_learning_node.learner.qgraph import QGraph  # noqa: E402
+from reference_solver import exact_edge_values  # noqa: E402
 
 ZERO = np.array([0.0, 0.0])
 

@@ -2,17 +2,21 @@
 its reward, goal and bore check measured on the tool pose against the cell's fixture."""
 from __future__ import annotations
 
-import numpy as np
-import pytest
-from scipy.spatial.transform import Rotation
-
 import math
 
+import numpy as np
+import pytest
 from qg_common.shaft_task import TOOL_DOWN, ShaftTaskGeometry
 from qg_common.types import N_START_POSES
-from qg_learning_node.executor.residual_task import (Observation, ResidualTask, TaskConfig,
-                                                     state_dim, tilt_from_push_axis)
+from qg_learning_node.executor.residual_task import (
+    Observation,
+    ResidualTask,
+    TaskConfig,
+    state_dim,
+    tilt_from_push_axis,
+)
 from qg_learning_node.learner.actor_mlp import ActorMLP
+from scipy.spatial.transform import Rotation
 
 DOWN = Rotation.from_rotvec([np.pi, 0.0, 0.0])     # tool z pointing down: the inserted pose
 PUSH = np.array([0.0, 0.0, -1.0])

@@ -16,11 +16,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 from qg_common.params import ConfigError, load_ros_params
-
 from qg_learning_node.executor.noise import NoiseConfig
 from qg_learning_node.executor.parameters import load_stall_recovery
-from qg_learning_node.executor.stall_recovery import (StallRecovery, StallRecoveryConfig,
-                                                      first_stall, stalled)
+from qg_learning_node.executor.stall_recovery import (
+    StallRecovery,
+    StallRecoveryConfig,
+    first_stall,
+    stalled,
+)
 
 FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "stalled_test_episodes_seed0.npz"
 CONFIG = Path(__file__).resolve().parents[2] / "config" / "executor.yaml"

@@ -4,7 +4,6 @@ from __future__ import annotations
 import csv
 
 import pytest
-
 from qg_learning_node.learner.training_log import EPISODE_WINDOW, TrainingLog
 
 

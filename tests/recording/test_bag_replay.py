@@ -8,7 +8,6 @@ import time
 from pathlib import Path
 
 import pytest
-
 from qg_recording.bag_writer import BagWriter
 from qg_recording.cdr import encode_twist_stamped, encode_wrench_stamped
 

@@ -10,7 +10,6 @@ import pytest
 import yaml
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
-
 from qg_recording.bag_reader import bag_info, read_bag
 from qg_recording.bag_writer import BagWriter
 from qg_recording.cdr import encode_wrench_stamped

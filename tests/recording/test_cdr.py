@@ -13,11 +13,10 @@ import pytest
 
 pytest.importorskip("rclpy")
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped  # noqa: E402
-from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
-
 from qg_recording import cdr  # noqa: E402
 from qg_recording.schemas import message_fields  # noqa: E402
+from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
 
 T_NS = 1_763_700_000_123_456_789
 FRAMES = ["", "a", "ab", "abc", "abcd", "base_link"]  # every padding length after the frame id

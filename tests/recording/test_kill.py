@@ -13,10 +13,9 @@ import pytest
 import yaml
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
-from rosbags.highlevel import AnyReader, AnyReaderError
-
 from qg_recording.bag_reader import bag_info, read_bag
 from qg_recording.episode_recorder import ROWS, EpisodeRecorder
+from rosbags.highlevel import AnyReader, AnyReaderError
 
 CHILD = Path(__file__).with_name("record_child.py")
 CHUNK = 8 * 1024  # about 80 WrenchStamped messages per chunk

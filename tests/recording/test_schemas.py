@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import pytest
 from mcap_ros2._dynamic import generate_dynamic
-
 from qg_recording.episode_recorder import TOPICS
 from qg_recording.schemas import SEPARATOR, MsgNotFoundError, normalize_type_name, schema_text
 

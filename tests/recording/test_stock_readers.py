@@ -11,11 +11,10 @@ import pytest
 import yaml
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
-from rosbags.highlevel import AnyReader
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
-
 from qg_recording.episode_recorder import TOPICS, EpisodeRecorder
 from qg_recording.schemas import schema_text, type_hash
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 NAMES = [f"panda_joint{i}" for i in range(1, 8)]
 T0 = 1_763_700_000_000_000_000

@@ -8,7 +8,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-
 from qg_common.params import config_file, load_ros_params, merge_params
 from qg_common.shaft_task import ShaftTaskGeometry
 from qg_common.types import StartPose

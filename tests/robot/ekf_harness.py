@@ -15,7 +15,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import pybullet as p
-
 from qg_common.panda_description import Q_READY, panda_urdf_path
 from robot_bridge_node.core.arm_model import ArmModel
 from robot_bridge_node.core.wrench_ekf import WrenchEKF

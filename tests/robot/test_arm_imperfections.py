@@ -7,15 +7,12 @@ import math
 
 import numpy as np
 import pytest
-from qg_common.panda_description import panda_urdf_path
-from qg_common.panda_description import panda_arm
+from arms import cell, start
+from qg_common.panda_description import panda_arm, panda_urdf_path
 from robot_bridge_node.core.arm_model import ArmModel
-from sim_robot_node.core.arm_imperfections import (GAZ_2019_COULOMB, ArmImperfections,
-                                                   ImperfectArm)
+from sim_robot_node.core.arm_imperfections import GAZ_2019_COULOMB, ArmImperfections, ImperfectArm
 from sim_robot_node.core.shaft_scene import ShaftScene, ShaftSceneConfig
 from sim_robot_node.core.shaft_world import build_world
-
-from arms import cell, start
 
 IDEAL = ArmImperfections.ideal()
 

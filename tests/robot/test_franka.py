@@ -16,10 +16,10 @@ import pytest
 from franka_robot_node.core.fr3_description import FR3_READY, fr3_arm
 from franka_robot_node.core.franka_arm import FrankaConnectError, FrankaFault, TorqueRejected
 from franka_robot_node.core.franka_config import FrankaConfig
+from franka_robot_node.plugin import FRANKA, describe_franka
 from franka_sim_node.core.franky_sim_host import FrankySimHost
 from franka_sim_node.core.franky_sim_scene import CELL_PREFIX, PARK_HEIGHT, parked_q
 from franka_sim_node.franka_sim import DEFAULT_SCENE, scene_extensions, scene_params, spawn
-from franka_robot_node.plugin import FRANKA, describe_franka
 from qg_common.shaft_task import ShaftTaskGeometry
 from qg_common.types import WrenchSetpoint
 from robot_bridge_node.core.arm_model import ArmModel

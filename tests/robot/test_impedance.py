@@ -3,14 +3,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from robot_bridge_node.core.impedance import HybridImpedanceController, ImpedanceConfig
+from arms import ideal, start
 from qg_common.panda_description import Q_READY, panda_arm
+from qg_common.types import WrenchSetpoint
 from robot_bridge_node.core.arm_model import ArmModel
 from robot_bridge_node.core.hardware_interface import load_robot
+from robot_bridge_node.core.impedance import HybridImpedanceController, ImpedanceConfig
 from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
-from qg_common.types import WrenchSetpoint
-
-from arms import ideal, start
 
 
 @pytest.fixture(scope="module")

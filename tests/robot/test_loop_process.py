@@ -14,16 +14,14 @@ import time
 
 import numpy as np
 import pytest
+from arms import start
 from qg_common.types import WrenchSetpoint
-
 from robot_bridge_node.core.hardware_interface import robot_plugin
 from robot_bridge_node.core.interface_kinds import interface_kind
 from robot_bridge_node.core.loop_link import LoopLink
 from robot_bridge_node.core.loop_runner import SetpointCommand, StepEvent
 from robot_bridge_node.core.sample_ring import HAS_TRUTH, PUBLISH
 from robot_bridge_node.robot_process import shipped_loop_spec
-
-from arms import start
 
 ROBOT = "sim_panda"
 SETPOINT = WrenchSetpoint.residual(-15.0, 1.5, -0.5)

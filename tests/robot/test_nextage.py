@@ -5,12 +5,18 @@ import numpy as np
 import pinocchio as pin
 import pybullet as p
 import pytest
-
-from robot_bridge_node.core.position_control import (PositionControlConfig,
-                                                     TaskSpacePositionController)
-from sim_robot_node.core.nextage_scene import (INIT_POSE, NextagePegScene, NextageSceneConfig,
-                                               PegHoleGeometry, nextage_urdf_path)
 from qg_common.params import config_file, load_ros_params
+from robot_bridge_node.core.position_control import (
+    PositionControlConfig,
+    TaskSpacePositionController,
+)
+from sim_robot_node.core.nextage_scene import (
+    INIT_POSE,
+    NextagePegScene,
+    NextageSceneConfig,
+    PegHoleGeometry,
+    nextage_urdf_path,
+)
 
 TOOL = "RARM_TOOL"
 #: Published joint limits of the right arm [deg] (the URDF comment's table).

@@ -6,11 +6,10 @@ import math
 
 import numpy as np
 import pytest
+from arms import cell, ideal, pressed_balance, start
+from qg_common.types import N_START_POSES, WrenchSetpoint
 from robot_bridge_node.core.hardware_interface import load_robot
 from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
-from qg_common.types import N_START_POSES, WrenchSetpoint
-
-from arms import cell, ideal, pressed_balance, start
 
 
 @pytest.fixture(scope="module")

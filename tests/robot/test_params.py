@@ -4,14 +4,14 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from qg_common.params import ConfigError, config_file, load_ros_params, unflatten
+from qg_common.shaft_task import ShaftTaskGeometry
 from robot_bridge_node.core.impedance import ImpedanceConfig
 from robot_bridge_node.core.rest_detector import RestConfig
 from robot_bridge_node.core.robot_loop import LoopConfig
 from robot_bridge_node.core.safety import SafetyLimits
-from qg_common.shaft_task import ShaftTaskGeometry
 from robot_bridge_node.core.start_motion import ResetConfig
 from sim_robot_node.core.shaft_scene_config import ShaftSceneConfig
-from qg_common.params import ConfigError, config_file, load_ros_params, unflatten
 
 
 def test_node_section_overrides_the_wildcard(tmp_path: Path) -> None:

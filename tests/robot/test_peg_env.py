@@ -3,11 +3,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from robot_bridge_node.core.position_control import (PositionControlConfig,
-                                                     TaskSpacePositionController)
-from sim_robot_node.core.nextage_scene import NextageSceneConfig, nextage_urdf_path
 from qg_common.params import config_file, load_ros_params
+from robot_bridge_node.core.position_control import (
+    PositionControlConfig,
+    TaskSpacePositionController,
+)
+from sim_robot_node.core.nextage_scene import NextageSceneConfig, nextage_urdf_path
 from sim_robot_node.core.peg_env import PegEnv, PegEnvConfig, toward_goal
 
 

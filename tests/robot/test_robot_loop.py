@@ -10,13 +10,18 @@ import math
 
 import numpy as np
 import pytest
-from robot_bridge_node.core.hardware_interface import load_robot, robot_defaults, robot_plugin
-from robot_bridge_node.core.robot_loop import (MeasuredWrench, LoopConfig, RobotLoop,
-                                               StateClock, TickClock, build_loop)
-from robot_bridge_node.core.safety import SetpointRejected
-from qg_common.types import N_START_POSES, PoseReference, WrenchSetpoint
-
 from arms import ideal, start
+from qg_common.types import N_START_POSES, PoseReference, WrenchSetpoint
+from robot_bridge_node.core.hardware_interface import load_robot, robot_defaults, robot_plugin
+from robot_bridge_node.core.robot_loop import (
+    LoopConfig,
+    MeasuredWrench,
+    RobotLoop,
+    StateClock,
+    TickClock,
+    build_loop,
+)
+from robot_bridge_node.core.safety import SetpointRejected
 
 PUSH = -15.0  # [N] the constant base policy (contact convention: pressing in)
 

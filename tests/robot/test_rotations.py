@@ -6,9 +6,13 @@ import math
 
 import numpy as np
 import pytest
+from qg_common.rotations import (
+    axis_angle_matrix,
+    matrix_from_quaternion,
+    quaternion_from_matrix,
+    rotation_log,
+)
 from scipy.spatial.transform import Rotation
-
-from qg_common.rotations import axis_angle_matrix, matrix_from_quaternion, quaternion_from_matrix, rotation_log
 
 _RNG = np.random.default_rng(0)
 AXES = [np.array(a, float) / np.linalg.norm(a) for a in
@@ -79,7 +83,6 @@ def test_block_quaternions_are_eigens_and_cost_no_memory() -> None:
     unlike ``pin.Quaternion`` of a C-ordered NumPy matrix (eigenpy 3.13 leaked 80 bytes a call,
     the robot process's growth per episode), leaves the process's memory where it was."""
     import pinocchio as pin
-
     from qg_common.rotations import quaternions_from_matrices
 
     rotations = [Rotation.from_rotvec(axis * angle).as_matrix() for axis in AXES for angle in ANGLES]

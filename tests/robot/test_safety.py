@@ -6,12 +6,16 @@ import math
 import numpy as np
 import pytest
 from qg_common.panda_description import DTAU_MAX, panda_arm
+from qg_common.rotations import axis_angle_matrix, tilt_from_down
+from qg_common.types import PoseReference, WrenchSetpoint
 from qg_common.xarm_description import xarm7_arm
 from robot_bridge_node.core.arm_model import ArmModel
-from robot_bridge_node.core.safety import (VELOCITY_BRAKE_DAMPING, SafetyFilter, SafetyLimits,
-                                           SetpointRejected)
-from qg_common.types import PoseReference, WrenchSetpoint
-from qg_common.rotations import axis_angle_matrix, tilt_from_down
+from robot_bridge_node.core.safety import (
+    VELOCITY_BRAKE_DAMPING,
+    SafetyFilter,
+    SafetyLimits,
+    SetpointRejected,
+)
 
 DOWN = np.diag([1.0, -1.0, -1.0])  # tool z pointing down
 

@@ -4,9 +4,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from qg_common.types import GroundTruth
-
-from robot_bridge_node.core.sample_ring import (SampleRing, truth_from_array, truth_to_array,
-                                                TRUTH_SIZE)
+from robot_bridge_node.core.sample_ring import (
+    TRUTH_SIZE,
+    SampleRing,
+    truth_from_array,
+    truth_to_array,
+)
 
 
 def write(ring: SampleRing, first: int, n: int) -> None:

@@ -6,15 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pybullet as p
 import pytest
-from qg_common.xarm_description import xarm7_arm
+from arms import start
 from qg_common.types import WrenchSetpoint
+from qg_common.xarm_description import xarm7_arm
 from robot_bridge_node.core.arm_model import ArmModel
 from robot_bridge_node.core.hardware_interface import load_robot, robot_defaults, robot_plugin
 from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
 from sim_robot_node.core.arm_imperfections import ArmImperfections
-
-from arms import start
 
 PUSH = -15.0  # [N] the base policy
 

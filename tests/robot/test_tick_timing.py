@@ -8,7 +8,6 @@ import time
 import numpy as np
 import pytest
 from qg_common.realtime_pacer import RealtimePacer
-
 from robot_bridge_node.core.loop_process import RealtimePace
 from robot_bridge_node.core.tick_timing import TickTiming
 

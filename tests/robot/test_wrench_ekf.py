@@ -10,13 +10,18 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-from ekf_harness import (PandaTorqueHarness, descend_reference, rmse, settling_time,
-                         sine_reference, step_wrench)
-
+from ekf_harness import (
+    PandaTorqueHarness,
+    descend_reference,
+    rmse,
+    settling_time,
+    sine_reference,
+    step_wrench,
+)
 from qg_common.panda_description import Q_READY, panda_arm
+from qg_common.params import config_file, load_ros_params
 from robot_bridge_node.core.arm_model import ArmModel
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
-from qg_common.params import config_file, load_ros_params
 
 W = np.array([5.0, -3.0, -15.0, 0.5, -0.3, 0.2])     # tool frame [N, Nm]
 NOISE = (1e-5, 1e-3)                                 # [rad, rad/s]

@@ -22,10 +22,9 @@ HISTORY = 1000          # a second of the 1 kHz topic
 
 def test_a_1khz_topic_is_taken_whole_without_a_busy_spinning_thread() -> None:
     import rclpy
+    from qg_common.callback_executor import CallbackThreadPool
     from rclpy.node import Node
     from std_msgs.msg import Header
-
-    from qg_common.callback_executor import CallbackThreadPool
 
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=231)      # no test's processes use it

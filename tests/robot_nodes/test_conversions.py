@@ -57,8 +57,14 @@ def test_setpoint_messages_convert_both_ways_and_nan_reaches_the_safety_filter()
 
 
 def test_at_rest_and_joint_state_messages_carry_the_numbers():
-    from qg_common.conversions import (at_rest_msg, joint_state_from_msg, joint_state_msg,
-                                       time_msg, time_ns, wrench_from_msg)
+    from qg_common.conversions import (
+        at_rest_msg,
+        joint_state_from_msg,
+        joint_state_msg,
+        time_msg,
+        time_ns,
+        wrench_from_msg,
+    )
     from qg_common.panda_description import JOINT_NAMES
     from qg_common.types import GroundTruth, JointState, StepResult
     truth = GroundTruth(wrench=np.arange(6.0), insertion_depth=0.004, plunger_travel=0.001,

@@ -10,9 +10,8 @@ import os
 import numpy as np
 import pytest
 from conftest import Stack
-from robot_client import DEEP, RobotClient, shaft_start, wrench
-
 from qg_common.rotations import matrix_from_quaternion
+from robot_client import DEEP, RobotClient, shaft_start, wrench
 
 pytestmark = pytest.mark.ros
 

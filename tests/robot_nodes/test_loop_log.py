@@ -9,7 +9,6 @@ import pytest
 def test_lines_of_every_severity_in_any_order_are_logged() -> None:
     import rclpy
     from rclpy.node import Node
-
     from robot_bridge_node.bridge_node import log_at
 
     rclpy.init(domain_id=230)          # no test's processes use it; nothing is published
@@ -25,7 +24,6 @@ def test_lines_of_every_severity_in_any_order_are_logged() -> None:
 def test_a_line_repeated_within_a_second_is_logged_once(monkeypatch: pytest.MonkeyPatch) -> None:
     import rclpy
     from rclpy.node import Node
-
     from robot_bridge_node import bridge_node
 
     rclpy.init(domain_id=230)

@@ -19,22 +19,21 @@ EPISODE = "rt_0001"
 
 
 def status(state: str):
-    from qg_interfaces.msg import EpisodeStatus
     from qg_common.conversions import time_msg
+    from qg_interfaces.msg import EpisodeStatus
     return EpisodeStatus(stamp=time_msg(time.time_ns()), episode_id=EPISODE, state=state, mode="test",
                          reward_type="sparse", initial_pose=2, step=0, max_steps=1)
 
 
 @pytest.mark.alone   # a 1 kHz best-effort stream to this test's own subscriber
 def test_realtime_bag_is_stamped_like_the_live_messages(stack, machine_to_itself) -> None:
-    from qg_interfaces.msg import EpisodeStatus
-    from rclpy.serialization import deserialize_message
-    from rosbags.highlevel import AnyReader
-
     from qg_common.topics import LATCHED
+    from qg_interfaces.msg import EpisodeStatus
     from qg_recording.bag_reader import bag_info
     from qg_recording.episode_recorder import TOPICS
     from qg_recording.player import message_class
+    from rclpy.serialization import deserialize_message
+    from rosbags.highlevel import AnyReader
 
     bag = Path(stack.env["QG_RUNS_DIR"]) / "episodes" / EPISODE
     # With the machine to itself: beside the other workers this test's subscriber, starved,
@@ -89,7 +88,6 @@ def test_ticks_stamped_before_the_bag_opened_are_not_recorded(tmp_path: Path) ->
     from qg_recording.bag_reader import read_raw
     from qg_recording.episode_recorder import EpisodeRecorder
     from rclpy.serialization import serialize_message
-
     from robot_bridge_node.core.sample_ring import record_dtype
     from robot_bridge_node.core.tick_messages import TickNames
     from robot_bridge_node.recorder_node import RecorderNode

@@ -104,9 +104,8 @@ def test_a_reset_asked_again_with_its_request_id_is_answered_not_redone(
     the arm, which has moved on, is not reset again (no settling: the lockstep clock stands)."""
     from qg_common.conversions import start_pose_request
     from qg_interfaces.srv import MoveToStart
-    from rosgraph_msgs.msg import Clock
-
     from qg_learning_node.cli.ros_client import call_service
+    from rosgraph_msgs.msg import Clock
     stack = robot_process
     with stack.client() as cli:
         clock: list[int] = []

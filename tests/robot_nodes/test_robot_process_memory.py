@@ -14,9 +14,7 @@ import gc
 from pathlib import Path
 
 import numpy as np
-
 from qg_recording.episode_recorder import EpisodeRecorder
-
 from robot_bridge_node.core.sample_ring import HAS_TOOL, HAS_TRUTH, HAS_WRENCH, record_dtype
 from robot_bridge_node.core.tick_messages import TickNames, record_ticks, serialized_ticks
 

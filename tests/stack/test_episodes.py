@@ -40,9 +40,8 @@ class Episodes:
 
     def __init__(self, cli, robot: str = "") -> None:
         """:param robot: the robot's namespace (``robot0`` under many robots), "" = the root."""
-        from qg_interfaces.msg import EpisodeStatus, LearnerDiagnostics
-
         from qg_common.topics import LATCHED, robot_topic
+        from qg_interfaces.msg import EpisodeStatus, LearnerDiagnostics
         from rclpy.qos import QoSProfile
         self.cli = cli
         self.robot = robot
@@ -72,10 +71,9 @@ class Episodes:
         """StartEpisode, asked again with its request id if the reply is lost."""
         import uuid
 
-        from qg_interfaces.srv import StartEpisode
-
-        from qg_learning_node.cli.ros_client import RESEND_AFTER, call_service
         from qg_common.topics import robot_topic
+        from qg_interfaces.srv import StartEpisode
+        from qg_learning_node.cli.ros_client import RESEND_AFTER, call_service
         fields.setdefault("request_id", uuid.uuid4().hex)
         return call_service(self.cli, StartEpisode, robot_topic(self.robot, "executor/start_episode"),
                             StartEpisode.Request(**fields), timeout=60.0, resend_after=RESEND_AFTER)
@@ -113,11 +111,10 @@ def wait_for_file(path: Path, timeout: float = 15.0) -> Path:
 def test_train_episode_is_recorded_and_replays_into_the_same_graph(stack, tmp_path):
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
-
-    from qg_learning_node.learner.learner_params import learner_config_from_params
-    from qg_learning_node.learner.learner_core import LearnerCore
-    from qg_learning_node.learner.offline import rebuild_from_bags
     from qg_common.params import config_file, load_ros_params
+    from qg_learning_node.learner.learner_core import LearnerCore
+    from qg_learning_node.learner.learner_params import learner_config_from_params
+    from qg_learning_node.learner.offline import rebuild_from_bags
 
     checkpoints = tmp_path / "checkpoints"
     stack.start(ROBOT, learner_spec(checkpoints), executor_spec(max_steps=25))
@@ -193,10 +190,9 @@ def check_bag_against_live(bag: Path, live, graph: dict, episode_id: str) -> dic
     """Read every message of ``bag`` with rosbags (types from the bag's own definitions, type
     hashes checked) and compare topics, QoS, type hashes, stamps and bytes with what the live
     graph showed; returns the recorded (log time, bytes) per topic."""
+    from qg_recording.player import message_class
     from rclpy.serialization import deserialize_message
     from rosbags.highlevel import AnyReader
-
-    from qg_recording.player import message_class
 
     recorded: dict[str, list[tuple[int, bytes]]] = {}
     with AnyReader([bag]) as reader:
@@ -279,7 +275,6 @@ def test_learner_killed_mid_episode_degrades_then_resumes(stack, tmp_path, let_a
     restarted learner speaks; the restarted learner resumes from the checkpoint and does not
     checkpoint again the episode that ended while it was down (its latched status)."""
     from param_client import integer, set_value
-
     from qg_learning_node.learner_node import CHECKPOINT_GRACE
     checkpoints = tmp_path / "checkpoints"
 
@@ -364,7 +359,6 @@ def test_bad_requests_are_refused_and_the_stack_stays_up(stack):
         busy = episodes.start(mode="test")
         assert not busy.success and "still running" in busy.message
         from qg_interfaces.srv import StopEpisode
-
         from qg_learning_node.cli.ros_client import call_service
         stopped = call_service(cli, StopEpisode, "/executor/stop_episode",
                                StopEpisode.Request(reason="test"), timeout=30.0)
@@ -386,13 +380,13 @@ def test_executor_without_robot_refuses_with_a_clear_message(stack):
 def test_in_process_runner_repeats_the_ros_stack_episode(stack, tmp_path):
     """The experiments' fast runner must agree with the ROS stack: the same test episode (same
     start pose, the learner's initial actor, no noise) gives the same transitions in both."""
-    from qg_learning_node.executor.episode import Episode
-    from qg_learning_node.learner.learner_params import learner_config_from_params
-    from qg_experiments.runner import LivePolicy, InsertionRobot, StackSettings, run_episode
-    from qg_learning_node.learner.learner_core import LearnerCore
-    from qg_learning_node.executor.residual_task import ACTION_DIM, OBSERVATION_COMPONENTS
-    from qg_learning_node.learner.offline import iter_transitions
     from qg_common.params import config_file, load_ros_params
+    from qg_experiments.runner import InsertionRobot, LivePolicy, StackSettings, run_episode
+    from qg_learning_node.executor.episode import Episode
+    from qg_learning_node.executor.residual_task import ACTION_DIM, OBSERVATION_COMPONENTS
+    from qg_learning_node.learner.learner_core import LearnerCore
+    from qg_learning_node.learner.learner_params import learner_config_from_params
+    from qg_learning_node.learner.offline import iter_transitions
 
     steps, pose = 4, 3
     executor = ("executor", "qg_learning_node", "executor",

@@ -17,9 +17,8 @@ def test_executor_stopped_mid_episode_aborts_it_and_exits_zero(stack):
     """SIGINT (Ctrl-C, ``qgl up`` stopping) and SIGTERM alike: the running episode ends as
     ``aborted`` (reason ``shutdown``) on the latched status, the robot gets the zero residual,
     and the process says so and exits 0 without a traceback."""
-    from qg_interfaces.msg import WrenchSetpoint
-
     from qg_common.topics import COMMAND_QOS
+    from qg_interfaces.msg import WrenchSetpoint
     stack.start(ROBOT)
     with stack.client() as cli:
         episodes = Episodes(cli)
@@ -52,10 +51,9 @@ def test_executor_stopped_mid_episode_aborts_it_and_exits_zero(stack):
 def test_stopping_the_stack_mid_episode_records_the_abort(stack):
     """``qgl up`` stopped (its launcher's stop): the episode's bag ends with the executor's
     ``aborted`` status, not with the episode still ``running``."""
+    from qg_recording.player import message_class
     from rclpy.serialization import deserialize_message
     from rosbags.highlevel import AnyReader
-
-    from qg_recording.player import message_class
     stack.start(ROBOT, executor_spec(max_steps=400, alone=True))
     with stack.client() as cli:
         episodes = Episodes(cli)
@@ -82,9 +80,8 @@ def test_learner_heartbeat_goes_on_while_it_trains(stack, tmp_path, machine_to_i
     moment cannot make it too short to tell (a cycle timed beforehand to last 3 s lasted 1.4 s
     while an experiment suite ran, and 16 s on another loaded run). The test watches
     ``WATCH`` seconds of it, then kills the learner."""
-    from qg_interfaces.msg import LearnerDiagnostics, Transition
-
     from qg_common.topics import RELIABLE_DEEP
+    from qg_interfaces.msg import LearnerDiagnostics, Transition
     learner = ("learner", "qg_learning_node", "learner",
                ("--ros-args", "-p", "learner.cycle_steps:=1",
                 "-p", "learner.iterations_per_cycle:=1000000",

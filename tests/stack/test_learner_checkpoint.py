@@ -18,7 +18,6 @@ GRACE = 0.4         # [s] the grace of this test (the node's is 3 s)
 @pytest.fixture
 def learner(tmp_path, monkeypatch):
     import rclpy
-
     from qg_learning_node import learner_node
 
     monkeypatch.setattr(learner_node, "CHECKPOINT_GRACE", GRACE)
@@ -82,7 +81,6 @@ def test_an_aborted_episode_is_not_checkpointed_a_completed_test_episode_is(lear
     import json
 
     from qg_interfaces.msg import EpisodeStatus
-
     from qg_learning_node.learner_node import CHECKPOINT_INFO_NAME
     for step in range(3):
         _take(learner, "cut", step)

@@ -38,7 +38,6 @@ class TwoRobots:
 @pytest.fixture(scope="module")
 def two_robots(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TwoRobots]:
     from qg_interfaces.srv import StartEpisode
-
     from qg_learning_node.cli.fleet import fleet_specs
     from qg_learning_node.cli.launcher import ProcessSpec
 
@@ -113,10 +112,10 @@ def test_offline_rebuild_of_both_robots_bags_gives_the_learners_memory(two_robot
     """The learner checkpoints after every training episode: then its memory holds both
     robots' transitions, one trajectory chain per robot. The rebuild from the two robots' bags
     (`qgl replay --into-learner`) must hold the same transitions, chains and graph."""
-    from qg_learning_node.learner.learner_params import learner_config_from_params
-    from qg_learning_node.learner.learner_core import LearnerCore
-    from qg_learning_node.learner.offline import rebuild_from_bags
     from qg_common.params import config_file, load_ros_params
+    from qg_learning_node.learner.learner_core import LearnerCore
+    from qg_learning_node.learner.learner_params import learner_config_from_params
+    from qg_learning_node.learner.offline import rebuild_from_bags
 
     run = two_robots
     total = sum(f.step for f in run.finals.values())

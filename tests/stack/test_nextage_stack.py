@@ -43,11 +43,11 @@ def test_stack_nextage_names_the_installed_peg_files():
 
 
 def test_sim_nextage_is_a_position_robot_with_a_wrist_sensor():
-    from robot_bridge_node.core.hardware_interface import robot_plugin
-    from robot_bridge_node.core.position_loop import PositionLoop, build_position_loop
     from qg_common.node_parameters import package_defaults
     from qg_common.peg_task import PegCell
     from qg_common.types import PoseReference, WrenchSetpoint
+    from robot_bridge_node.core.hardware_interface import robot_plugin
+    from robot_bridge_node.core.position_loop import PositionLoop, build_position_loop
     plugin = robot_plugin("sim_nextage")
     assert plugin.interface == "position"
     robot = plugin.create(package_defaults("sim", plugin.config_files))
@@ -76,11 +76,10 @@ def test_sim_nextage_is_a_position_robot_with_a_wrist_sensor():
 
 @pytest.mark.ros
 def test_a_nextage_peg_episode_runs_through_the_ros_stack_and_is_recorded(stack):
-    from qg_recording.bag_reader import read_bag
-
     from qg_common.params import package_config
     from qg_common.peg_task import PegCell
     from qg_learning_node.executor.peg_task import PegTaskConfig
+    from qg_recording.bag_reader import read_bag
     executor_file = package_config("qg_learning_node", "executor_nextage.yaml")
     learner_file = package_config("qg_learning_node", "learner_nextage.yaml")
     stack.start(("robot", "robot_bridge_node", "robot", ("--ros-args", "-p", "robot:=sim_nextage")),

@@ -77,11 +77,10 @@ def test_an_executor_refuses_a_file_that_does_not_fit_at_start(stack, tmp_path):
 
 
 def test_qgl_up_policy_runs_the_frozen_actor_without_a_learner(stack, tmp_path):
-    from qg_interfaces.msg import Transition
-    from test_episodes import Episodes
-
     from qg_common.topics import RELIABLE_DEEP
+    from qg_interfaces.msg import Transition
     from qg_learning_node.policy_file import load_policy
+    from test_episodes import Episodes
     path = _export(tmp_path, "policy.npz", 2, "tilt_only")
     policy = load_policy(path)
     config = tmp_path / "stack.yaml"       # the shipped stack, with a short test episode

@@ -12,9 +12,13 @@ import time
 from pathlib import Path
 
 import pytest
-
-from qg_learning_node.cli.launcher import (Launcher, ProcessSpec, RespawnPolicy,
-                                           StackConfigError, load_stack)
+from qg_learning_node.cli.launcher import (
+    Launcher,
+    ProcessSpec,
+    RespawnPolicy,
+    StackConfigError,
+    load_stack,
+)
 
 
 def _python(name: str, code: str, **respawn) -> ProcessSpec:

@@ -6,7 +6,6 @@ import gymnasium
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
-
 from qg_experiments.gym_envs import ROS_ENV_IDS
 
 pytestmark = pytest.mark.ros

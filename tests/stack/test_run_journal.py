@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 
 import pytest
-
 from qg_learning_node.cli.episode_schedule import EpisodeOutcome
 from qg_learning_node.cli.run_journal import RunJournal, RunMismatch, RunPlan
 

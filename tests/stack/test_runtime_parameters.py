@@ -15,9 +15,8 @@ pytestmark = pytest.mark.ros
 def test_learner_takes_iterations_batch_size_and_learning_rates_from_the_next_cycle(
         stack, tmp_path):
     import torch
-    from qg_interfaces.msg import EpisodeStatus, LearnerDiagnostics, Transition
-
     from qg_common.topics import LATCHED, RELIABLE_DEEP
+    from qg_interfaces.msg import EpisodeStatus, LearnerDiagnostics, Transition
     checkpoints = tmp_path / "checkpoints"
     stack.start(("learner", "qg_learning_node", "learner",
                  ("--ros-args", "-p", "learner.cycle_steps:=5",
@@ -87,9 +86,8 @@ def test_learner_takes_iterations_batch_size_and_learning_rates_from_the_next_cy
 def test_executor_noise_set_between_episodes_applies_to_the_next_one(stack, tmp_path):
     """Noise off: a training episode's actions are the actor's own; noise back on: they are
     not. The actor does not change (no training cycle within these short episodes)."""
-    from qg_interfaces.msg import ActorParameters, Transition
-
     from qg_common.topics import LATCHED, RELIABLE_DEEP
+    from qg_interfaces.msg import ActorParameters, Transition
     from qg_learning_node.conversions import actor_tensors_from_msg
     from qg_learning_node.learner.actor_mlp import ActorMLP
     stack.start(ROBOT, ("learner", "qg_learning_node", "learner",

@@ -47,7 +47,6 @@ def test_every_executable_starts_and_is_discovered(every_executable):
 
 def test_start_episode_crosses_processes_and_rejects_bad_fields(every_executable):
     from qg_interfaces.srv import StartEpisode
-
     from qg_learning_node.cli.ros_client import RESEND_AFTER, call_service
     stack = every_executable
     with stack.client() as cli:

@@ -20,11 +20,10 @@ from collections.abc import Callable, Sequence
 
 import mujoco
 import numpy as np
+from franka_robot_node.core.fr3_description import FR3_READY
 from franky_sim import SimulationServer
 from franky_sim.mujoco_simulator import MujocoSimulator
 from qg_common.realtime_pacer import RealtimePacer
-
-from franka_robot_node.core.fr3_description import FR3_READY
 
 __all__ = ["SceneExtension", "FrankySimHost", "ROBOT_PREFIX", "HAND_BODY", "TCP_IN_HAND"]
 

@@ -22,17 +22,15 @@ from typing import Any
 
 import mujoco
 import numpy as np
+from franka_robot_node.core.fr3_description import FR3_READY
+from franka_robot_node.core.franka_config import HeldTool
 from franky_sim.mujoco_simulator import MujocoSimulator
-from qg_common.shaft_task import SHAFT_TASK_SECTION, ShaftTaskGeometry
+from qg_common.shaft_task import SHAFT_TASK_SECTION, TOOL_DOWN, ShaftTaskGeometry
+from robot_bridge_node.core.arm_model import ArmModel
 from sim_robot_node.core.arm_imperfections import RESIDUAL_FRICTION_SHARE
 from sim_robot_node.core.mujoco_world import add_shaft_cell, set_cell_physics
 from sim_robot_node.core.shaft_scene_config import ShaftSceneConfig
 
-from qg_common.shaft_task import TOOL_DOWN
-from robot_bridge_node.core.arm_model import ArmModel
-
-from franka_robot_node.core.fr3_description import FR3_READY
-from franka_robot_node.core.franka_config import HeldTool
 from franka_sim_node.core.franky_sim_host import HAND_BODY, TCP_IN_HAND, SceneExtension
 
 __all__ = ["fixture_box", "held_cylinder", "residual_joint_friction", "shaft_cell",

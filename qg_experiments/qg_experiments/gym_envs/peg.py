@@ -16,11 +16,16 @@ from typing import Any
 import gymnasium
 import numpy as np
 from gymnasium import spaces
-
-from qg_experiments.gym_envs.rendering import (RENDER_FPS, RENDER_MODES, RenderedRobot,
-                                                RobotView, check_render_mode)
-from qg_experiments.nextage_peg import NextagePeg
 from qg_learning_node.executor.peg_task import PEG_ACTION_DIM, PEG_STATE_DIM
+
+from qg_experiments.gym_envs.rendering import (
+    RENDER_FPS,
+    RENDER_MODES,
+    RenderedRobot,
+    RobotView,
+    check_render_mode,
+)
+from qg_experiments.nextage_peg import NextagePeg
 
 __all__ = ["NextagePegEnv"]
 

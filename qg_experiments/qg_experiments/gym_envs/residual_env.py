@@ -30,14 +30,22 @@ from typing import Any
 import gymnasium
 import numpy as np
 from gymnasium import spaces
-from qg_common.types import N_START_POSES
-
-from qg_experiments.gym_envs.rendering import (RENDER_FPS, RENDER_MODES, RenderedRobot,
-                                                check_render_mode)
-from qg_learning_node.executor.episode import Episode
 from qg_common.shaft_task import ShaftTaskGeometry
-from qg_learning_node.executor.residual_task import (ACTION_DIM, Observation, ResidualTask,
-                                                     TaskConfig)
+from qg_common.types import N_START_POSES
+from qg_learning_node.executor.episode import Episode
+from qg_learning_node.executor.residual_task import (
+    ACTION_DIM,
+    Observation,
+    ResidualTask,
+    TaskConfig,
+)
+
+from qg_experiments.gym_envs.rendering import (
+    RENDER_FPS,
+    RENDER_MODES,
+    RenderedRobot,
+    check_render_mode,
+)
 
 __all__ = ["ResidualEnv"]
 

@@ -10,13 +10,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from qg_learning_node.learner.algorithms import label
 
 from qg_experiments import aggregates, grid, stats
 from qg_experiments.profile import Statistics
 from qg_experiments.random_baselines import Bar
 from qg_experiments.report import plots
 from qg_experiments.report.markdown import table
-from qg_learning_node.learner.algorithms import label
 
 __all__ = ["Judged", "judge", "verdict_sentence", "aggregate_section"]
 

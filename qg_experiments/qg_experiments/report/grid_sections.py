@@ -7,13 +7,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from qg_learning_node.learner.algorithms import label
 
 from qg_experiments import grid, stats
 from qg_experiments.random_baselines import Bar
 from qg_experiments.report import plots
 from qg_experiments.report.divergence import divergence_counts
 from qg_experiments.report.markdown import bar_text, fmt, grid_table, speed, table
-from qg_learning_node.learner.algorithms import label
 
 __all__ = ["THESIS", "random_section", "paired_line", "grid_section", "learning_curves_section",
            "q_section", "variant_section", "divergence_text"]

@@ -9,9 +9,10 @@ import math
 from pathlib import Path
 from typing import Any
 
+from qg_learning_node.learner.algorithms import label
+
 from qg_experiments import stats
 from qg_experiments.random_baselines import Bar
-from qg_learning_node.learner.algorithms import label
 
 __all__ = ["fmt", "table", "APART_BLOCKS", "marked_blocks", "write_marked_block", "speed",
            "bar_text", "grid_cell", "grid_table"]

@@ -11,8 +11,13 @@ from qg_experiments.profile import Profile
 from qg_experiments.random_baselines import random_bar_of, summarize_baselines
 from qg_experiments.report.aggregate_section import aggregate_section
 from qg_experiments.report.comparison import comparison, graph_section
-from qg_experiments.report.grid_sections import (grid_section, learning_curves_section,
-                                                 q_section, random_section, variant_section)
+from qg_experiments.report.grid_sections import (
+    grid_section,
+    learning_curves_section,
+    q_section,
+    random_section,
+    variant_section,
+)
 from qg_experiments.report.markdown import APART_BLOCKS, marked_blocks, step_label, table
 from qg_experiments.report.peg_sections import peg_budget, peg_paired, peg_section
 from qg_experiments.report.tables import episodes_csv, write_bar, write_csv
@@ -177,7 +182,7 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
     kept = marked_blocks(path.read_text() if path.exists() else "", APART_BLOCKS)
     path.write_text("\n".join(lines) + (f"\n\n{kept}\n" if kept else ""))
     if (out / "peers").is_dir() or (out / "standard_tasks").is_dir():
-        from qg_experiments import peers_report      # imports the Gym side and its messages
+        from qg_experiments import peers_report  # imports the Gym side and its messages
         peers_report.write_section(path, out)
     from qg_experiments import franka_report
     franka_report.write_section(path, docs / "data" / franka_report.DATA.name)

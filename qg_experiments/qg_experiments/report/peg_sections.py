@@ -6,12 +6,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from qg_learning_node.learner.algorithms import label
 
 from qg_experiments import peg, stats
 from qg_experiments.profile import PegBudget
 from qg_experiments.report import plots
 from qg_experiments.report.markdown import fmt, speed, table
-from qg_learning_node.learner.algorithms import label
 
 __all__ = ["peg_section", "peg_paired", "peg_budget"]
 

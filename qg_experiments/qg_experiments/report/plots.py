@@ -7,10 +7,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from qg_learning_node.learner.algorithms import label
 
 from qg_experiments.figures import pyplot
 from qg_experiments.random_baselines import Bar
-from qg_learning_node.learner.algorithms import label
 
 __all__ = ["COLORS", "random_steps", "learning_curves", "mean_q", "peg_learning", "q_spread",
            "smooth", "performance_profiles", "cell_means"]

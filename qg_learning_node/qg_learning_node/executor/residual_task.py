@@ -107,7 +107,7 @@ class TaskConfig:
             raise ValueError("step caps must be >= 1")
 
     @classmethod
-    def from_dict(cls, values: dict[str, Any]) -> "TaskConfig":
+    def from_dict(cls, values: dict[str, Any]) -> TaskConfig:
         unknown = set(values) - set(cls.__dataclass_fields__)
         if unknown:
             raise ValueError(f"unknown task parameters: {sorted(unknown)}")

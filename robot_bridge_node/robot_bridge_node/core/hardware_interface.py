@@ -24,8 +24,7 @@ from importlib.metadata import entry_points
 from typing import Any, Protocol
 
 import numpy as np
-from qg_common.params import (ParameterSection, load_ros_params, merge_params,
-                              package_config)
+from qg_common.params import ParameterSection, load_ros_params, merge_params, package_config
 from qg_common.types import GroundTruth, JointState, StartPose
 
 __all__ = ["HardwareFault", "Recoverable", "TorqueInterface", "PositionInterface",

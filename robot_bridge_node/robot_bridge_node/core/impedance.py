@@ -28,7 +28,6 @@ from typing import Any
 
 import numpy as np
 from qg_common.params import config_from_dict
-
 from qg_common.types import PoseReference, WrenchSetpoint
 
 from robot_bridge_node.core.arm_model import ArmModel

@@ -19,11 +19,15 @@ import numpy as np
 from qg_common.params import ParameterSection
 from qg_common.types import JointState
 
-from robot_bridge_node.core.hardware_interface import (Robot, RobotDescription,
-                                                       load_registered, registered_names)
+from robot_bridge_node.core.hardware_interface import (
+    Robot,
+    RobotDescription,
+    load_registered,
+    registered_names,
+)
 from robot_bridge_node.core.rest_detector import RestConfig
-from robot_bridge_node.core.start_motion import ResetConfig
 from robot_bridge_node.core.robot_loop import LoopClock, LoopConfig, RobotLoop, WrenchEstimator
+from robot_bridge_node.core.start_motion import ResetConfig
 
 __all__ = ["InterfaceKind", "CommandHold", "LoopBuilder", "STEP_SECTIONS", "INTERFACE_GROUP",
            "interface_kind", "interface_kind_names"]

@@ -28,9 +28,9 @@ import sys
 import threading
 import time
 import traceback
+from collections.abc import Callable
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -38,12 +38,17 @@ from qg_common.realtime_pacer import DEFAULT_SPIN, FIFO_SPIN, RealtimePacer, fif
 
 from robot_bridge_node.core.hardware_interface import Robot, robot_plugin
 from robot_bridge_node.core.interface_kinds import interface_kind
-from robot_bridge_node.core.loop_runner import (LoopRunner, ResetCommand, SetpointCommand,
-                                                StepEvent)
+from robot_bridge_node.core.loop_runner import LoopRunner, ResetCommand, SetpointCommand, StepEvent
 from robot_bridge_node.core.robot_loop import MAX_STATE_GAP, RobotLoop, StateClock
-from robot_bridge_node.core.sample_ring import (HAS_OWN_WRENCH, HAS_TOOL, HAS_TRUTH,
-                                                HAS_WRENCH, PUBLISH,
-                                                SampleRing, truth_to_array)
+from robot_bridge_node.core.sample_ring import (
+    HAS_OWN_WRENCH,
+    HAS_TOOL,
+    HAS_TRUTH,
+    HAS_WRENCH,
+    PUBLISH,
+    SampleRing,
+    truth_to_array,
+)
 from robot_bridge_node.core.tick_timing import TickTiming
 
 __all__ = ["LoopSpec", "RingOutlet", "EventSender", "PipeMailbox", "RealtimePace", "TIMING_PERIOD",

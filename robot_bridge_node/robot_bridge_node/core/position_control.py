@@ -19,7 +19,6 @@ from typing import Any
 
 import numpy as np
 import pinocchio as pin
-
 from qg_common.params import config_from_dict
 
 from robot_bridge_node.core.impedance import ToolState

@@ -13,13 +13,20 @@ from typing import Any
 import numpy as np
 from qg_common.types import StartPose, WrenchSetpoint
 
-from robot_bridge_node.core.hardware_interface import (PositionInterface, Robot,
-                                                       SimulationInterface)
-from robot_bridge_node.core.position_control import (PositionControlConfig,
-                                                     TaskSpacePositionController, pose_matrix)
+from robot_bridge_node.core.hardware_interface import PositionInterface, Robot, SimulationInterface
+from robot_bridge_node.core.position_control import (
+    PositionControlConfig,
+    TaskSpacePositionController,
+    pose_matrix,
+)
 from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
-from robot_bridge_node.core.robot_loop import (LoopClock, LoopConfig, MeasuredWrench, RobotLoop,
-                                               WrenchEstimator)
+from robot_bridge_node.core.robot_loop import (
+    LoopClock,
+    LoopConfig,
+    MeasuredWrench,
+    RobotLoop,
+    WrenchEstimator,
+)
 from robot_bridge_node.core.safety import SetpointRejected
 from robot_bridge_node.core.start_motion import ResetConfig
 

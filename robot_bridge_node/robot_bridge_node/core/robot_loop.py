@@ -15,12 +15,22 @@ from typing import Any, Protocol
 
 import numpy as np
 from qg_common.params import config_from_dict
-from qg_common.types import (NO_GROUND_TRUTH, GroundTruth, JointState, StartPose,
-                             StepResult, WrenchSetpoint)
+from qg_common.types import (
+    NO_GROUND_TRUTH,
+    GroundTruth,
+    JointState,
+    StartPose,
+    StepResult,
+    WrenchSetpoint,
+)
 
 from robot_bridge_node.core.arm_model import ArmModel
-from robot_bridge_node.core.hardware_interface import (Robot, SimulationInterface,
-                                                       StampedStates, TorqueInterface)
+from robot_bridge_node.core.hardware_interface import (
+    Robot,
+    SimulationInterface,
+    StampedStates,
+    TorqueInterface,
+)
 from robot_bridge_node.core.impedance import HybridImpedanceController, ImpedanceConfig
 from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
 from robot_bridge_node.core.safety import SafetyFilter, SafetyLimits

@@ -17,7 +17,6 @@ from typing import Any
 import numpy as np
 from qg_common.params import config_from_dict
 from qg_common.rotations import tilt_from_down
-
 from qg_common.types import WrenchSetpoint
 
 from robot_bridge_node.core.arm_model import JointLimits

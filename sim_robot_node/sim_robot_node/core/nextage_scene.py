@@ -20,7 +20,6 @@ from typing import Any
 
 import numpy as np
 import pybullet as p
-
 from qg_common.params import config_from_dict
 from qg_common.peg_task import TOOL_DOWN, PegCell, PegHoleGeometry, sample_start
 from qg_common.types import JointState

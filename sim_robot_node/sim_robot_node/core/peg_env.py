@@ -23,12 +23,15 @@ from typing import Any, Protocol
 
 import numpy as np
 import pybullet as p
-
 from qg_common.params import config_from_dict
 from qg_common.peg_task import PegCell, PegHoleGeometry, sample_start
 
-from sim_robot_node.core.nextage_scene import (NextagePegScene, NextageSceneConfig,
-                                               build_hole_block, build_peg)
+from sim_robot_node.core.nextage_scene import (
+    NextagePegScene,
+    NextageSceneConfig,
+    build_hole_block,
+    build_peg,
+)
 
 __all__ = ["PegEnvConfig", "PegEnv", "JointTargetController", "toward_goal", "make_peg_env"]
 
@@ -253,7 +256,7 @@ class PegEnv:
         self._scene.step()
 
 
-def toward_goal(env: "PegEnv") -> np.ndarray:
+def toward_goal(env: PegEnv) -> np.ndarray:
     """A scripted baseline policy: rise above the block, centre over the hole, go straight down.
 
     It reads the true tip position, so it is a reference for what a learner can approach, not

@@ -26,8 +26,7 @@ from typing import Any
 from qg_common.peg_task import PEG_TASK_SECTION, PegCell
 from qg_common.rotations import quaternion_from_matrix
 from qg_common.shaft_task import SHAFT_TASK_SECTION, ShaftTaskGeometry
-from qg_common.task_scene import (BASE, CUBE, CYLINDER, TOOL, TaskFrame, TaskPart, TaskScene,
-                                  tube)
+from qg_common.task_scene import BASE, CUBE, CYLINDER, TOOL, TaskFrame, TaskPart, TaskScene, tube
 
 __all__ = ["shaft_task_scene", "nextage_task_scene"]
 

@@ -18,8 +18,13 @@ import threading
 from collections.abc import Callable
 
 from rclpy.context import Context
-from rclpy.executors import (ConditionReachedException, ExternalShutdownException,
-                             MultiThreadedExecutor, ShutdownException, TimeoutException)
+from rclpy.executors import (
+    ConditionReachedException,
+    ExternalShutdownException,
+    MultiThreadedExecutor,
+    ShutdownException,
+    TimeoutException,
+)
 from rclpy.task import Task
 
 __all__ = ["CallbackThreadPool", "REOFFER_WAIT"]

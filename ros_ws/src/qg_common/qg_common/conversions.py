@@ -20,8 +20,15 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from qg_common.rotations import matrix_from_quaternion, quaternion_from_matrix
 from qg_common.task_scene import TaskScene
-from qg_common.types import (TOOL_FRAME, GroundTruth, JointState, PoseReference,
-                             StartPose, StepResult, WrenchSetpoint)
+from qg_common.types import (
+    TOOL_FRAME,
+    GroundTruth,
+    JointState,
+    PoseReference,
+    StartPose,
+    StepResult,
+    WrenchSetpoint,
+)
 
 __all__ = ["TOOL_FRAME", "time_msg", "time_ns", "joint_state_msg",
            "joint_state_from_msg", "wrench_msg", "wrench_from_msg", "wrench_stamped",

@@ -28,14 +28,26 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                SetParametersResult)
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from qg_common.params import (ConfigError, ParameterSection, config_fields, field_default,
-                              flatten, load_ros_params, package_config, unflatten)
+from qg_common.params import (
+    ConfigError,
+    ParameterSection,
+    config_fields,
+    field_default,
+    flatten,
+    load_ros_params,
+    package_config,
+    unflatten,
+)
 
 __all__ = ["Leaf", "leaves", "declare_parameters", "describe", "package_defaults", "ros_value",
            "shipped_defaults", "unknown_overrides", "on_parameter_change"]

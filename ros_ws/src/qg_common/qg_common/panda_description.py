@@ -11,8 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
-from qg_common.arm_description import (ArmDescription, example_robot_data_arm,
-                                       example_robot_data_urdf)
+from qg_common.arm_description import (
+    ArmDescription,
+    example_robot_data_arm,
+    example_robot_data_urdf,
+)
 
 __all__ = ["panda_arm", "panda_urdf_path", "JOINT_NAMES", "FLANGE", "DTAU_MAX", "Q_READY"]
 
