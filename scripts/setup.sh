@@ -64,6 +64,10 @@ PY_PACKAGES=(ros_ws/src/qg_common ros_ws/src/qg_recording sim_robot_node franka_
              qg_experiments)
 site="$("$PY" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
 printf "$ROOT/%s\n" "${PY_PACKAGES[@]}" > "$site/qg_stack_sources.pth"
+# A plain interpreter of the venv (no ROS environment sourced: a Gymnasium user's) finds the
+# workspace's config files and message definitions where .venv/bin/qgl does (QG_ROS_INSTALL).
+printf 'import os; os.environ.setdefault("QG_ROS_INSTALL", "%s/ros_ws/install")\n' "$ROOT" \
+  > "$site/qg_stack_install.pth"
 meta_hash="$(cd "$ROOT" && cat "${PY_PACKAGES[@]/%//setup.py}" | sha256sum | cut -c1-16)"
 if [[ "$(cat "$STAMPS/egg_info" 2>/dev/null)" != "$meta_hash" ]]; then
   for pkg in "${PY_PACKAGES[@]}"; do

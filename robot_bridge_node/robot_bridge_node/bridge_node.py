@@ -22,25 +22,43 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from qg_common import topics
-from qg_common.conversions import (at_rest_msg, ground_truth_from_msg, joint_state_from_msg,
-                                   pose_stamped, setpoint_from_msg, time_msg, time_ns,
-                                   twist_stamped, wrench_from_msg)
+from qg_common.conversions import (
+    at_rest_msg,
+    ground_truth_from_msg,
+    joint_state_from_msg,
+    pose_stamped,
+    setpoint_from_msg,
+    time_msg,
+    time_ns,
+    twist_stamped,
+    wrench_from_msg,
+)
 from qg_common.node_parameters import declare_parameters, package_defaults
 from qg_common.node_runtime import LoopThread, favour_loop_thread, run_nodes
 from qg_common.types import NO_GROUND_TRUTH, GroundTruth, JointState, StartPose
-from qg_interfaces.msg import AtRest, GroundTruth as GroundTruthMsg
+from qg_interfaces.msg import AtRest
+from qg_interfaces.msg import GroundTruth as GroundTruthMsg
 from qg_interfaces.msg import WrenchSetpoint as WrenchSetpointMsg
 from rclpy.node import Node
 from sensor_msgs.msg import JointState as JointStateMsg
 from std_msgs.msg import Header
 
-from robot_bridge_node.core.hardware_interface import (ROBOT_SECTION, Robot, RobotPlugin,
-                                                       robot_plugin)
+from robot_bridge_node.core.frame_kinematics import base_frame
+from robot_bridge_node.core.hardware_interface import (
+    ROBOT_SECTION,
+    Robot,
+    RobotPlugin,
+    robot_plugin,
+)
 from robot_bridge_node.core.impedance import ToolState
 from robot_bridge_node.core.interface_kinds import interface_kind
-from robot_bridge_node.core.loop_runner import (LoopRunner, ResetCommand, SetpointCommand,
-                                                StepEvent, ThreadMailbox)
-from robot_bridge_node.core.robot_frames import base_frame
+from robot_bridge_node.core.loop_runner import (
+    LoopRunner,
+    ResetCommand,
+    SetpointCommand,
+    StepEvent,
+    ThreadMailbox,
+)
 from robot_bridge_node.core.robot_loop import MAX_STATE_GAP, RobotLoop, StateClock
 
 __all__ = ["BridgeNode", "RosOutlet", "log_at", "RemoteRobot", "LatestWrench",

@@ -57,8 +57,8 @@ def test_every_robots_bag_has_its_description_and_frames_and_the_tool_is_where_f
     from qg_interfaces.msg import EpisodeStatus
     from qg_recording.bag_reader import bag_info
     from robot_bridge_node.core.arm_model import ArmModel
+    from robot_bridge_node.core.frame_kinematics import urdf_root_link
     from robot_bridge_node.core.hardware_interface import robot_plugin
-    from robot_bridge_node.core.robot_frames import urdf_root_link
 
     stack.start(*(("robot_" + r, "robot_bridge_node", "robot",
                    ("--ros-args", "-r", f"__ns:=/{r}", "-p", f"robot:={r}", *SHORT_STEP))

@@ -9,17 +9,23 @@ Seeds: ``reset(seed=s)`` builds the robot afresh, with the arm of seed ``s`` (th
 biases, housing error and noise streams; ``arm_seed`` fixes one instead) and the start poses from
 0 again, so a seeded episode is the same every time. A reset without a seed goes on with the
 robot as it is.
+
+The runner (and with it the learner and torch) is imported when an environment is made, not
+with this module: registering or listing the environments loads none of it.
 """
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import numpy as np
+from qg_learning_node.executor.residual_task import Observation
 
 from qg_experiments.gym_envs.rendering import RobotView
 from qg_experiments.gym_envs.residual_env import ResidualEnv
-from qg_experiments.runner import ARMS, DEFAULT_ROBOT, ESTIMATORS, InsertionRobot, StackSettings
-from qg_learning_node.executor.residual_task import Observation
+
+if TYPE_CHECKING:
+    from qg_experiments.runner import InsertionRobot
 
 __all__ = ["InsertionEnv", "TRAIN_MAX_STEPS"]
 
@@ -38,20 +44,22 @@ class InsertionEnv(ResidualEnv):
     :param estimator: ``ekf`` (as the stack) | ``ground_truth`` (a perfect wrench sensor).
     :param housing_yaw: [rad] the housing's rotation about the vertical (start tilts turn with it).
     :param config_dir: the stack's ``config/``; ``None``: the installed files.
-    :param robot: the robot plugin (``sim_panda``, ``sim_panda_mujoco``, ...).
+    :param robot: the robot plugin (``sim_panda``, ``sim_panda_mujoco``, ...); ``None``: the
+        runner's default (``runner.DEFAULT_ROBOT``).
     :param render_mode: ``rgb_array`` | ``human`` | None (``residual_env``).
     """
 
     def __init__(self, observation: str | None = None, reward: str | None = None,
                  max_steps: int = TRAIN_MAX_STEPS, arm: str = "realistic",
                  arm_seed: int | None = None, estimator: str = "ekf", housing_yaw: float = 0.0,
-                 config_dir: str | None = None, robot: str = DEFAULT_ROBOT,
+                 config_dir: str | None = None, robot: str | None = None,
                  render_mode: str | None = None) -> None:
+        from qg_experiments.runner import ARMS, DEFAULT_ROBOT, ESTIMATORS, StackSettings
         if arm not in ARMS:
             raise ValueError(f"arm must be one of {ARMS}, got {arm!r}")
         if estimator not in ESTIMATORS:
             raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
-        settings = StackSettings.load(config_dir, arm, robot)
+        settings = StackSettings.load(config_dir, arm, robot or DEFAULT_ROBOT)
         if housing_yaw:
             settings = settings.with_cell(housing_yaw=float(housing_yaw))
         task = dataclasses.replace(settings.task,
@@ -65,6 +73,7 @@ class InsertionEnv(ResidualEnv):
         self._build(seed if self.arm_seed is None else self.arm_seed)
 
     def _build(self, arm_seed: int) -> None:
+        from qg_experiments.runner import InsertionRobot
         self.close()
         self.robot = InsertionRobot(self.settings.with_arm_seed(arm_seed), self.estimator)
 

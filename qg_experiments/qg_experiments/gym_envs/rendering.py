@@ -6,10 +6,10 @@ the bore up close, the step's numbers written on it), so ``gymnasium.wrappers.Re
 SB3's ``VecVideoRecorder`` and RL Zoo's ``record_video`` record episodes unchanged. ``human``:
 the same scene in pybullet's own window, which needs a display.
 
-The renderer is the one ``qgl render`` uses (entry-point group
-``qg_learning_node.renderers``), built from the robot's description and its task's scene (the
-frames and parts the robot process publishes), so a video of an environment and one of a
-bag look alike.
+The renderer is the one ``qgl render`` uses (``qg_learning_node.episode_video``: entry-point
+group ``qg_learning_node.renderers``), built from the robot's description and its task's scene
+(the frames and parts the robot process publishes, from ``frame_kinematics``), so a video of an
+environment and one of a bag look alike. Nothing here needs the ROS message definitions.
 """
 from __future__ import annotations
 
@@ -19,10 +19,9 @@ from typing import Any
 
 import gymnasium
 import numpy as np
+from qg_learning_node.episode_video import renderer
+from robot_bridge_node.core.frame_kinematics import FrameKinematics, task_scene
 from robot_bridge_node.core.hardware_interface import robot_plugin
-from robot_bridge_node.core.robot_frames import RobotFrames, task_scene
-
-from qg_learning_node.cli.render import renderer
 
 __all__ = ["RENDER_MODES", "RENDER_FPS", "RobotView", "RenderedRobot", "check_render_mode"]
 
@@ -51,7 +50,7 @@ class RobotView:
                  width: int = 448, height: int = 336) -> None:
         check_render_mode(render_mode)
         description = robot_plugin(robot).describe(params)
-        frames = RobotFrames(description)
+        frames = FrameKinematics(description)
         scene = task_scene(robot, params)
         static = [(t.parent, t.child, t.translation, t.rotation)
                   for t in frames.static_transforms(scene)]

@@ -131,16 +131,22 @@ def check_section(section: ParameterSection, values: Mapping[str, Any],
 
 
 def package_config(package: str, name: str) -> Path:
-    """``share/<package>/config/<name>`` of an installed package (found through the ament index).
+    """``share/<package>/config/<name>`` of an installed package: found through the ament index
+    (a sourced shell), else in the colcon workspace ``$QG_ROS_INSTALL`` names (which the venv's
+    interpreter sets: a plain Python, a Gymnasium user's, sources nothing).
 
-    :raises ConfigError: if the package is not on ``AMENT_PREFIX_PATH`` or lacks the file.
+    :raises ConfigError: if neither knows the package, or it lacks the file.
     """
     try:
         path = Path(get_package_share_directory(package)) / "config" / name
-    except (PackageNotFoundError, LookupError, EnvironmentError) as exc:
-        raise ConfigError(f"package {package!r} is not installed where the ament index looks "
-                          f"({exc}); run scripts/setup.sh and source ros_ws/install/setup.bash "
-                          "(qgl and scripts/*.sh do that themselves)") from None
+    except (OSError, PackageNotFoundError, LookupError) as exc:
+        share = Path(os.environ.get("QG_ROS_INSTALL", "")) / package / "share" / package
+        if not os.environ.get("QG_ROS_INSTALL") or not share.is_dir():
+            raise ConfigError(f"package {package!r} is not installed where the ament index "
+                              f"looks ({exc}) nor in $QG_ROS_INSTALL; run scripts/setup.sh and "
+                              "source ros_ws/install/setup.bash (qgl and scripts/*.sh do that "
+                              "themselves)") from None
+        path = share / "config" / name
     if not path.is_file():
         raise ConfigError(f"config file not found: {path}")
     return path
