@@ -157,24 +157,169 @@ def test_package_xml_declares_what_the_sources_import_and_learning_needs_no_robo
     assert not {d for d in learning if "pinocchio" in d or "robot_bridge" in d}
 
 
-#: Every Python source folder of the project (ros_ws/src/qg_learning_node etc. are symlinks).
-SOURCE_DIRS = ("qg_learning_node", "robot_bridge_node", "sim_robot_node", "franka_robot_node",
-               "franka_sim_node",
-               "qg_experiments",
-               "ros_ws/src/qg_common", "ros_ws/src/qg_recording", "benchmarks", "tests")
+def project_modules() -> dict[str, Path]:
+    """Every module of the project's packages by dotted name (a package by its ``__init__``)."""
+    modules = {}
+    for package in PACKAGE_DIRS:
+        for path in sources(package):
+            parts = path.relative_to(_source_root(path)).with_suffix("").parts
+            modules[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    return modules
 
 
-def test_pyflakes_finds_no_undefined_name_or_dead_import_anywhere():
-    """A misspelt or undefined name in a rarely taken branch (a loop thread's error path, say)
-    only shows when that branch runs; in a node it then kills the process. pyflakes finds it by
-    reading the source."""
-    import io
+def import_graph(modules: dict[str, Path]) -> dict[str, set[str]]:
+    """Which of ``modules`` each of them imports, at any depth (lazy imports, ``TYPE_CHECKING``
+    blocks and constant ``import_module`` names count): ``from a import b`` is an arrow to the
+    module ``a.b`` where there is one, else to ``a``."""
+    graph = {}
+    for name, path in modules.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        targets = set()
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                targets.update(alias.name for alias in node.names)
+            elif isinstance(node, ast.ImportFrom):
+                base = package.rsplit(".", node.level - 1)[0] if node.level else ""
+                module = ".".join(p for p in (base, node.module or "") if p)
+                targets.update(f"{module}.{a.name}" if f"{module}.{a.name}" in modules else module
+                               for a in node.names)
+            elif (isinstance(node, ast.Call) and node.args
+                  and isinstance(node.args[0], ast.Constant)
+                  and getattr(node.func, "attr", getattr(node.func, "id", "")) == "import_module"):
+                targets.add(str(node.args[0].value))
+        graph[name] = {t for t in targets if t in modules and t != name}
+    return graph
 
-    from pyflakes.api import checkRecursive
-    from pyflakes.reporter import Reporter
-    out = io.StringIO()
-    warnings = checkRecursive([str(ROOT / d) for d in SOURCE_DIRS], Reporter(out, out))
-    assert warnings == 0, out.getvalue()
+
+def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan's algorithm, without
+    recursion): each is a set of modules that import one another in a cycle."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    cycles = []
+    for root in graph:
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph[child]))))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                component = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    component.append(member)
+                    if member == node:
+                        break
+                if len(component) > 1:
+                    cycles.append(sorted(component))
+    return cycles
+
+
+def test_the_cycle_finder_finds_a_cycle_and_only_cycles():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a", "d"}, "d": set(), "e": {"d", "f"}, "f": {"e"},
+             "g": {"a"}}
+    assert sorted(import_cycles(graph)) == [["a", "b", "c"], ["e", "f"]]
+    assert import_cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_no_module_of_the_project_imports_itself_through_others():
+    """No import cycles among the project's modules (the shaft scene and its worlds, the two
+    run backends had one each): a leaf module holds what both sides of a cycle needed."""
+    modules = project_modules()
+    assert len(modules) >= 150, len(modules)
+    graph = import_graph(modules)
+    # the scan sees the arrows that made the old cycles
+    assert "sim_robot_node.core.shaft_scene_config" in graph["sim_robot_node.core.shaft_world"]
+    assert "qg_experiments.run_worker" in graph["qg_experiments.ray_backend"]
+    assert import_cycles(graph) == []
+
+
+#: The Gymnasium environments that need nothing but this Python (``gym_envs.ENV_IDS``); the
+#: one that drives a robot process over ROS 2, ``ros_insertion``, is the exception.
+GYM_IN_PROCESS = ["qg_experiments.gym_envs", "qg_experiments.gym_envs.insertion",
+                  "qg_experiments.gym_envs.peg", "qg_experiments.gym_envs.residual_env",
+                  "qg_experiments.gym_envs.rendering",
+                  "qg_experiments.gym_envs.sparse_mountain_car"]
+
+
+def test_the_gym_package_imports_no_rclpy_and_no_messages():
+    """What the in-process environments import, followed through every module of the project
+    they reach (lazily too), never reaches rclpy or a message package: a Gymnasium user needs
+    no ROS environment."""
+    modules = project_modules()
+    graph = import_graph(modules)
+    reached, todo = set(), list(GYM_IN_PROCESS)
+    while todo:
+        name = todo.pop()
+        if name not in reached:
+            reached.add(name)
+            todo.extend(graph[name])
+    assert "qg_experiments.runner" in reached and "robot_bridge_node.core.robot_loop" in reached
+    outside = {n.split(".")[0] for m in reached for n in imported_modules(modules[m])}
+    assert not outside & {"rclpy", "qg_interfaces", "rosidl_runtime_py", "rosidl_adapter"}, \
+        sorted(m for m in reached if {n.split(".")[0] for n in imported_modules(modules[m])}
+               & {"rclpy", "qg_interfaces", "rosidl_runtime_py", "rosidl_adapter"})
+    # the scan would see it: the ROS environment's module imports messages and rclpy's client
+    assert "qg_interfaces.msg" in imported_modules(modules["qg_experiments.gym_envs.ros_insertion"])
+
+
+#: In a fresh interpreter: import the Gym package (nothing heavy may load), then make the shaft
+#: insertion, check it with Gymnasium's checker and render one frame offscreen.
+_GYM_IN_A_PLAIN_PYTHON = r"""
+import sys
+HEAVY = ("rclpy", "torch", "rosidl_adapter", "qg_interfaces", "pybullet", "mujoco")
+import qg_experiments.gym_envs
+print("imported", *[m for m in HEAVY if m in sys.modules])
+import gymnasium
+from gymnasium.utils.env_checker import check_env
+env = gymnasium.make("qg_experiments:QGInsertion-v0", render_mode="rgb_array")
+check_env(env.unwrapped, skip_render_check=True)
+env.reset(seed=0)
+frame = env.render()
+print("frame", *frame.shape, frame.dtype, len({tuple(p) for p in frame.reshape(-1, 3)[::7]}))
+env.close()
+print("made", *[m for m in HEAVY if m in sys.modules])
+"""
+
+
+@pytest.mark.ros      # full tier: a fresh interpreter loads torch, both engines and the robot
+@pytest.mark.slow     # 12-27 s on the loaded cores, most of it imports and building the robot
+def test_the_gym_environments_work_in_a_plain_python_without_ros():
+    """``gymnasium.make("qg_experiments:QGInsertion-v0")``, Gymnasium's checker and an
+    ``rgb_array`` frame in the venv's Python with a bare environment (no ROS environment
+    sourced, no variable of the stack set), as a Gymnasium user runs it."""
+    plain = {"PATH": "/usr/bin:/bin", "HOME": str(Path.home())}
+    out = subprocess.run(["env", "-i", *(f"{k}={v}" for k, v in plain.items()), sys.executable,
+                          "-c", _GYM_IN_A_PLAIN_PYTHON], capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr[-3000:]
+    lines = {line.split()[0]: line.split()[1:] for line in out.stdout.splitlines()
+             if line.split() and line.split()[0] in ("imported", "frame", "made")}
+    assert lines["imported"] == []               # registering loads none of them
+    height, width, channels, dtype, colours = lines["frame"]
+    assert (int(height), int(width), int(channels), dtype) == (336, 448, 3, "uint8")
+    assert int(colours) > 20                     # a picture, not a blank frame
+    # making the environment loads the simulator and the runner's learner, never ROS
+    assert not {"rclpy", "rosidl_adapter", "qg_interfaces"} & set(lines["made"]), lines["made"]
 
 
 def test_executables_are_where_ros2_run_looks():
