@@ -148,3 +148,17 @@ def test_export_policy_writes_a_checkpoints_actor(stack, tmp_path):
     assert "the learner's actor maps 2-D states to 2-D actions; the residual task with " \
            "observation 'tilt' has 6-D states" in wrong.stderr, wrong.stderr
     assert not (tmp_path / "tilt.npz").exists()
+    # A run whose executor logged another state: its checkpoint is exported for that state.
+    tilt_run = tmp_path / "tilt_run"
+    (tilt_run / "logs").mkdir(parents=True)
+    LearnerCore(LearnerConfig.from_dict({"ddpg": {"actor_hidden": [8]}}), 6, 2).save(
+        tilt_run / "learner.pt")
+    (tilt_run / "logs" / "executor.log").write_text(
+        "[INFO] [1795888735.798370886] [executor]: task residual, observation tilt: 6-D states, "
+        "2-D actions\n")
+    done = _qgl(stack.env, "export-policy", "--run", str(tilt_run), "-o", str(tmp_path / "t"))
+    assert done.returncode == 0, done.stderr
+    spec = load_policy(tmp_path / "t.npz").spec
+    assert (spec.observation, spec.state_dim) == ("tilt", 6)
+    assert set(spec.settings) == {"base_force", "max_residual_torque", "force_range",
+                                  "torque_range", "tilt_range"}
