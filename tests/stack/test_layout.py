@@ -274,6 +274,12 @@ def test_the_gym_package_imports_no_rclpy_and_no_messages():
             reached.add(name)
             todo.extend(graph[name])
     assert "qg_experiments.runner" in reached and "robot_bridge_node.core.robot_loop" in reached
+    # the frames' kinematics, not their tf messages; the renderer's lookup, not the CLI; no
+    # bag code, which parses the message definitions
+    assert "robot_bridge_node.core.frame_kinematics" in reached
+    assert not [m for m in reached if m.startswith(("qg_recording", "qg_learning_node.cli",
+                                                    "robot_bridge_node.core.robot_frames",
+                                                    "robot_bridge_node.core.tick_messages"))]
     outside = {n.split(".")[0] for m in reached for n in imported_modules(modules[m])}
     assert not outside & {"rclpy", "qg_interfaces", "rosidl_runtime_py", "rosidl_adapter"}, \
         sorted(m for m in reached if {n.split(".")[0] for n in imported_modules(modules[m])}
