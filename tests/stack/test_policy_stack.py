@@ -61,6 +61,17 @@ def test_an_executor_refuses_a_file_that_does_not_fit_at_start(stack, tmp_path):
         assert run.returncode == 2, (reason, run.stdout, run.stderr)
         assert reason in run.stderr, (reason, run.stderr)
         assert "Traceback" not in run.stderr, run.stderr
+    # Through qgl up: the stack stops at once, with the executor's reason and its code.
+    config = tmp_path / "stack.yaml"
+    config.write_text("processes:\n"
+                      "  - {name: executor, package: qg_learning_node, executable: executor,\n"
+                      "     respawn: true}\n"
+                      "  - {name: learner, package: qg_learning_node, executable: learner}\n")
+    up = _qgl(stack.env, "up", "--config", str(config), "--policy", str(tilt))
+    assert up.returncode == 2, up.stdout + up.stderr
+    assert "state size: the file's actor takes 6-D states" in up.stdout, up.stdout
+    assert "[qgl] started executor" in up.stdout and "learner" not in up.stdout.split(
+        "[qgl] started")[1].splitlines()[0], up.stdout
     # The file that fits: the same executor starts (and stops on SIGINT with code 0).
     fits = subprocess.Popen([*executor, "--ros-args", "-p", f"policy.file:={tilt_only}"],
                             env=stack.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
