@@ -307,12 +307,11 @@ print("made", *[m for m in HEAVY if m in sys.modules])
 """
 
 
-@pytest.mark.ros      # full tier: a fresh interpreter loads torch, both engines and the robot
-@pytest.mark.slow     # 12-27 s on the loaded cores, most of it imports and building the robot
 def test_the_gym_environments_work_in_a_plain_python_without_ros():
     """``gymnasium.make("qg_experiments:QGInsertion-v0")``, Gymnasium's checker and an
     ``rgb_array`` frame in the venv's Python with a bare environment (no ROS environment
-    sourced, no variable of the stack set), as a Gymnasium user runs it."""
+    sourced, no variable of the stack set), as a Gymnasium user runs it. (3.4-4.7 s on the
+    two cores, 26 s while others load them: most of it torch, both engines and the robot.)"""
     plain = {"PATH": "/usr/bin:/bin", "HOME": str(Path.home())}
     out = subprocess.run(["env", "-i", *(f"{k}={v}" for k, v in plain.items()), sys.executable,
                           "-c", _GYM_IN_A_PLAIN_PYTHON], capture_output=True, text=True,
