@@ -19,9 +19,10 @@ FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "stalled_test_episo
 CAP = 100
 
 
-def test_the_executor_recovers_a_stalled_test_episode_and_says_so(stack):
+def test_the_executor_recovers_a_stalled_test_episode_and_says_so(stack, capsys):
     from qg_common.topics import LATCHED
     from qg_interfaces.msg import ActorParameters
+    from qg_learning_node.cli.episode_wait import wait_for_episode
     from qg_learning_node.conversions import actor_to_msg
     from qg_recording.player import message_class
     from rclpy.serialization import deserialize_message
@@ -46,6 +47,9 @@ def test_the_executor_recovers_a_stalled_test_episode_and_says_so(stack):
         assert response.success, response.message + stack.logs()
         final = episodes.final(response.episode_id, timeout=600.0)
         mine = [s for s in episodes.statuses if s.episode_id == response.episode_id]
+        capsys.readouterr()
+        assert wait_for_episode(cli, response.episode_id, 10.0) == 0   # `qgl episode --wait`
+        printed = capsys.readouterr().out
     # The recorded actor ran (not the zero residual) and inserted after at least one recovery,
     # each announced while running.
     assert final.state == "done" and not final.degraded and final.actor_version == 7, \
@@ -56,6 +60,7 @@ def test_the_executor_recovers_a_stalled_test_episode_and_says_so(stack):
     assert any(m.startswith(f"stall recovery {final.recoveries} at step") for m in announced), \
         announced
     assert [s.recoveries for s in mine] == sorted(s.recoveries for s in mine)   # it only counts up
+    assert f"recoveries={final.recoveries} " in printed, printed
 
     bag = wait_for_bag(Path(stack.env["QG_RUNS_DIR"]) / "episodes", response.episode_id)
     with AnyReader([bag]) as reader:

@@ -21,10 +21,12 @@ def wait_for_episode(cli: CliNode, episode_id: str, timeout: float, namespace: s
 
     def on_status(msg: EpisodeStatus) -> None:
         if msg.episode_id == episode_id:
-            if not last or (msg.state, msg.step // 50) != (last[-1].state, last[-1].step // 50):
+            if not last or ((msg.state, msg.step // 50, msg.recoveries)
+                            != (last[-1].state, last[-1].step // 50, last[-1].recoveries)):
+                recovered = f"recoveries={msg.recoveries} " if msg.recoveries else ""
                 print(f"  {msg.state:<9} step {msg.step:>4}/{msg.max_steps} "
                       f"return {msg.episode_return:8.2f} success={msg.success} "
-                      f"degraded={msg.degraded} {msg.message}", flush=True)
+                      f"degraded={msg.degraded} {recovered}{msg.message}", flush=True)
             last.append(msg)
 
     sub = cli.node.create_subscription(
