@@ -35,7 +35,7 @@ def grid_specs(budget: GridBudget, estimator: str = "ekf", config_dir: str | Non
                     test_episodes=budget.test_episodes, train_max_steps=budget.train_max_steps,
                     test_max_steps=budget.test_max_steps, cycle_steps=budget.cycle_steps,
                     estimator=estimator, config_dir=config_dir, observation=budget.observation,
-                    arm=arm, experiment=experiment)
+                    arm=arm, experiment=experiment, stall_recovery=budget.stall_recovery)
             for lr, iterations in budget.cells for algorithm in budget.algorithms
             for seed in budget.seeds]
 

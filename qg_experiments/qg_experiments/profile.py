@@ -92,6 +92,8 @@ class GridBudget:
 
     :param observation: the state of every run (``residual_task.OBSERVATIONS``); ``None`` keeps
         ``executor.yaml``'s.
+    :param stall_recovery: every run also tests its poses with stall recovery, counted apart
+        (``RunSpec.stall_recovery``; the runs' names end in ``_recovery``).
     """
     cells: tuple[tuple[float, int], ...]
     algorithms: tuple[str, ...] = COMPARED
@@ -102,6 +104,7 @@ class GridBudget:
     test_max_steps: int = 200
     cycle_steps: int = 20
     observation: str | None = None
+    stall_recovery: bool = False
 
     def __post_init__(self) -> None:
         if self.observation is not None:

@@ -17,6 +17,7 @@ from qg_learning_node.executor.stall_recovery import StallRecovery
 from qg_learning_node.learner.actor_mlp import ActorMLP
 
 from qg_experiments import grid
+from qg_experiments.profile import GridBudget
 from qg_experiments.runner import (InsertionRobot, RunSpec, StackSettings, recovery_seed,
                                    run_episode, run_training, stall_recovery_config)
 from qg_experiments.stalls import run_recoveries, stall_counts
@@ -53,6 +54,17 @@ def test_recovery_turns_a_stalled_test_pose_into_an_inserted_one_counted() -> No
         recovered["recovered_at"])
     # The first recovery starts once a whole window of no progress has passed.
     assert recovered["recovered_at"][0] >= config.window - 1
+
+
+def test_a_profile_grid_can_ask_every_run_for_recovery() -> None:
+    cells = ((1e-2, 50), (1e-3, 10))
+    plain = grid.grid_specs(GridBudget(cells=cells, seeds=(100, 101)))
+    recovered = grid.grid_specs(GridBudget(cells=cells, seeds=(100, 101), stall_recovery=True))
+    assert not any(s.stall_recovery for s in plain)
+    assert all(s.stall_recovery and s.name.endswith(f"_recovery_s{s.seed}") for s in recovered)
+    # The same runs otherwise: saved apart by name, never mixed into the grid without it.
+    assert [dataclasses.replace(s, stall_recovery=False) for s in recovered] == plain
+    assert not {s.name for s in plain} & {s.name for s in recovered}
 
 
 @pytest.mark.slow
