@@ -6,7 +6,8 @@ A run "trained" when at least ``--trained`` of its last 8 training episodes inse
 a test episode of such a run that did not insert (it ran to the test cap). Printed per
 experiment (the variants setting by setting) and algorithm: runs, runs trained, runs with a
 stall, stalled test episodes of the trained runs, and how many stalled poses the same run had
-inserted in training.
+inserted in training; where runs were saved with stall recovery (names ending in
+``_recovery``), their recovery episodes apart: inserted and recoveries.
 
 Usage: python benchmarks/stall_counts.py [--data docs/data/thesis] [--trained 6]
 The last line is one JSON object.
@@ -37,7 +38,8 @@ def runs_of(rows: list[dict[str, str]]) -> list[tuple[str, list[dict[str, Any]]]
     runs: dict[str, list[dict[str, Any]]] = collections.defaultdict(list)
     for row in rows:
         runs[row["run"]].append({"mode": row["mode"], "pose": int(row["pose"]),
-                                 "success": row["success"] == "True"})
+                                 "success": row["success"] == "True",
+                                 "recoveries": int(row.get("recoveries") or 0)})
     return [(name.split("_")[0], episodes) for name, episodes in runs.items()]
 
 

@@ -2,7 +2,11 @@
 stand in separate columns, and recovery episodes never enter the test numbers."""
 from __future__ import annotations
 
+import csv
+from pathlib import Path
+
 from qg_experiments.report.comparison import graph_section
+from qg_experiments.report.tables import episodes_csv
 
 
 def _run(algorithm: str, seed: int, recovery: bool) -> dict:
@@ -41,3 +45,14 @@ def test_recovery_has_its_own_column_and_leaves_the_test_numbers_alone() -> None
     # Every other number of the row is the same with recovery episodes saved or not.
     assert [c for i, c in enumerate(without) if i != column] == \
         [c for i, c in enumerate(with_recovery) if i != column]
+
+
+def test_the_episodes_csv_keeps_the_recovery_episodes_counts(tmp_path: Path) -> None:
+    path = tmp_path / "grid_episodes.csv"
+    episodes_csv(path, [_run("qgddpg", 0, True), _run("ddpg", 0, False)])
+    with path.open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 24 + 16
+    recovery = [r for r in rows if r["mode"] == "recovery"]
+    assert [r["recoveries"] for r in recovery] == ["2", "2"] + ["0"] * 6
+    assert all(r["recoveries"] == "" for r in rows if r["mode"] != "recovery")

@@ -16,13 +16,16 @@ __all__ = ["write_csv", "episodes_csv", "write_bar"]
 
 
 def write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
-    """``rows`` as CSV, their list-valued columns left out. Without rows there is no file, and
-    one left by earlier runs goes: the data beside the page is the page's, never an older step's."""
+    """``rows`` as CSV, their list-valued columns left out; the columns are every row's keys in
+    order of appearance (a key only later rows have, as a recovery episode's ``recoveries``,
+    is kept; other rows leave it empty). Without rows there is no file, and one left by earlier
+    runs goes: the data beside the page is the page's, never an older step's."""
     if not rows:
         path.unlink(missing_ok=True)
         return
     path.parent.mkdir(parents=True, exist_ok=True)
-    keys = [k for k in rows[0] if not isinstance(rows[0][k], (list, np.ndarray))]
+    keys = list(dict.fromkeys(k for row in rows for k, v in row.items()
+                              if not isinstance(v, (list, np.ndarray))))
     with path.open("w", newline="") as f:
         writer = csv.DictWriter(f, keys, extrasaction="ignore")
         writer.writeheader()
