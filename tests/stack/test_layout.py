@@ -555,6 +555,21 @@ def test_config_files_are_installed_to_share_and_found_through_the_ament_index(m
         == (ROOT / "config" / "experiments.yaml").resolve()
 
 
+def test_config_files_are_found_in_the_workspace_without_the_ament_index(monkeypatch, tmp_path):
+    """A plain Python (no sourced shell, no ament index) finds a package's config file in the
+    workspace ``$QG_ROS_INSTALL`` names, which the venv's interpreter sets; with neither, the
+    error says what to do."""
+    from qg_common.params import ConfigError, package_config
+    monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
+    monkeypatch.setenv("QG_ROS_INSTALL", str(ROOT / "ros_ws" / "install"))
+    path = package_config("sim_robot_node", "panda_scene.yaml")
+    assert path.parent.parts[-3:] == ("share", "sim_robot_node", "config")
+    assert path.resolve() == (ROOT / "config" / "panda_scene.yaml").resolve()
+    monkeypatch.setenv("QG_ROS_INSTALL", str(tmp_path / "nowhere"))
+    with pytest.raises(ConfigError, match="installed where the ament index looks.*QG_ROS_INSTALL"):
+        package_config("sim_robot_node", "panda_scene.yaml")
+
+
 def test_runs_go_to_qg_runs_dir_or_the_current_directory(monkeypatch, tmp_path):
     from qg_common.params import runs_dir
     monkeypatch.setenv("QG_RUNS_DIR", str(tmp_path / "elsewhere"))
