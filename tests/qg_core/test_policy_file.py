@@ -209,3 +209,23 @@ def test_a_relu_actor_runs_as_trained(tmp_path: Path) -> None:
     with pytest.raises(PolicyFileError, match="the actor maps 2-D states to 2-D actions, its "
                        "spec says 3 -> 2"):
         save_policy(tmp_path / "bad.npz", policy, spec)
+
+
+def test_a_runs_task_is_read_from_its_executors_logs(tmp_path: Path) -> None:
+    """``export-policy --run`` takes the state the run's executor logged at start, from the
+    launcher's logs or the ROS logs; two different tasks in one run are refused, not guessed."""
+    from qg_learning_node.cli.policy import logged_task
+    line = "[INFO] [1795888735.798370886] [executor]: task residual, observation {}: {}-D " \
+           "states, 2-D actions\n"
+    assert logged_task(tmp_path) is None
+    (tmp_path / "ros_log").mkdir()
+    (tmp_path / "ros_log" / "python3_1_2.log").write_text(
+        "[INFO] [1.0] [learner]: learning\n" + line.format("tilt_force", 4))
+    assert logged_task(tmp_path) == {"kind": "residual", "observation": "tilt_force"}
+    (tmp_path / "logs").mkdir()
+    (tmp_path / "logs" / "executor.log").write_text(line.format("tilt_force", 4))
+    assert logged_task(tmp_path) == {"kind": "residual", "observation": "tilt_force"}
+    (tmp_path / "ros_log" / "python3_3_4.log").write_text(line.format("tilt_only", 2))
+    with pytest.raises(ValueError, match=r"ran several tasks \(residual tilt_force, residual "
+                       r"tilt_only\): name the one to export with --set"):
+        logged_task(tmp_path)

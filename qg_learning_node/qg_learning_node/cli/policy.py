@@ -64,14 +64,26 @@ def executor_task(files: list[Path] | None = None,
 
 
 def logged_task(run_dir: Path) -> dict[str, str] | None:
-    """What the executor of the run in ``run_dir`` logged of its task (``logs/executor*.log``,
-    as ``qgl demo`` and ``qgl up --log-dir`` write them): ``{"kind", "observation"}``, or
-    ``None`` if no log says."""
-    for log in sorted((run_dir / "logs").glob("executor*.log")):
-        match = _TASK_LINE.search(log.read_text(errors="replace"))
-        if match:
-            return {"kind": match.group(1), "observation": match.group(2)}
-    return None
+    """What the executor of the run in ``run_dir`` logged of its task: ``{"kind",
+    "observation"}``, or ``None`` if no log says. Read from ``logs/executor*.log`` (``qgl demo``,
+    ``qgl up --log-dir``) and the ROS logs (``ros_log/*.log``, every ``qgl`` run's).
+
+    :raises ValueError: if the run's executors logged different tasks (name one with ``--set``).
+    """
+    files = [*sorted((run_dir / "logs").glob("executor*.log")),
+             *sorted((run_dir / "ros_log").glob("*.log"))]
+    found = set()
+    for log in files:
+        found.update((m.group(1), m.group(2))
+                     for m in _TASK_LINE.finditer(log.read_text(errors="replace")))
+    if len(found) > 1:
+        raise ValueError(f"the executors of {run_dir} ran several tasks "
+                         f"({', '.join(f'{k} {o}' for k, o in sorted(found))}): name the one "
+                         "to export with --set task.kind=... / task.observation=...")
+    if not found:
+        return None
+    kind, observation = found.pop()
+    return {"kind": kind, "observation": observation}
 
 
 def run_checkpoint(run_dir: Path) -> Path:
@@ -123,21 +135,22 @@ def _setting(text: str) -> tuple[str, Any]:
 def _cmd_export(args: argparse.Namespace) -> int:
     from qg_learning_node.learner.learner_core import LearnerCore
     overrides = dict(args.set)
-    if args.run:
-        run_dir = Path(args.run)
-        checkpoint = run_checkpoint(run_dir)
-        logged = logged_task(run_dir)
-        if logged is not None:      # the run's own task, unless the command line says otherwise
-            overrides.setdefault("task.kind", logged["kind"])
-            if logged["kind"] == "residual":
-                overrides.setdefault("task.observation", logged["observation"])
-        source = str(run_dir.resolve())
-    else:
-        checkpoint = Path(args.checkpoint)
-        if not checkpoint.is_file():
-            raise FileNotFoundError(f"checkpoint not found: {checkpoint}")
-        source = str(checkpoint.resolve())
     try:
+        if args.run:
+            run_dir = Path(args.run)
+            checkpoint = run_checkpoint(run_dir)
+            named = {"task.kind", "task.observation"} & set(overrides)
+            logged = None if named else logged_task(run_dir)
+            if logged is not None:  # the run's own task, unless the command line names one
+                overrides["task.kind"] = logged["kind"]
+                if logged["kind"] == "residual":
+                    overrides["task.observation"] = logged["observation"]
+            source = str(run_dir.resolve())
+        else:
+            checkpoint = Path(args.checkpoint)
+            if not checkpoint.is_file():
+                raise FileNotFoundError(f"checkpoint not found: {checkpoint}")
+            source = str(checkpoint.resolve())
         kind, task = executor_task([Path(f) for f in args.executor_config], overrides)
         core = LearnerCore.load(checkpoint)
         path = export_core(core, kind, task, args.robot, Path(args.output), source)
