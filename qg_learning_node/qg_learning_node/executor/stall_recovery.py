@@ -3,10 +3,11 @@
 Why: without exploration noise the trained actor can hold the shaft at its own fixed point
 (docs/learning.md section 15): the arm comes to rest at the same state step after step and the
 actor repeats the same action until the step cap, while the same actor with the training noise
-inserts. :class:`StallRecovery` watches an episode's (state, action) pairs; when over ``window``
-steps both repeat themselves within a tolerance, with a period of one step (a fixed point) or
-a few (a limit cycle: the actor's action tips the shaft one way and back), it perturbs the next ``steps`` actions with seeded
-noise (the training noise of ``noise.py``, or a dither) and counts one recovery.
+inserts. :class:`StallRecovery` watches an episode's (state, action) pairs, one per RL step,
+each step ending with the arm at rest. When over ``window`` steps both repeat themselves within
+a tolerance, with a period of one step (a fixed point) or a few (a limit cycle: the action tips
+the shaft one way and back), it perturbs the next ``steps`` actions with seeded noise (the
+training noise of ``noise.py``, or a dither) and counts one recovery.
 
 Off by default: the thesis protocol tests the deterministic actor, and its numbers never
 include a recovery (the runner runs recovered test episodes apart, mode ``recovery``). Pure
