@@ -47,3 +47,14 @@ def test_ruff_flags_each_kind_of_finding(tmp_path: Path):
     assert result.returncode == 1
     codes = {line.split()[1] for line in result.stdout.splitlines() if str(module) in line}
     assert {"F401", "F821", "I001", "UP006", "UP035"} <= codes, result.stdout
+
+
+def test_no_file_is_exempt_from_pyflakes():
+    """Files may wait for the mechanical fixes (import order, spellings), never for a pyflakes
+    finding: an undefined name or a dead import is a bug, not a style."""
+    import tomllib
+    config = tomllib.loads((ROOT / "ruff.toml").read_text())
+    exempt = config["lint"].get("per-file-ignores", {})
+    assert {path: codes for path, codes in exempt.items()
+            if any(code.startswith("F") for code in codes)} == {}
+    assert set(config["lint"]["select"]) == {"F", "I", "UP"}
