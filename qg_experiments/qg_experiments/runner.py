@@ -405,6 +405,15 @@ class RunSpec:
         extra += "_recovery" if self.stall_recovery else ""
         return f"{self.algorithm}_lr{self.critic_lr:g}_it{self.iterations}{extra}_s{self.seed}"
 
+    @property
+    def task_settings(self) -> dict[str, Any]:
+        """Numbers the run reads beside its fields and ``config_digest``'s: with
+        ``stall_recovery``, ``executor.yaml``'s ``stall_recovery`` section. Saved with the run;
+        a saved run is reused only under the same (``tasks``)."""
+        if not self.stall_recovery:
+            return {}
+        return {"stall_recovery": dataclasses.asdict(stall_recovery_config(self.config_dir))}
+
     def learner_config(self, base: LearnerConfig) -> LearnerConfig:
         config = algorithm_config(base, self.algorithm, ACTION_DIM)
         ddpg = dataclasses.replace(config.ddpg, critic_lr=self.critic_lr, actor_lr=None,
@@ -526,7 +535,8 @@ def run_training(spec: RunSpec) -> dict[str, Any]:
     envs = (env,) if test_env is env else (env, test_env)
     return {"experiment": spec.experiment, "name": spec.name, "spec": dataclasses.asdict(spec),
             "config_digest": config_digest(spec.config_dir), **settings.step_record,
-            **({} if recovery is None else {"stall_recovery": dataclasses.asdict(recovery)}),
+            **({} if recovery is None else {"stall_recovery": dataclasses.asdict(recovery),
+                                            "task_settings": spec.task_settings}),
             "episodes": episodes,
             "evaluations": evaluations, "cycles": cycles,
             "rl_steps": sum(e.steps for e in envs),

@@ -7,6 +7,8 @@ learning on seed 0), run on the real in-process robot of seed 0 (sim, bridge loo
 from __future__ import annotations
 
 import dataclasses
+import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -18,9 +20,11 @@ from qg_learning_node.learner.actor_mlp import ActorMLP
 
 from qg_experiments import grid
 from qg_experiments.profile import GridBudget
-from qg_experiments.runner import (InsertionRobot, RunSpec, StackSettings, recovery_seed,
-                                   run_episode, run_training, stall_recovery_config)
+from qg_experiments.runner import (InsertionRobot, RunSpec, StackSettings, config_digest,
+                                   recovery_seed, run_episode, run_training,
+                                   stall_recovery_config)
 from qg_experiments.stalls import run_recoveries, stall_counts
+from qg_experiments.tasks import result_path, unsaved
 
 FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "stalled_test_episodes_seed0.npz"
 POSE = 1          # a fixed point in the recording
@@ -84,6 +88,9 @@ def test_a_run_with_recovery_counts_it_apart_from_its_test_episodes() -> None:
     assert all("recoveries" in e for e in recovery)
     assert with_recovery["stall_recovery"]["enabled"] is True
     assert "stall_recovery" not in plain
+    # The recovery's numbers are the run's identity too: saved, and compared when resuming.
+    assert with_recovery["task_settings"] == {"stall_recovery": with_recovery["stall_recovery"]}
+    assert spec.task_settings == {} and "task_settings" not in plain
     # Counted apart: a run that trained shows its recovery episodes beside its stalls.
     trained = [{"mode": "train", "pose": p, "success": True} for p in range(8)]
     episodes = trained + with_recovery["episodes"][1:]
@@ -92,3 +99,21 @@ def test_a_run_with_recovery_counts_it_apart_from_its_test_episodes() -> None:
         "recoveries": sum(e["recoveries"] for e in recovery)}
     counts = stall_counts([("qgddpg", episodes)])["qgddpg"]
     assert counts["trained_test_episodes"] == 2 and counts["recovery_episodes"] == 2
+
+
+def test_a_saved_run_with_recovery_is_reused_only_under_the_same_recovery(tmp_path: Path) -> None:
+    config = tmp_path / "config"
+    shutil.copytree(Path(__file__).resolve().parents[2] / "config", config)
+    spec = RunSpec(algorithm="qgddpg", critic_lr=1e-2, iterations=2, seed=4,
+                   config_dir=str(config), stall_recovery=True)
+    path = result_path(tmp_path / "runs", spec)
+    path.parent.mkdir(parents=True)
+    path.write_text(json.dumps({"spec": dataclasses.asdict(spec),
+                                "config_digest": config_digest(str(config)),
+                                "task_settings": spec.task_settings}))
+    assert unsaved([spec], tmp_path / "runs") == []
+    executor = config / "executor.yaml"
+    executor.write_text(executor.read_text().replace("      steps: 5 ", "      steps: 8 "))
+    assert spec.task_settings["stall_recovery"]["steps"] == 8
+    assert config_digest(str(config)) == json.loads(path.read_text())["config_digest"]
+    assert unsaved([spec], tmp_path / "runs") == [spec]     # the recovery changed: run again
