@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from qg_common.types import N_START_POSES
 from qg_learning_node.executor.episode import Episode
-from qg_learning_node.executor.noise import KINDS, ActionNoise
+from qg_learning_node.executor.noise import KINDS, ActionNoise, NoiseConfig
 from qg_learning_node.executor.residual_task import ACTION_DIM
 
 from qg_experiments import stats
@@ -30,8 +30,15 @@ from qg_experiments.runner import (
     zero_policy,
 )
 
-__all__ = ["BaselineSpec", "baseline_specs", "run_baseline", "summarize_baselines", "random_bar",
+__all__ = ["BaselineSpec", "baseline_noise", "baseline_specs", "run_baseline", "summarize_baselines", "random_bar",
            "Bar", "random_bar_of"]
+
+
+def baseline_noise(noise: NoiseConfig, spec: BaselineSpec) -> NoiseConfig:
+    """The executor's ``noise`` as a random policy of ``spec``'s kind and sigma: every step
+    noisy (``clean_fraction`` 0: the zero actor has no action of its own to send clean, so a
+    clean step would be the zero residual, a different policy)."""
+    return dataclasses.replace(noise, kind=spec.kind, sigma=spec.sigma, clean_fraction=0.0)
 
 
 @dataclass(frozen=True)
@@ -78,7 +85,7 @@ def run_baseline(spec: BaselineSpec) -> dict[str, Any]:
     settings = StackSettings.load(spec.config_dir, spec.arm).with_arm_seed(spec.seed)
     settings = dataclasses.replace(
         settings, task=dataclasses.replace(settings.task, train_max_steps=spec.max_steps))
-    noise_config = dataclasses.replace(settings.noise, kind=spec.kind, sigma=spec.sigma)
+    noise_config = baseline_noise(settings.noise, spec)
     env = InsertionRobot(settings, spec.estimator)
     episodes = []
     for index in range(spec.episodes):

@@ -91,3 +91,11 @@ def test_the_noise_samples_do_not_depend_on_the_clean_fraction():
 def test_clean_fraction_is_checked():
     with pytest.raises(ValueError, match='clean_fraction'):
         NoiseConfig(clean_fraction=1.5)
+
+
+def test_a_random_baseline_sends_noise_on_every_step_whatever_the_executors_clean_steps():
+    from qg_experiments.random_baselines import BaselineSpec, baseline_noise
+    config = baseline_noise(NoiseConfig(clean_fraction=0.2), BaselineSpec('uniform', 0.3))
+    assert (config.kind, config.clean_fraction) == ('uniform', 0.0)
+    noise = ActionNoise(config, 2, seed=1)
+    assert not any(np.all(noise.explore(np.zeros(2)) == 0.0) for _ in range(500))
