@@ -72,7 +72,8 @@ def test_clean_steps_send_the_actors_own_action_at_their_rate():
 
 
 def test_without_clean_steps_exploration_is_the_thesis_noise_sample_for_sample():
-    a, b = ActionNoise(NoiseConfig(), 2, seed=3), ActionNoise(NoiseConfig(), 2, seed=3)
+    thesis = NoiseConfig(clean_fraction=0.0)
+    a, b = ActionNoise(thesis, 2, seed=3), ActionNoise(thesis, 2, seed=3)
     action = np.array([0.1, 0.1])
     assert all(np.array_equal(a.explore(action), b.perturb(action)) for _ in range(200))
 
@@ -81,7 +82,7 @@ def test_the_noise_samples_do_not_depend_on_the_clean_fraction():
     """The clean steps draw from their own stream: a noisy step of a run with clean steps is
     the same noise sample as the thesis run's, step for step."""
     with_clean = ActionNoise(NoiseConfig(clean_fraction=0.5), 2, seed=11)
-    thesis = ActionNoise(NoiseConfig(), 2, seed=11)
+    thesis = ActionNoise(NoiseConfig(clean_fraction=0.0), 2, seed=11)
     action = np.zeros(2)
     noisy = [x for x in (with_clean.explore(action) for _ in range(400)) if np.any(x != 0)]
     assert 150 < len(noisy) < 250
