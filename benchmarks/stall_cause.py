@@ -33,8 +33,13 @@ from typing import Any
 import numpy as np
 import torch
 from qg_common.types import N_START_POSES
-from qg_experiments.runner import (InsertionRobot, LivePolicy, RunSpec, StackSettings,
-                                   episode_noise_seed)
+from qg_experiments.runner import (
+    InsertionRobot,
+    LivePolicy,
+    RunSpec,
+    StackSettings,
+    episode_noise_seed,
+)
 from qg_learning_node.executor.episode import Episode, TransitionRecord
 from qg_learning_node.executor.noise import ActionNoise
 from qg_learning_node.executor.residual_task import ACTION_DIM, Observation

@@ -25,8 +25,7 @@ from typing import Any
 import numpy as np
 import torch
 from qg_common.types import N_START_POSES
-from qg_experiments.runner import (InsertionRobot, recovery_seed, run_episode,
-                                   stall_recovery_config)
+from qg_experiments.runner import InsertionRobot, recovery_seed, run_episode, stall_recovery_config
 from qg_learning_node.executor.episode import Episode
 from qg_learning_node.executor.residual_task import ACTION_DIM
 from qg_learning_node.executor.stall_recovery import StallRecovery, first_stall

@@ -24,30 +24,46 @@ from typing import Any
 
 import numpy as np
 import torch
-from qg_common.params import (check_section, config_file, load_ros_params, merge_params,
-                              section_values)
+from qg_common.params import (
+    check_section,
+    config_file,
+    load_ros_params,
+    merge_params,
+    section_values,
+)
 from qg_common.shaft_task import ShaftTaskGeometry
 from qg_common.types import N_START_POSES, StepResult, WrenchSetpoint
-from robot_bridge_node.core.hardware_interface import (RobotPlugin, load_robot, robot_defaults,
-                                                       robot_plugin)
-from robot_bridge_node.core.rest_detector import RestConfig
-from robot_bridge_node.core.robot_loop import MeasuredWrench, RobotLoop, build_loop
-from robot_bridge_node.core.torque_kind import EKF_SECTION, TORQUE
-from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
-
 from qg_learning_node.executor.episode import Actor, Episode, TransitionRecord
-from qg_learning_node.learner.learner_params import learner_config_from_params
 from qg_learning_node.executor.noise import ActionNoise, NoiseConfig
-from qg_learning_node.executor.parameters import (load_geometry, load_noise,
-                                                  load_stall_recovery, load_task)
-from qg_learning_node.executor.stall_recovery import StallRecovery, StallRecoveryConfig
 from qg_learning_node.executor.observation import observation_from_step
-from qg_learning_node.executor.residual_task import (ACTION_DIM, Observation,
-                                                     ResidualTask, TaskConfig)
+from qg_learning_node.executor.parameters import (
+    load_geometry,
+    load_noise,
+    load_stall_recovery,
+    load_task,
+)
+from qg_learning_node.executor.residual_task import (
+    ACTION_DIM,
+    Observation,
+    ResidualTask,
+    TaskConfig,
+)
+from qg_learning_node.executor.stall_recovery import StallRecovery, StallRecoveryConfig
 from qg_learning_node.learner import algorithms
 from qg_learning_node.learner.actor_mlp import ActorMLP
 from qg_learning_node.learner.ddpg import DDPG
 from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore
+from qg_learning_node.learner.learner_params import learner_config_from_params
+from robot_bridge_node.core.hardware_interface import (
+    RobotPlugin,
+    load_robot,
+    robot_defaults,
+    robot_plugin,
+)
+from robot_bridge_node.core.rest_detector import RestConfig
+from robot_bridge_node.core.robot_loop import MeasuredWrench, RobotLoop, build_loop
+from robot_bridge_node.core.torque_kind import EKF_SECTION, TORQUE
+from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
 
 __all__ = ["ALGORITHMS", "ARMS", "ESTIMATORS", "DEFAULT_ROBOT", "StackSettings", "InsertionRobot",
            "LivePolicy",

@@ -14,7 +14,8 @@ here (:func:`run_recoveries`) stand beside the deterministic actor's, never insi
 from __future__ import annotations
 
 from collections import Counter
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 __all__ = ["TRAINED_AT", "LAST_TRAINING", "RECOVERY_MODE", "run_stalls", "run_recoveries",
            "stall_counts", "recovery_text"]

@@ -19,38 +19,50 @@ from collections.abc import Callable
 from typing import Any
 
 from qg_common import topics
+from qg_common.conversions import setpoint_msg, start_pose_request
 from qg_common.node_parameters import declare_parameters, on_parameter_change
 from qg_common.node_runtime import run_nodes
 from qg_common.params import ParameterSection
-from qg_common.retried_requests import answered_once
-from qg_common.conversions import setpoint_msg, start_pose_request
 from qg_common.peg_task import PegCell
+from qg_common.retried_requests import answered_once
 from qg_common.shaft_task import ShaftTaskGeometry
 from qg_common.topics import LATCHED, RELIABLE_DEEP
 from qg_common.types import WrenchSetpoint as Setpoint
-from qg_interfaces.msg import (ActorParameters, AtRest, EpisodeStatus, LearnerDiagnostics,
-                               TaskSpec, Transition, WrenchSetpoint)
+from qg_interfaces.msg import (
+    ActorParameters,
+    AtRest,
+    EpisodeStatus,
+    LearnerDiagnostics,
+    TaskSpec,
+    Transition,
+    WrenchSetpoint,
+)
 from qg_interfaces.srv import MoveToStart, StartEpisode, StopEpisode
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.duration import Duration
 from rclpy.node import Node
 
-from qg_learning_node.conversions import (actor_tensors_from_msg, observation_from_msg,
-                                          transition_to_msg)
+from qg_learning_node.conversions import (
+    actor_tensors_from_msg,
+    observation_from_msg,
+    transition_to_msg,
+)
 from qg_learning_node.executor.episode import Episode
 from qg_learning_node.executor.episode_id import episode_id as make_episode_id
 from qg_learning_node.executor.episode_request import N_POSES, EpisodeRequest
 from qg_learning_node.executor.noise import ActionNoise, NoiseConfig
-from qg_learning_node.executor.parameters import (CELL_SECTIONS, EXECUTOR_SECTIONS,
-                                                  TASK_CHOICE_SECTION, TASK_SECTIONS,
-                                                  ExecutorConfig)
+from qg_learning_node.executor.parameters import (
+    CELL_SECTIONS,
+    EXECUTOR_SECTIONS,
+    TASK_CHOICE_SECTION,
+    TASK_SECTIONS,
+    ExecutorConfig,
+)
 from qg_learning_node.executor.peg_task import PegTask, PegTaskConfig
 from qg_learning_node.executor.residual_task import ResidualTask, TaskConfig
 from qg_learning_node.executor.stall_recovery import StallRecovery, StallRecoveryConfig
 from qg_learning_node.learner.actor_mlp import ActorMLP
 from qg_learning_node.policy_file import Policy, frozen_policy
-
-
 
 #: [s] how long shutdown waits for the episode thread to abort the episode.
 SHUTDOWN_GRACE = 2.0

@@ -13,18 +13,24 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from qg_experiments import grid
+from qg_experiments.profile import GridBudget
+from qg_experiments.runner import (
+    InsertionRobot,
+    RunSpec,
+    StackSettings,
+    config_digest,
+    recovery_seed,
+    run_episode,
+    run_training,
+    stall_recovery_config,
+)
+from qg_experiments.stalls import run_recoveries, stall_counts
+from qg_experiments.tasks import result_path, unsaved
 from qg_learning_node.executor.episode import Episode
 from qg_learning_node.executor.residual_task import ACTION_DIM
 from qg_learning_node.executor.stall_recovery import StallRecovery
 from qg_learning_node.learner.actor_mlp import ActorMLP
-
-from qg_experiments import grid
-from qg_experiments.profile import GridBudget
-from qg_experiments.runner import (InsertionRobot, RunSpec, StackSettings, config_digest,
-                                   recovery_seed, run_episode, run_training,
-                                   stall_recovery_config)
-from qg_experiments.stalls import run_recoveries, stall_counts
-from qg_experiments.tasks import result_path, unsaved
 
 FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "stalled_test_episodes_seed0.npz"
 POSE = 1          # a fixed point in the recording

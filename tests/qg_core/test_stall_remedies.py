@@ -7,7 +7,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-
 from qg_learning_node.executor.noise import ActionNoise, NoiseConfig
 from qg_learning_node.learner.ddpg import DDPG, DDPGConfig
 from qg_learning_node.learner.learner_config import LearnerConfig

@@ -6,8 +6,9 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
-from qg_common.params import config_file, load_ros_params, merge_params
+from arms import pressed_balance
 from qg_common.panda_description import panda_arm
+from qg_common.params import config_file, load_ros_params, merge_params
 from qg_common.shaft_task import TOOL_DOWN, ShaftTaskGeometry
 from qg_common.types import PoseReference, WrenchSetpoint
 from robot_bridge_node.core.arm_model import ArmModel
@@ -15,8 +16,6 @@ from robot_bridge_node.core.hardware_interface import load_robot
 from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from sim_robot_node.core.mujoco_world import CELL_CONTACT_BIT, add_shaft_cell, set_cell_physics
 from sim_robot_node.core.shaft_scene import ShaftSceneConfig
-
-from arms import pressed_balance
 
 ROBOT = "sim_panda_mujoco"
 PUSH = -15.0  # [N] the base policy (contact convention: pressing in)

@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from qg_learning_node.learner.algorithms import COMPARED, label
 
 from qg_experiments import grid, stats
 from qg_experiments.random_baselines import Bar
@@ -13,7 +14,6 @@ from qg_experiments.report.divergence import divergence_counts, run_divergence
 from qg_experiments.report.grid_sections import THESIS, divergence_text, paired_line
 from qg_experiments.report.markdown import fmt, table
 from qg_experiments.stalls import LAST_TRAINING, TRAINED_AT, recovery_text, stall_counts
-from qg_learning_node.learner.algorithms import COMPARED, label
 
 __all__ = ["graph_section", "comparison"]
 

@@ -15,7 +15,6 @@ import sys
 from pathlib import Path
 
 import yaml
-
 from qg_common.params import config_file
 from qg_recording.bag_reader import BagInfo, NotABagError, bag_files, bag_info
 from qg_recording.rosbag2_metadata import METADATA_FILE
@@ -47,7 +46,7 @@ def expand_bag_paths(path: Path) -> list[Path]:
 
 
 def _stamp(t_ns: int) -> str:
-    when = datetime.datetime.fromtimestamp(t_ns * 1e-9, tz=datetime.timezone.utc)
+    when = datetime.datetime.fromtimestamp(t_ns * 1e-9, tz=datetime.UTC)
     return f"{when:%b %d %Y %H:%M:%S}.{(t_ns // 1_000_000) % 1000:03d} UTC ({t_ns // 10**9}.{t_ns % 10**9:09d})"
 
 
@@ -145,7 +144,6 @@ def _into_learner(args: argparse.Namespace, paths: list[Path]) -> int:
 
 def _publish(args: argparse.Namespace, paths: list[Path]) -> int:
     import rclpy
-
     from qg_recording.player import play
 
     rclpy.init()

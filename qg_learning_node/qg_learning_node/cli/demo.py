@@ -18,16 +18,21 @@ import argparse
 import json
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, replace
 from functools import partial
 from pathlib import Path
 
 from qg_common.params import config_file, runs_dir
 
-from qg_learning_node.cli.episode_schedule import (EpisodeJob, EpisodeOutcome, robot_name,
-                                                   run_episode_by_service, run_lanes,
-                                                   split_over_robots)
+from qg_learning_node.cli.episode_schedule import (
+    EpisodeJob,
+    EpisodeOutcome,
+    robot_name,
+    run_episode_by_service,
+    run_lanes,
+    split_over_robots,
+)
 from qg_learning_node.cli.fleet import fleet_specs, robot_namespace
 from qg_learning_node.cli.launcher import Launcher, ProcessSpec, load_stack
 from qg_learning_node.cli.ros_env import install_dir, stack_env
@@ -78,9 +83,8 @@ class StepMonitor:
 
     def __init__(self, cli, bar, log: TrainingLog, episodes: int,
                  robots: Sequence[str] = ("",)) -> None:
-        from qg_interfaces.msg import LearnerDiagnostics, Transition
-
         from qg_common.topics import LEARNER_DIAGNOSTICS, RELIABLE_DEEP, TRANSITIONS
+        from qg_interfaces.msg import LearnerDiagnostics, Transition
         self.bar, self.log, self.episodes = bar, log, episodes
         self.steps = 0
         self.started = time.monotonic()
@@ -158,10 +162,9 @@ def wait_for_stack(cli, timeout: float, robots: Sequence[str] = ("",)) -> None:
     The start-episode clients are the node's kept ones (``CliNode.client``): the episodes'
     requests then go through clients the executors have long matched.
     """
+    from qg_common.topics import LEARNER_DIAGNOSTICS, MOVE_TO_START, START_EPISODE
     from qg_interfaces.msg import LearnerDiagnostics
     from qg_interfaces.srv import MoveToStart, StartEpisode
-
-    from qg_common.topics import LEARNER_DIAGNOSTICS, MOVE_TO_START, START_EPISODE
     heartbeats: list = []
     sub = cli.node.create_subscription(LearnerDiagnostics, "/" + LEARNER_DIAGNOSTICS,
                                        heartbeats.append, 10)
@@ -334,7 +337,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         print(f"qgl demo: --robots must be >= 1, got {args.robots}", file=sys.stderr)
         return 2
     if args.robots == 1:          # the demo is a training run with the demo's numbers
-        return _demo_as_run(args)
+        return args.one_robot(args)
     if args.run_dir:
         print("qgl demo: --run-dir (a run that continues) is for one robot", file=sys.stderr)
         return 2
@@ -394,22 +397,6 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0 if all(c == 0 for c in codes.values()) else 1
 
 
-def _demo_as_run(args: argparse.Namespace) -> int:
-    """``qgl run`` with the demo's numbers (``cli/training_run.py``): in a new
-    ``<runs>/demo_<time>`` folder, or continuing the one ``--run-dir`` names."""
-    from qg_learning_node.cli import training_run
-    from qg_learning_node.cli.run_journal import RunMismatch
-    try:
-        plan, settings, config = training_run.plan_from_args(args, args.train_episodes, 0)
-        run_dir = Path(args.run_dir) if args.run_dir else \
-            Path(args.runs_dir or runs_dir()) / time.strftime("demo_%Y%m%d_%H%M%S")
-        return training_run.run_training(run_dir, plan, settings, config, args.episode_timeout,
-                                         args.random_bar, label="qgl demo")
-    except (ValueError, RunMismatch) as exc:
-        print(f"qgl demo: {exc}", file=sys.stderr)
-        return 2
-
-
 def _render_last_test(outcomes: list[EpisodeOutcome], run_dir: Path) -> None:
     """The last test episode as a video beside the learning curve (``qgl render``); a demo
     without a renderer or that bag says why and goes on."""
@@ -427,7 +414,10 @@ def _render_last_test(outcomes: list[EpisodeOutcome], run_dir: Path) -> None:
           f"as a video: {report['out']} ({report['wall_s']:.1f} s to render)", flush=True)
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction,
+               one_robot: Callable[[argparse.Namespace], int]) -> None:
+    """``qgl demo``; ``one_robot`` runs the one-robot demo (a resumable training run,
+    ``training_run.run_demo``), passed in so this module does not import the run's."""
     demo = sub.add_parser("demo", help="the main job: train on the ROS stack, test, plot")
     demo.add_argument("--config", default=None,
                       help="stack file (default: the stack.yaml qg_learning_node installs)")
@@ -462,4 +452,4 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     demo.add_argument("--random-bar", type=Path, default=None,
                       help="JSON of the random bar the plot draws (default: the report's, "
                            "docs/data/thesis/random_bar.json of this checkout)")
-    demo.set_defaults(func=_cmd_demo)
+    demo.set_defaults(func=_cmd_demo, one_robot=one_robot)

@@ -55,10 +55,9 @@ class EpisodeGuard:
     """
 
     def __init__(self, cli: Any, roles: dict[str, ProcessRole]) -> None:
+        from qg_common.topics import EPISODE_STATUS, LATCHED, STOP_EPISODE
         from qg_interfaces.msg import EpisodeStatus
         from qg_interfaces.srv import StopEpisode
-
-        from qg_common.topics import EPISODE_STATUS, LATCHED, STOP_EPISODE
 
         from qg_learning_node.cli.episode_schedule import robot_name
         self.cli, self.roles = cli, roles

@@ -26,16 +26,17 @@ import subprocess
 import sys
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
-from collections import deque
-
 import yaml
-
-from ament_index_python.packages import (PackageNotFoundError, get_package_prefix,
-                                         get_package_share_directory)
+from ament_index_python.packages import (
+    PackageNotFoundError,
+    get_package_prefix,
+    get_package_share_directory,
+)
 from qg_common.process_guard import die_with_parent
 
 __all__ = ["ProcessSpec", "Launcher", "load_stack_config", "load_stack", "StackConfigError",
@@ -104,7 +105,7 @@ class ProcessSpec:
             return [self.executable, *args]
         try:
             prefix = Path(get_package_prefix(self.package))
-        except (PackageNotFoundError, LookupError, EnvironmentError):
+        except (OSError, PackageNotFoundError, LookupError):
             raise StackConfigError(f"package {self.package!r} is not installed: run "
                                    "scripts/setup.sh") from None
         exe = prefix / "lib" / self.package / self.executable
@@ -123,7 +124,7 @@ def _substitute(arg: str) -> str:
     def share(match: re.Match) -> str:
         try:
             return get_package_share_directory(match.group(1))
-        except (PackageNotFoundError, LookupError, EnvironmentError):
+        except (OSError, PackageNotFoundError, LookupError):
             raise StackConfigError(f"$(find-pkg-share {match.group(1)}): no such package "
                                    "installed") from None
     return _FIND_PKG_SHARE.sub(share, arg)

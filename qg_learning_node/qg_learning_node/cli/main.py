@@ -56,9 +56,8 @@ def _cmd_up(args: argparse.Namespace) -> int:
 def _cmd_episode(args: argparse.Namespace) -> int:
     import uuid
 
-    from qg_interfaces.srv import StartEpisode, StopEpisode
-
     from qg_common import topics
+    from qg_interfaces.srv import StartEpisode, StopEpisode
 
     from qg_learning_node.cli.episode_wait import wait_for_episode
     from qg_learning_node.cli.ros_client import RESEND_AFTER, CliNode, call_service
@@ -158,7 +157,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("env", help='print the stack\'s environment as exports: eval "$(qgl env)"')
 
     from qg_learning_node.cli import demo, policy, render, train, training_run
-    demo.add_parser(sub)
+    demo.add_parser(sub, one_robot=training_run.run_demo)
     training_run.add_parser(sub)
     policy.add_parser(sub)
     train.add_parser(sub)

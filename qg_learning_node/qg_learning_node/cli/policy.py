@@ -19,12 +19,17 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from qg_common.params import (ConfigError, config_file, load_ros_params, load_yaml, merge_params,
-                              unflatten)
+from qg_common.params import (
+    ConfigError,
+    config_file,
+    load_ros_params,
+    load_yaml,
+    merge_params,
+    unflatten,
+)
 
 from qg_learning_node.cli.launcher import ProcessSpec, StackConfigError
-from qg_learning_node.policy_file import (PolicyFileError, load_policy, save_policy,
-                                          spec_for_task)
+from qg_learning_node.policy_file import PolicyFileError, load_policy, save_policy, spec_for_task
 
 __all__ = ["add_parser", "executor_task", "export_core", "run_checkpoint", "logged_task",
            "frozen_stack", "stack_robot"]
@@ -118,7 +123,7 @@ def export_core(core: Any, task_kind: str, task: Any, robot: str, output: Path,
         "source": source, "steps": int(core.steps), "updates": int(core.updates),
         "actor_version": int(core.actor_version), "qgraph": bool(config.use_qgraph),
         "bounds": config.ddpg.bounds, "seed": int(config.ddpg.seed),
-        "exported": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "exported": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
     }
     spec = spec_for_task(task_kind, task, robot, config.ddpg.actor_activation, provenance)
     return save_policy(output, core.agent.actor_tensors(), spec)

@@ -31,7 +31,7 @@ class CliNode:
         self.name = name
         self.domain_id = domain_id
 
-    def __enter__(self) -> "CliNode":
+    def __enter__(self) -> CliNode:
         self.context = rclpy.Context()
         if self.domain_id is None:
             rclpy.init(context=self.context)

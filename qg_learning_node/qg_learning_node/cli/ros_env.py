@@ -36,7 +36,7 @@ def install_dir() -> Path:
         return Path(env)
     try:   # sourced: isolated installs live in <install>/<package>
         prefix = Path(get_package_prefix("qg_interfaces"))
-    except (PackageNotFoundError, LookupError, EnvironmentError):
+    except (OSError, PackageNotFoundError, LookupError):
         raise FileNotFoundError("the stack's workspace is unknown: run scripts/setup.sh and use "
                                 ".venv/bin/qgl, or set QG_ROS_INSTALL=<repo>/ros_ws/install") \
             from None

@@ -101,7 +101,7 @@ class RunPlan:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "RunPlan":
+    def from_dict(cls, data: dict[str, Any]) -> RunPlan:
         known = {f.name for f in fields(cls)}
         return cls(**{k: v for k, v in data.items() if k in known})
 
@@ -121,7 +121,7 @@ class RunJournal:
         self.sessions: list[dict[str, Any]] = data.get("sessions", [])
 
     @classmethod
-    def open(cls, folder: Path, plan: RunPlan) -> "RunJournal":
+    def open(cls, folder: Path, plan: RunPlan) -> RunJournal:
         """The run in ``folder``: a new one (its plan written), or the one there, which must
         be ``plan``. :raises RunMismatch: naming the settings that differ."""
         folder.mkdir(parents=True, exist_ok=True)

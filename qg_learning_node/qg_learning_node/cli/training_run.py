@@ -291,6 +291,20 @@ def _cmd_run(args: argparse.Namespace) -> int:
         return 2
 
 
+def run_demo(args: argparse.Namespace) -> int:
+    """``qgl run`` with the demo's numbers (``cli/training_run.py``): in a new
+    ``<runs>/demo_<time>`` folder, or continuing the one ``--run-dir`` names."""
+    try:
+        plan, settings, config = plan_from_args(args, args.train_episodes, 0)
+        run_dir = Path(args.run_dir) if args.run_dir else \
+            Path(args.runs_dir or runs_dir()) / time.strftime("demo_%Y%m%d_%H%M%S")
+        return run_training(run_dir, plan, settings, config, args.episode_timeout,
+                                         args.random_bar, label="qgl demo")
+    except (ValueError, RunMismatch) as exc:
+        print(f"qgl demo: {exc}", file=sys.stderr)
+        return 2
+
+
 def add_learning_arguments(parser: argparse.ArgumentParser) -> None:
     """The arguments a run's plan is made of, besides its episodes (shared with the demo)."""
     from qg_learning_node.cli.demo import DemoSettings

@@ -35,7 +35,7 @@ class TransitionRecord:
     zero_action: bool
 
     @classmethod
-    def from_message(cls, msg: Any) -> "TransitionRecord":
+    def from_message(cls, msg: Any) -> TransitionRecord:
         """From a ``qg_interfaces/Transition`` message, live or decoded from a bag (duck-typed)."""
         return cls(msg.episode_id, int(msg.step), np.asarray(msg.state, np.float64),
                    np.asarray(msg.action, np.float64), float(msg.reward),

@@ -44,7 +44,7 @@ class NoiseConfig:
             raise ValueError(f"noise clean_fraction must lie in [0, 1], got {self.clean_fraction}")
 
     @classmethod
-    def from_dict(cls, values: dict[str, Any]) -> "NoiseConfig":
+    def from_dict(cls, values: dict[str, Any]) -> NoiseConfig:
         return cls(**{k: v for k, v in values.items() if k in cls.__dataclass_fields__})
 
 

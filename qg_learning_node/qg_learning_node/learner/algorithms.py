@@ -19,8 +19,12 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from qg_learning_node.learner.learner_config import (APRIORI_BOUNDS, BOUND_MODES, GRAPH_BOUNDS,
-                                                     LearnerConfig)
+from qg_learning_node.learner.learner_config import (
+    APRIORI_BOUNDS,
+    BOUND_MODES,
+    GRAPH_BOUNDS,
+    LearnerConfig,
+)
 
 __all__ = ["Algorithm", "REGISTRY", "FAMILIES", "COMPARED", "algorithm", "keys", "label"]
 

@@ -34,9 +34,14 @@ import torch
 from torch import nn
 
 from qg_learning_node.learner.adam import Adam
-from qg_learning_node.learner.learner_config import (ACTOR_ACTIVATION_NAMES, APRIORI_BOUNDS,
-                                                     BOUND_MODES, GRAPH_BOUNDS, DDPGConfig,
-                                                     realisable_range)
+from qg_learning_node.learner.learner_config import (
+    ACTOR_ACTIVATION_NAMES,
+    APRIORI_BOUNDS,
+    BOUND_MODES,
+    GRAPH_BOUNDS,
+    DDPGConfig,
+    realisable_range,
+)
 from qg_learning_node.learner.replay import Batch, NStepContext
 
 __all__ = ['BOUND_MODES', 'DDPG', 'DDPGConfig', 'build_mlp', 'realisable_range']

@@ -127,7 +127,7 @@ class DDPGConfig:
         return self.critic_lr / 10.0 if self.actor_lr is None else self.actor_lr
 
     @classmethod
-    def from_dict(cls, values: dict) -> 'DDPGConfig':
+    def from_dict(cls, values: dict) -> DDPGConfig:
         unknown = set(values) - {f.name for f in dataclasses.fields(cls)}
         if unknown:
             raise ValueError(f'unknown DDPG config keys: {sorted(unknown)}')
@@ -195,7 +195,7 @@ class LearnerConfig:
                 raise ValueError(f'{name} must be >= 1, got {getattr(self, name)}')
 
     @classmethod
-    def from_dict(cls, values: dict) -> 'LearnerConfig':
+    def from_dict(cls, values: dict) -> LearnerConfig:
         unknown = set(values) - {f.name for f in dataclasses.fields(cls)}
         if unknown:
             raise ValueError(f'unknown learner config keys: {sorted(unknown)}')

@@ -32,9 +32,13 @@ import numpy as np
 import torch
 
 from qg_learning_node.learner.ddpg import DDPG, DIAGNOSTIC_KEYS
-from qg_learning_node.learner.learner_config import (RUNTIME_FIELDS, SCHEDULES,
-                                                     LearnerConfig, differences,
-                                                     with_runtime_settings)
+from qg_learning_node.learner.learner_config import (
+    RUNTIME_FIELDS,
+    SCHEDULES,
+    LearnerConfig,
+    differences,
+    with_runtime_settings,
+)
 from qg_learning_node.learner.qgraph import TRANSITION_KINDS, QGraph
 from qg_learning_node.learner.replay import ReplayMemory
 
@@ -162,7 +166,7 @@ class LearnerCore:
         }, pathlib.Path(path))
 
     @classmethod
-    def load(cls, path: pathlib.Path) -> 'LearnerCore':
+    def load(cls, path: pathlib.Path) -> LearnerCore:
         state = torch.load(pathlib.Path(path), weights_only=False)
         core = cls(LearnerConfig.from_dict(state['config']), *state['dims'])
         core.agent.load_state_dict(state['agent'])

@@ -201,7 +201,7 @@ class QGraph:
         return {k: _copy(v) for k, v in vars(self).items()}
 
     @classmethod
-    def from_state_dict(cls, state: dict) -> 'QGraph':
+    def from_state_dict(cls, state: dict) -> QGraph:
         graph = cls.__new__(cls)
         graph.resolution = 0.0            # checkpoints from before state merging
         graph.__dict__.update(state)

@@ -28,8 +28,14 @@ import numpy as np
 from qg_common.arm_description import ArmDescription
 from qg_common.shaft_task import Fixture, ShaftTaskGeometry
 
-from sim_robot_node.core.shaft_urdfs import (PAYLOAD_INERTIA, PLUNGER_INERTIA, bare_arm_urdf,
-                                             housing_boxes, plunger_box, shaft_inertia)
+from sim_robot_node.core.shaft_urdfs import (
+    PAYLOAD_INERTIA,
+    PLUNGER_INERTIA,
+    bare_arm_urdf,
+    housing_boxes,
+    plunger_box,
+    shaft_inertia,
+)
 
 if TYPE_CHECKING:
     from sim_robot_node.core.shaft_scene_config import ShaftSceneConfig

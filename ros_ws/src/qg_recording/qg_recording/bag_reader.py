@@ -17,11 +17,11 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 import zstandard
-from mcap.writer import MCAP0_MAGIC
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, Message, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.writer import MCAP0_MAGIC
 from mcap_ros2.decoder import DecoderFactory
 
 from .rosbag2_metadata import METADATA_FILE, read_metadata

@@ -34,7 +34,14 @@ import numpy as np
 
 from .cdr import FixedLayout
 from .mcap_stream import ChunkStats, McapStream
-from .rosbag2_metadata import ROS_DISTRO, BagMetadata, TopicRecord, check_qos, qos_profiles_yaml, write_metadata
+from .rosbag2_metadata import (
+    ROS_DISTRO,
+    BagMetadata,
+    TopicRecord,
+    check_qos,
+    qos_profiles_yaml,
+    write_metadata,
+)
 from .schemas import TypeHashNotFoundError, normalize_type_name, schema_text, type_hash
 
 __all__ = ["BagWriter", "bag_file_name"]

@@ -20,8 +20,15 @@ from mcap.stream_reader import breakup_chunk
 
 from .bag_reader import READ_ERRORS, bag_files, bag_info, top_level_records
 from .mcap_stream import ChunkStats, McapStream
-from .rosbag2_metadata import (METADATA_FILE, ROS_DISTRO, BagMetadata, TopicRecord, parse_qos_profiles, read_metadata,
-                               write_metadata)
+from .rosbag2_metadata import (
+    METADATA_FILE,
+    ROS_DISTRO,
+    BagMetadata,
+    TopicRecord,
+    parse_qos_profiles,
+    read_metadata,
+    write_metadata,
+)
 
 __all__ = ["ReindexResult", "reindex"]
 

@@ -24,7 +24,12 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from rosidl_adapter.parser import InvalidSpecification, InvalidValue, MessageSpecification, parse_message_string
+from rosidl_adapter.parser import (
+    InvalidSpecification,
+    InvalidValue,
+    MessageSpecification,
+    parse_message_string,
+)
 
 __all__ = [
     "Field",
@@ -91,7 +96,7 @@ def find_msg_file(type_name: str) -> Path:
     raise MsgNotFoundError(f"no definition of {pkg}/msg/{name} (searched {searched})")
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def type_hash(type_name: str) -> str:
     """The RIHS01 type hash of `pkg/msg/Type`, as the graph reports it for a topic of that type.
 
@@ -109,7 +114,7 @@ def type_hash(type_name: str) -> str:
     raise TypeHashNotFoundError(f"no installed type description of {full_name} (searched {searched})")
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _definition(pkg: str, name: str) -> tuple[str, MessageSpecification]:
     """The `.msg` text of `pkg/name` and its parsed specification.
 
@@ -143,7 +148,7 @@ class Field:
     array: int | None
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def message_fields(type_name: str) -> tuple[Field, ...]:
     """The fields of a message type in definition order (constants skipped).
 
@@ -162,7 +167,7 @@ def message_fields(type_name: str) -> tuple[Field, ...]:
     return tuple(fields)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def schema_text(type_name: str) -> str:
     """Full ros2msg schema of `type_name` (`pkg/msg/Type`) with all its dependencies inlined.
 
