@@ -414,42 +414,45 @@ def _render_last_test(outcomes: list[EpisodeOutcome], run_dir: Path) -> None:
           f"as a video: {report['out']} ({report['wall_s']:.1f} s to render)", flush=True)
 
 
+def add_learning_arguments(parser: argparse.ArgumentParser) -> None:
+    """The arguments a run's plan is made of, besides its episodes (``qgl run`` and ``qgl demo``)."""
+    parser.add_argument("--config", default=None,
+                        help="stack file (default: the stack.yaml qg_learning_node installs)")
+    parser.add_argument("--test-poses", type=int, default=8, help="poses per test round")
+    parser.add_argument("--train-max-steps", type=int, default=DemoSettings.train_max_steps,
+                        help="step cap of training episodes (the executor's default is 1000)")
+    parser.add_argument("--critic-lr", type=float, default=DemoSettings.critic_lr,
+                        help="critic learning rate (actor: one tenth)")
+    parser.add_argument("--iterations", type=int, default=DemoSettings.iterations,
+                        help="training iterations per 20-step cycle (schedule cycle)")
+    parser.add_argument("--schedule", choices=SCHEDULES, default=DemoSettings.schedule,
+                        help="cycle: train after every 20 steps (the thesis); async: the "
+                             "learner trains while the robot moves")
+    parser.add_argument("--updates-per-step", type=float, default=DemoSettings.updates_per_step,
+                        help="train steps per RL step (schedule async)")
+    parser.add_argument("--robot", default=None,
+                        help="the robot plugin to learn on (e.g. sim_xarm7; default: the "
+                             "processes' own, sim_panda)")
+    parser.add_argument("--seed", type=int, default=1, help="slot i runs with seed SEED+i")
+    parser.add_argument("--episode-timeout", type=float, default=900.0, help="[s]")
+    parser.add_argument("--random-bar", type=Path, default=None,
+                        help="JSON of the random bar the plot draws (default: the report's)")
+
+
 def add_parser(sub: argparse._SubParsersAction,
                one_robot: Callable[[argparse.Namespace], int]) -> None:
     """``qgl demo``; ``one_robot`` runs the one-robot demo (a resumable training run,
     ``training_run.run_demo``), passed in so this module does not import the run's."""
     demo = sub.add_parser("demo", help="the main job: train on the ROS stack, test, plot")
-    demo.add_argument("--config", default=None,
-                      help="stack file (default: the stack.yaml qg_learning_node installs)")
     demo.add_argument("--runs-dir", default=None,
                       help="parent of the run folder (default: $QG_RUNS_DIR, else ./runs)")
     demo.add_argument("--run-dir", default=None,
                       help="the run's own folder: an interrupted demo continues there with the "
                            "same command (one robot; `qgl run`)")
     demo.add_argument("--train-episodes", type=int, default=40, help="(thesis: 40)")
-    demo.add_argument("--test-poses", type=int, default=8)
-    demo.add_argument("--train-max-steps", type=int, default=DemoSettings.train_max_steps,
-                      help="step cap of the demo's training episodes (the executor's default "
-                           "is 1000, the thesis's)")
-    demo.add_argument("--critic-lr", type=float, default=DemoSettings.critic_lr,
-                      help="critic learning rate (actor: one tenth)")
-    demo.add_argument("--iterations", type=int, default=DemoSettings.iterations,
-                      help="training iterations per 20-step cycle (schedule cycle)")
-    demo.add_argument("--schedule", choices=SCHEDULES, default=DemoSettings.schedule,
-                      help="cycle: train after every 20 steps (the thesis); async: the learner "
-                           "trains while the robot moves")
-    demo.add_argument("--updates-per-step", type=float, default=DemoSettings.updates_per_step,
-                      help="train steps per RL step (schedule async)")
     demo.add_argument("--robots", type=int, default=1,
                       help="robots learning at once (namespaces /robot0, /robot1, ... and one "
                            "learner, as `qgl up --robots N`): the training episodes are dealt "
                            "to them and run concurrently; the tests run on robot0")
-    demo.add_argument("--robot", default=None,
-                      help="the robot plugin to learn on (-p robot:=NAME for every process that "
-                           "loads one, e.g. sim_xarm7; default: the processes' own, sim_panda)")
-    demo.add_argument("--seed", type=int, default=1)
-    demo.add_argument("--episode-timeout", type=float, default=900.0, help="[s]")
-    demo.add_argument("--random-bar", type=Path, default=None,
-                      help="JSON of the random bar the plot draws (default: the report's, "
-                           "docs/data/thesis/random_bar.json of this checkout)")
+    add_learning_arguments(demo)
     demo.set_defaults(func=_cmd_demo, one_robot=one_robot)

@@ -305,33 +305,6 @@ def run_demo(args: argparse.Namespace) -> int:
         return 2
 
 
-def add_learning_arguments(parser: argparse.ArgumentParser) -> None:
-    """The arguments a run's plan is made of, besides its episodes (shared with the demo)."""
-    from qg_learning_node.cli.demo import DemoSettings
-    from qg_learning_node.learner.learner_config import SCHEDULES
-    parser.add_argument("--config", default=None,
-                        help="stack file (default: the stack.yaml qg_learning_node installs)")
-    parser.add_argument("--test-poses", type=int, default=8, help="poses per test round")
-    parser.add_argument("--train-max-steps", type=int, default=DemoSettings.train_max_steps,
-                        help="step cap of training episodes (the executor's default is 1000)")
-    parser.add_argument("--critic-lr", type=float, default=DemoSettings.critic_lr,
-                        help="critic learning rate (actor: one tenth)")
-    parser.add_argument("--iterations", type=int, default=DemoSettings.iterations,
-                        help="training iterations per 20-step cycle (schedule cycle)")
-    parser.add_argument("--schedule", choices=SCHEDULES, default=DemoSettings.schedule,
-                        help="cycle: train after every 20 steps (the thesis); async: the "
-                             "learner trains while the robot moves")
-    parser.add_argument("--updates-per-step", type=float, default=DemoSettings.updates_per_step,
-                        help="train steps per RL step (schedule async)")
-    parser.add_argument("--robot", default=None,
-                        help="the robot plugin to learn on (e.g. sim_xarm7; default: the "
-                             "processes' own, sim_panda)")
-    parser.add_argument("--seed", type=int, default=1, help="slot i runs with seed SEED+i")
-    parser.add_argument("--episode-timeout", type=float, default=900.0, help="[s]")
-    parser.add_argument("--random-bar", type=Path, default=None,
-                        help="JSON of the random bar the plot draws (default: the report's)")
-
-
 def add_parser(sub: argparse._SubParsersAction) -> None:
     run = sub.add_parser("run", help="a training run through the stack that the same command "
                                      "continues after Ctrl-C, a crash or a reboot")
@@ -341,5 +314,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     run.add_argument("--run-dir", default=None,
                      help="the run's folder; an existing one is continued (default: a new "
                           "<runs>/run_<time>)")
+    from qg_learning_node.cli.demo import add_learning_arguments
     add_learning_arguments(run)
     run.set_defaults(func=_cmd_run)
