@@ -39,7 +39,7 @@ def status(store, t_ns: int, state: str):
     return store.types["qg_interfaces/msg/EpisodeStatus"](
         stamp=time_msg(store, t_ns), episode_id="ep_7", state=state, mode="train", reward_type="dense",
         initial_pose=3, step=STEPS if state == "done" else 0, max_steps=50, episode_return=-2.5,
-        success=state == "done", degraded=False, actor_version=11, message="")
+        success=state == "done", degraded=False, actor_version=11, message="", recoveries=0)
 
 
 @pytest.fixture(scope="module")

@@ -76,8 +76,16 @@ class InHost:
     def name(self) -> str:
         return self.spec.name
 
-    def command(self) -> list[str]:
-        return ["ip", "netns", "exec", self.host, *self.spec.command()]
+    @property
+    def respawn(self) -> bool:
+        return self.spec.respawn
+
+    @property
+    def respawn_delay(self) -> float:
+        return self.spec.respawn_delay
+
+    def command(self, respawned: bool = False) -> list[str]:
+        return ["ip", "netns", "exec", self.host, *self.spec.command(respawned)]
 
 
 #: How the two hosts find each other (docs/deployment.md, "Discovery"): multicast on the subnet,

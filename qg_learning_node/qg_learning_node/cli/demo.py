@@ -87,7 +87,7 @@ class StepMonitor:
         from qg_interfaces.msg import LearnerDiagnostics, Transition
         self.bar, self.log, self.episodes = bar, log, episodes
         self.steps = 0
-        self.started = time.monotonic()
+        self.rate_since = time.monotonic()
         self.robots = {robot: _RobotProgress() for robot in robots}
         self.last_return = float("nan")
         self.successes = {"train": [0, 0], "test": [0, 0]}
@@ -102,11 +102,11 @@ class StepMonitor:
     @property
     def fps(self) -> float:
         """RL steps per wall second since the first episode started."""
-        return self.steps / max(1e-9, time.monotonic() - self.started)
+        return self.steps / max(1e-9, time.monotonic() - self.rate_since)
 
     def begin(self, index: int, mode: str, robot: str = "") -> None:
         if index == 0:
-            self.started = time.monotonic()
+            self.rate_since = time.monotonic()
         self.robots[robot] = _RobotProgress(f"{mode} {index + 1}/{self.episodes}")
         self._show()
 
