@@ -290,7 +290,8 @@ class ExecutorNode(Node):
         if self.worker is None or not self.worker.is_alive() or self.episode is None:
             response.success, response.message = False, "no episode is running"
             return response
-        self._stop_episode("stop requested", timeout=self.config.step_timeout + 1.0)
+        reason = f"stop requested: {request.reason}" if request.reason else "stop requested"
+        self._stop_episode(reason, timeout=self.config.step_timeout + 1.0)
         response.success = True
         response.episode_id = self.episode.episode_id
         response.message = f"aborted: {request.reason}" if request.reason else "aborted"

@@ -363,7 +363,9 @@ def test_bad_requests_are_refused_and_the_stack_stays_up(stack):
         stopped = call_service(cli, StopEpisode, "/executor/stop_episode",
                                StopEpisode.Request(reason="test"), timeout=30.0)
         assert stopped.success and stopped.episode_id == running.episode_id
-        assert episodes.final(running.episode_id, 30.0).state == "aborted"
+        final = episodes.final(running.episode_id, 30.0)
+        assert final.state == "aborted" and "stop requested: test" in final.message, \
+            final.message
         again = episodes.start(mode="test", initial_pose=1)
         assert again.success, again.message
     assert stack.launcher.poll() == [], stack.logs()
