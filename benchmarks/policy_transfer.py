@@ -16,8 +16,8 @@ Usage: python benchmarks/policy_transfer.py OUT.npz [--seeds 0 1 2] [--lr 1e-3] 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -25,46 +25,25 @@ import torch
 from qg_common.types import N_START_POSES
 from qg_experiments.runner import (
     InsertionRobot,
-    LivePolicy,
     RunSpec,
-    StackSettings,
-    episode_noise_seed,
     run_episode,
 )
 from qg_learning_node.cli.policy import export_core
 from qg_learning_node.executor.episode import Episode
-from qg_learning_node.executor.noise import ActionNoise
-from qg_learning_node.executor.residual_task import ACTION_DIM
 from qg_learning_node.learner.learner_core import LearnerCore
 from qg_learning_node.policy_file import load_policy
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from stall_probe import learn_in_process  # noqa: E402  (the stall probe's learning)
 
 TRAIN_CAP = 50        # [steps] the grid's training episodes
 TEST_CAP = 200        # [steps] the thesis's test episodes
 
 
 def train_and_test(spec: RunSpec) -> tuple[InsertionRobot, LearnerCore, list[dict]]:
-    """``spec``'s training in process, then a deterministic test episode per start pose."""
-    settings = StackSettings.load(spec.config_dir, spec.arm, spec.robot).with_arm_seed(spec.seed)
-    settings = dataclasses.replace(settings, task=dataclasses.replace(
-        settings.task, train_max_steps=TRAIN_CAP, test_max_steps=TEST_CAP))
-    env = InsertionRobot(settings, spec.estimator)
-    learner = LearnerCore(spec.learner_config(settings.learner), env.residual.state_dim,
-                          ACTION_DIM)
-    policy = LivePolicy(learner.agent)
-
-    def learn(record) -> None:
-        learner.add_transition(record.state, record.action, record.reward, record.next_state,
-                               record.terminal)
-        while learner.training_due():
-            learner.train_cycle()
-            policy.update(learner.agent)
-
-    trained = 0
-    for index in range(spec.train_episodes):
-        noise = ActionNoise(settings.noise, ACTION_DIM, episode_noise_seed(spec.seed, index))
-        result = run_episode(env, Episode(f"train{index:03d}", "train", index % N_START_POSES,
-                                          spec.reward, env.residual, noise), policy, learn)
-        trained += bool(result["success"])
+    """``spec``'s training in process (the stall probe's), then a deterministic test episode
+    per start pose."""
+    env, learner, policy, _, trained = learn_in_process(spec, TEST_CAP)
     tests = []
     for pose in range(N_START_POSES):
         result = run_episode(env, Episode(f"test{pose}", "test", pose, spec.reward,

@@ -37,12 +37,13 @@ TAIL = 10              # [steps] the end of a stalled episode that is looked at
 NOISY_RETRIES = 4      # the stalled pose again with the training noise
 
 
-def trained(seed: int) -> tuple[InsertionRobot, LearnerCore, LivePolicy, Any]:
-    """The demo's learning on ``seed`` in process: the robot, learner, actor and settings."""
-    spec = RunSpec("qgddpg", 1e-2, 50, seed, train_max_steps=50)
-    settings = StackSettings.load(spec.config_dir, spec.arm, spec.robot).with_arm_seed(seed)
+def learn_in_process(spec: RunSpec, test_cap: int = TEST_CAP
+                     ) -> tuple[InsertionRobot, LearnerCore, LivePolicy, Any, int]:
+    """``spec``'s training episodes in process (its train cap, ``test_cap`` for later tests):
+    the robot, learner, actor, settings and how many training episodes inserted."""
+    settings = StackSettings.load(spec.config_dir, spec.arm, spec.robot).with_arm_seed(spec.seed)
     settings = dataclasses.replace(settings, task=dataclasses.replace(
-        settings.task, train_max_steps=spec.train_max_steps, test_max_steps=TEST_CAP))
+        settings.task, train_max_steps=spec.train_max_steps, test_max_steps=test_cap))
     env = InsertionRobot(settings, spec.estimator)
     learner = LearnerCore(spec.learner_config(settings.learner), env.residual.state_dim,
                           ACTION_DIM)
@@ -55,11 +56,18 @@ def trained(seed: int) -> tuple[InsertionRobot, LearnerCore, LivePolicy, Any]:
             learner.train_cycle()
             policy.update(learner.agent)
 
+    inserted = 0
     for index in range(spec.train_episodes):
-        noise = ActionNoise(settings.noise, ACTION_DIM, episode_noise_seed(seed, index))
-        run_episode(env, Episode(f"train{index:03d}", "train", index % N_START_POSES,
-                                 spec.reward, env.residual, noise), policy, learn)
-    return env, learner, policy, settings
+        noise = ActionNoise(settings.noise, ACTION_DIM, episode_noise_seed(spec.seed, index))
+        result = run_episode(env, Episode(f"train{index:03d}", "train", index % N_START_POSES,
+                                          spec.reward, env.residual, noise), policy, learn)
+        inserted += bool(result["success"])
+    return env, learner, policy, settings, inserted
+
+
+def trained(seed: int) -> tuple[InsertionRobot, LearnerCore, LivePolicy, Any]:
+    """The demo's learning on ``seed`` in process: the robot, learner, actor and settings."""
+    return learn_in_process(RunSpec("qgddpg", 1e-2, 50, seed, train_max_steps=50))[:4]
 
 
 def probe_pose(env: InsertionRobot, learner: LearnerCore, policy: LivePolicy, settings: Any,
