@@ -138,6 +138,10 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
     lines += table(["experiment", "thesis", f"profile {profile.name}", "runs finished"],
                    [[*row, f"{len(results_by[k])} of {planned.get(k, '?')}"]
                     for k, row in budget.items()])
+    earlier = sorted(path.name for path in docs.glob("results_*.md"))
+    if earlier:      # pages of another setup, kept for the experiments not run again since
+        lines += ["", "Earlier pages, kept as they were generated under another setup (each says "
+                  "which): " + ", ".join(f"[{name}]({name})" for name in earlier) + "."]
     noise = settings.noise
     lines += ["", "How the runs were made: each run builds the simulated Panda, the bridge's 1 kHz "
               "loop and the wrench estimator (`RobotLoop`), and drives it with the executor's "
