@@ -28,8 +28,9 @@ EXPERIMENTS = ("grid", "state_grid", "variants")
 
 def setting_of(run: str) -> str:
     """The setting a run's name carries between its cell and its seed (``sparse``, ``g0.99``,
-    ``cap300``; empty for the grid): the variants are counted setting by setting."""
-    return "_".join(run.split("_")[3:-1])
+    ``cap300``; empty for the grid): the variants are counted setting by setting. A run tested
+    again with stall recovery (``_recovery``) counts in its setting, its recovery apart."""
+    return "_".join(part for part in run.split("_")[3:-1] if part != "recovery")
 
 
 def runs_of(rows: list[dict[str, str]]) -> list[tuple[str, list[dict[str, Any]]]]:
