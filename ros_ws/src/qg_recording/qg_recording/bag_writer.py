@@ -49,6 +49,8 @@ __all__ = ["BagWriter", "bag_file_name"]
 LIBRARY = "qg_recording"
 _COMPRESSIONS = {"zstd": "zstd", "none": ""}
 _BATCH = 64  # queue items between two voluntary releases of the interpreter lock
+#: [bytes] an MCAP message record's fields besides its data, and its message index entry
+_PER_MESSAGE = 31 + 16
 
 
 def bag_file_name(directory: Path) -> str:
@@ -110,6 +112,10 @@ class BagWriter:
         self._collect = collect
         self._flushed_at = time.monotonic()  # the last `_flush`
         self.messages_written = 0  # handed to the MCAP file so far (by the writer thread)
+        # Uncompressed bytes queued (producer) and taken off the queue (writer thread): one
+        # writer each, so neither needs a lock.
+        self._enqueued = 0
+        self._dequeued = 0
         self._accepting = True
         self._error: BaseException | None = None
         self._closing = threading.Event()
@@ -165,6 +171,11 @@ class BagWriter:
         channel = self._channels.get(name)
         return None if channel is None else self._topics[channel].type_name
 
+    def set_custom(self, key: str, value: str) -> None:
+        """Add or change one `custom_data` entry (metadata.yaml from its next rewrite on)."""
+        with self._lock:
+            self._metadata.custom_data[str(key)] = str(value)
+
     def write(self, topic: str, data: bytes, t_ns: int) -> None:
         """Queue one serialized message (log and publish time `t_ns`); never blocks.
 
@@ -177,6 +188,7 @@ class BagWriter:
             self._queue.append((self._channels[topic], t_ns, data))
         except KeyError:
             raise ValueError(f"topic {topic} was not added to the bag") from None
+        self._enqueued += len(data) + _PER_MESSAGE
         self._wake.set()
 
     def write_rows(self, topic: str, layout: FixedLayout, t_ns: np.ndarray, values: np.ndarray) -> None:
@@ -191,7 +203,14 @@ class BagWriter:
         if self.topic_type(topic) != layout.type_name:
             raise ValueError(f"topic {topic} was not added to the bag as {layout.type_name}")
         self._queue.append((self._channels[topic], t_ns, (layout, values)))
+        self._enqueued += len(t_ns) * (layout.size + _PER_MESSAGE)
         self._wake.set()
+
+    @property
+    def unwritten_bytes(self) -> int:
+        """Uncompressed bytes queued or in the open chunk: at most what the file grows by
+        before the next write (give or take the summary and zstd's few bytes per chunk)."""
+        return self._enqueued - self._dequeued + self._mcap.chunk_bytes
 
     def close(self) -> None:
         """Write every queued message, the MCAP summary and the final metadata.yaml."""
@@ -250,10 +269,12 @@ class BagWriter:
                 if payload.__class__ is bytes:
                     mcap.add_message(channel, t_ns, payload)
                     self.messages_written += 1
+                    self._dequeued += len(payload) + _PER_MESSAGE
                 else:
                     layout, values = payload
                     mcap.add_rows(channel, t_ns, layout.encode_many(t_ns, values))
                     self.messages_written += len(t_ns)
+                    self._dequeued += len(t_ns) * (layout.size + _PER_MESSAGE)
                 if mcap.chunk_bytes >= self._chunk_size:
                     self._close_chunk()
             if queue:

@@ -10,6 +10,11 @@ and every flush interval the writer thread collects the partly filled buffers to
 topics (100 Hz ground truth fills a buffer in 2 s) lose no more than the chunk in progress.
 RL-rate messages are encoded on the spot; rclpy messages go through `record_message`, which
 imports rclpy only when called.
+
+What a bag holds and how much the folder may take is the recording policy's
+(`disk_keeper.RecordingPolicy`): an episode without 1 kHz data registers only the RL-rate
+topics and its 1 kHz `record_*` calls are no-ops; one the policy refuses raises
+`RecordingRefused` from `start` before anything is written.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ import atexit
 import json
 import re
 import threading
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,6 +32,7 @@ import numpy as np
 
 from . import cdr
 from .bag_writer import BagWriter
+from .disk_keeper import RL_RATE_TOPICS, DiskKeeper, RecordingPolicy, disk_bytes, free_bytes
 
 __all__ = ["TOPICS", "EpisodeRecorder", "TopicSpec", "ground_truth_columns"]
 
@@ -121,6 +127,10 @@ class EpisodeRecorder:
 
     :param runs_dir: parent folder of the episode bags (created on first start).
     :param chunk_size, compression, flush_interval_s: passed to `BagWriter`.
+    :param policy: what bags hold and the folder's budget (default: everything, no budget).
+    :param free_space: bytes free on the folder's disk (`disk_keeper.free_bytes`; a test may
+        simulate a full disk).
+    :param log: where dropped 1 kHz data is reported.
     """
 
     def __init__(
@@ -129,19 +139,35 @@ class EpisodeRecorder:
         chunk_size: int = 512 * 1024,
         compression: str = "zstd",
         flush_interval_s: float = 1.0,
+        policy: RecordingPolicy | None = None,
+        free_space: Callable[[Path], int] = free_bytes,
+        log: Callable[[str], None] = lambda _: None,
     ) -> None:
         self.runs_dir = Path(runs_dir)
         self._writer_options = {"chunk_size": chunk_size, "compression": compression,
                                 "flush_interval_s": flush_interval_s}
+        self.keeper = DiskKeeper(self.runs_dir, policy or RecordingPolicy(), free_space, log)
         self._writer: BagWriter | None = None
         self._pending: dict[str, _Rows] = {}
         # start/stop may come from another thread (a service callback) than the 1 kHz calls.
         self._lock = threading.Lock()
         self.episode_id = ""
+        self._high_rate = True          # this episode records its 1 kHz topics
+        self._planned_high_rate = True  # ... began to
+        self._high_rate_limit: int | None = None  # [bytes] ... while its bag stays below this
+        #: [bytes] on disk of the last bag closed (as written, before any 1 kHz data dropped).
+        self.last_bytes = 0
+        self.last_high_rate = False     # whether it was recorded with (some of) its 1 kHz topics
 
     @property
     def active(self) -> bool:
         return self._writer is not None
+
+    @property
+    def unwritten_bytes(self) -> int:
+        """Uncompressed bytes of the open bag not in its file yet (queued, in the open chunk)."""
+        writer = self._writer
+        return 0 if writer is None else writer.unwritten_bytes
 
     def start(self, episode_id: str, metadata: Mapping[str, Any] | None = None) -> Path:
         """Open `runs_dir/<episode_id>/`, ending the episode being recorded if any.
@@ -150,19 +176,29 @@ class EpisodeRecorder:
             non-string values are stored as JSON.
         :raises ValueError: for an episode id that is not a plain directory name.
         :raises FileExistsError: if that episode was recorded already.
+        :raises RecordingRefused: if the policy refuses the episode (disk nearly full, budget
+            full of RL-rate data); nothing of it is written.
         """
         if not _EPISODE_ID.match(episode_id):
             raise ValueError(f"episode id must be a plain directory name, got {episode_id!r}")
         self.stop()
+        if (self.runs_dir / episode_id).exists():
+            raise FileExistsError(f"{self.runs_dir / episode_id} already holds a bag")
+        high_rate, limit = self.keeper.plan(episode_id)
         custom = {"episode_id": episode_id}
         for key, value in (metadata or {}).items():
             custom[str(key)] = value if isinstance(value, str) else json.dumps(value)
+        if not (high_rate and self.keeper.policy.mode == "all"):   # today's bags stay as they were
+            custom["recording"] = self.keeper.policy.mode if high_rate else "rl_rate"
         writer = BagWriter(self.runs_dir / episode_id, custom_data=custom, collect=self._hand_off_rows,
                            **self._writer_options)
         for topic, spec in TOPICS.items():  # all up front: no registration check per message
-            writer.add_topic(topic, spec.type_name, spec.qos, spec.depth, spec.durability)
+            if high_rate or topic in RL_RATE_TOPICS:
+                writer.add_topic(topic, spec.type_name, spec.qos, spec.depth, spec.durability)
         with self._lock:
             self._writer, self.episode_id = writer, episode_id
+            self._high_rate, self._high_rate_limit = high_rate, limit
+            self._planned_high_rate = high_rate
         atexit.register(self.stop)  # Ctrl-C: hand the buffered rows over before the bag closes
         return writer.directory
 
@@ -170,8 +206,24 @@ class EpisodeRecorder:
         """Queue every buffered row (the writer thread calls this every flush interval, so rows
         reach the disk with the chunk of their time: a SIGKILL loses at most that chunk)."""
         with self._lock:
+            if self._writer is not None:
+                self._check_limit()
             for rows in self._pending.values():
                 rows.hand_off()
+
+    def _check_limit(self) -> None:
+        """Stop this episode's 1 kHz topics once its bag reaches the size the budget leaves it
+        (lock held, recorder active); their buffered rows are dropped."""
+        limit = self._high_rate_limit
+        if limit is None or not self._high_rate:
+            return
+        # on disk, queued, in the open chunk, and still in the row buffers: uncompressed
+        buffered = sum(rows.n * (rows.layout.size + 47) for rows in self._pending.values())
+        size = disk_bytes(self._writer.directory) + self._writer.unwritten_bytes + buffered
+        if size >= limit:
+            self._high_rate = False
+            self._pending.clear()
+            self._writer.set_custom("high_rate_cut", f"at {size} bytes: recording.budget_mb")
 
     def stop(self) -> Path | None:
         """Close the current bag (drains every queued message); returns its directory.
@@ -185,8 +237,11 @@ class EpisodeRecorder:
             for rows in self._pending.values():
                 rows.hand_off()
             self._pending.clear()
+            high_rate = self._planned_high_rate
         atexit.unregister(self.stop)
         writer.close()
+        self.last_high_rate = high_rate
+        self.last_bytes = self.keeper.closed(writer.directory, high_rate)
         return writer.directory
 
     def _ensure_topic(self, topic: str, type_name: str | None) -> BagWriter:
@@ -226,7 +281,7 @@ class EpisodeRecorder:
     ) -> None:
         """A JointState; position, velocity and effort need len(names) values each."""
         with self._lock:
-            if self._writer is None:
+            if self._writer is None or not self._high_rate:
                 return
             rows = self._pending.get(topic)
             if rows is None or rows.names is not names or rows.frame_id is not frame_id:
@@ -241,7 +296,7 @@ class EpisodeRecorder:
         self, t_ns: int, force: Vector, torque: Vector, frame_id: str = "tool", topic: str = "/wrench_estimate",
     ) -> None:
         with self._lock:
-            if self._writer is not None:
+            if self._writer is not None and self._high_rate:
                 v = self._stamped_row(topic, "geometry_msgs/msg/WrenchStamped", frame_id, t_ns)
                 v[:3] = force
                 v[3:] = torque
@@ -251,7 +306,7 @@ class EpisodeRecorder:
         topic: str = "/ee_pose",
     ) -> None:
         with self._lock:
-            if self._writer is not None:
+            if self._writer is not None and self._high_rate:
                 v = self._stamped_row(topic, "geometry_msgs/msg/PoseStamped", frame_id, t_ns)
                 v[:3] = position
                 v[3:] = quaternion_xyzw
@@ -260,7 +315,7 @@ class EpisodeRecorder:
         self, t_ns: int, linear: Vector, angular: Vector, frame_id: str = "base", topic: str = "/ee_twist",
     ) -> None:
         with self._lock:
-            if self._writer is not None:
+            if self._writer is not None and self._high_rate:
                 v = self._stamped_row(topic, "geometry_msgs/msg/TwistStamped", frame_id, t_ns)
                 v[:3] = linear
                 v[3:] = angular
@@ -272,7 +327,7 @@ class EpisodeRecorder:
     ) -> None:
         """qg_interfaces/GroundTruth, filled by field name (a renamed field fails loudly)."""
         with self._lock:
-            if self._writer is not None:
+            if self._writer is not None and self._high_rate:
                 v = self._stamped_row(topic, "qg_interfaces/msg/GroundTruth", frame_id, t_ns)
                 ground_truth_columns(self._pending[topic].layout, v, contact_wrench,
                                      insertion_depth, plunger_travel, success, position_error,
@@ -286,7 +341,7 @@ class EpisodeRecorder:
         :param type_name: needed for topics not in `TOPICS`.
         """
         with self._lock:
-            if self._writer is not None:
+            if self._writer is not None and (self._high_rate or topic in RL_RATE_TOPICS):
                 writer = self._ensure_topic(topic, type_name)
                 self._stamped_row(topic, writer.topic_type(topic), frame_id, t_ns)[:] = values
 
@@ -304,6 +359,9 @@ class EpisodeRecorder:
         """
         with self._lock:
             if self._writer is None or len(t_ns) == 0:
+                return
+            self._check_limit()
+            if not (self._high_rate or topic in RL_RATE_TOPICS):
                 return
             writer = self._ensure_topic(topic, None if layout is None else layout.type_name)
             type_name = writer.topic_type(topic)
@@ -336,7 +394,7 @@ class EpisodeRecorder:
         :param type_name: needed for topics not in `TOPICS` (recorded as reliable, depth 10).
         """
         with self._lock:
-            if self._writer is not None:
+            if self._writer is not None and (self._high_rate or topic in RL_RATE_TOPICS):
                 self._ensure_topic(topic, type_name).write(topic, data, t_ns)
 
     def record_message(self, topic: str, t_ns: int, msg: Any, type_name: str | None = None) -> None:
