@@ -11,13 +11,18 @@ lockstep, the wall clock in realtime), as rosbag2 logs receive times: one time b
 a bag starts with its first message. Episode boundaries come from ``/episode_status``: a bag
 opens when an episode starts resetting and closes once the episode has ended and all of its
 transitions have arrived.
+
+What the bags hold and how much their folder may take is ``recording.*``
+(``qg_recording.disk_keeper``): an episode the policy refuses (disk nearly full, budget full of
+RL-rate data) gets no bag, and the robot's reset, which waits for the bag, fails with the
+reason, so the executor ends the episode ``aborted`` before its first step.
 """
 from __future__ import annotations
 
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +31,7 @@ from qg_common import topics
 from qg_common.node_parameters import declare_parameters, on_parameter_change
 from qg_common.params import ParameterSection, config_from_dict, runs_dir
 from qg_interfaces.msg import AtRest, EpisodeStatus, Transition, WrenchSetpoint
+from qg_recording.disk_keeper import MB, RecordingPolicy, RecordingRefused
 from qg_recording.episode_recorder import EpisodeRecorder
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
@@ -54,10 +60,12 @@ class RecorderConfig:
     :param episodes_dir: folder of the episode bags; "" = ``$QG_RUNS_DIR/episodes``, else
         ``runs/episodes`` in the current directory.
     :param close_timeout: [s] wait this long for late transitions after the episode ended.
+    :param recording: what the bags hold and the folder's disk budget (``RecordingPolicy``).
     """
     record: bool = True
     episodes_dir: str = ""
     close_timeout: float = 2.0
+    recording: RecordingPolicy = field(default_factory=RecordingPolicy)
 
     def __post_init__(self) -> None:
         if not self.close_timeout >= 0.0:
@@ -69,7 +77,10 @@ class RecorderConfig:
 
 
 RECORDER_SECTION = ParameterSection(
-    "", RecorderConfig, ranges={"close_timeout": (0.0, 600.0)},
+    "", RecorderConfig, ranges={
+        "close_timeout": (0.0, 600.0), "recording.every_k": (1, 1_000_000),
+        "recording.keep_last": (0, 1_000_000), "recording.budget_mb": (0.0, 1e9),
+        "recording.min_free_mb": (0.0, 1e9)},
     runtime=frozenset({"record", "close_timeout"}))
 
 
@@ -85,10 +96,13 @@ class RecorderNode(Node):
         self.config = RecorderConfig.from_dict(declare_parameters(
             self, [RECORDER_SECTION], (("robot_bridge_node", "recorder.yaml"),)))
         on_parameter_change(self, self._reconfigure)
-        self.recorder = EpisodeRecorder(Path(self.config.episodes_dir or runs_dir() / "episodes"))
+        self.recorder = EpisodeRecorder(Path(self.config.episodes_dir or runs_dir() / "episodes"),
+                                        policy=self.config.recording,
+                                        log=self.get_logger().info)
         self.lock = threading.Lock()
         self._opened = threading.Condition(self.lock)    # a bag opened
         self.episode_id = ""
+        self.refused_id, self.refused_reason = "", ""   # the episode refused last, and why
         self.opened_ns = 0                  # the loop's clock when the open bag began
         self.transitions = 0
         self.final_steps: int | None = None
@@ -143,12 +157,18 @@ class RecorderNode(Node):
         reset, but the two arrive on different threads, and under load the status came after
         the settled tick, which no bag then took. Without recording, an episode id or an
         executor (nothing publishes ``/episode_status``) there is nothing to wait for.
+
+        :raises RuntimeError: with the reason, if the recording policy refused the episode.
         """
         if not (self.config.record and episode_id
                 and self.count_publishers(topics.EPISODE_STATUS)):
             return True
         with self._opened:
-            return self._opened.wait_for(lambda: self.episode_id == episode_id, timeout)
+            opened = self._opened.wait_for(
+                lambda: episode_id in (self.episode_id, self.refused_id), timeout)
+            if opened and self.refused_id == episode_id:
+                raise RuntimeError(self.refused_reason)
+            return opened
 
     # --- RL-rate topics -------------------------------------------------------------------
     def _subscribe(self, msg_type: type, topic: str, handler: Callable[[int, bytes, Any], None],
@@ -161,14 +181,20 @@ class RecorderNode(Node):
         self.create_subscription(msg_type, topic, on_message, qos, callback_group=group, raw=True)
 
     def _on_status(self, t_ns: int, data: bytes, msg: EpisodeStatus) -> None:
-        if not self.config.record or not msg.episode_id:
+        if not self.config.record or not msg.episode_id or msg.episode_id == self.refused_id:
             return
         if msg.episode_id != self.episode_id and msg.state not in _FINAL:
             self._close()
             with self.lock:
-                self.recorder.start(msg.episode_id, {"mode": msg.mode,
-                                                     "initial_pose": int(msg.initial_pose),
-                                                     "reward": msg.reward_type})
+                try:
+                    self.recorder.start(msg.episode_id, {"mode": msg.mode,
+                                                         "initial_pose": int(msg.initial_pose),
+                                                         "reward": msg.reward_type})
+                except RecordingRefused as exc:
+                    self.get_logger().error(str(exc))
+                    self.refused_id, self.refused_reason = msg.episode_id, str(exc)
+                    self._opened.notify_all()
+                    return
                 self.opened_ns = t_ns
                 self.episode_id, self.transitions, self.final_steps = msg.episode_id, 0, None
                 for topic, latched in self._latched.items():
@@ -221,7 +247,11 @@ class RecorderNode(Node):
         with self.lock:
             if self.episode_id:
                 path = self.recorder.stop()
-                self.get_logger().info(f"recorded {self.episode_id} -> {path}")
+                rec = self.recorder
+                self.get_logger().info(
+                    f"recorded {self.episode_id} -> {path}: {rec.last_bytes} bytes "
+                    f"({rec.last_bytes / MB:.2f} MiB, "
+                    f"{'with' if rec.last_high_rate else 'without'} its 1 kHz topics)")
             self.episode_id, self.final_steps = "", None
             self._closer.cancel()
 

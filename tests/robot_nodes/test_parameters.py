@@ -23,10 +23,10 @@ def test_each_robot_node_declares_only_its_own_parameters_read_only(stack):
                 "loop.dt"} <= bridge
         assert {"sim.clock_mode", "panda_scene.shaft_mass"} <= sim and "robot" not in sim
         assert {"ekf.process_noise_force"} <= estimator
-        assert {"record", "episodes_dir", "close_timeout"} <= recorder
+        assert {"record", "episodes_dir", "close_timeout", "recording.mode"} <= recorder
         assert not any(n.startswith(("panda_scene.", "sim.", "ekf.")) for n in bridge)
         assert not any(n.startswith(("impedance.", "safety.", "ekf.")) for n in sim)
-        assert len(bridge) < 40 and len(recorder) < 10, (len(bridge), len(recorder))
+        assert len(bridge) < 40 and len(recorder) < 12, (len(bridge), len(recorder))
 
         force = describe(cli, "/bridge", "safety.force_max")
         assert force.read_only and "feed-forward force" in force.description
