@@ -19,6 +19,7 @@ the reason in ``reasons``, and the caller stops the stack. Each restart is annou
 """
 from __future__ import annotations
 
+import argparse
 import os
 import re
 import signal
@@ -27,7 +28,7 @@ import sys
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import IO, Any
 
@@ -40,7 +41,9 @@ from ament_index_python.packages import (
 from qg_common.process_guard import die_with_parent
 
 __all__ = ["ProcessSpec", "Launcher", "load_stack_config", "load_stack", "StackConfigError",
-           "RespawnPolicy", "Respawn", "CONFIG_ERROR_EXIT"]
+           "RespawnPolicy", "Respawn", "CONFIG_ERROR_EXIT", "recording_setting", "recording_argument",
+           "with_recording",
+           "stack_with_recording"]
 
 #: The exit code of a node whose parameters are refused (``run_nodes``): never respawned.
 CONFIG_ERROR_EXIT = 2
@@ -208,6 +211,72 @@ def load_stack(path: Path) -> tuple[list[ProcessSpec], RespawnPolicy]:
     if len(set(names)) != len(names):
         raise StackConfigError(f"{path}: process names must be unique, got {names}")
     return specs, policy
+
+
+#: The processes whose ``recorder`` node records the episodes (and takes ``recording.*``).
+RECORDING_PROCESSES = frozenset({("robot_bridge_node", "robot")})
+
+
+def recording_setting(text: str) -> tuple[str, str]:
+    """``--recording NAME=VALUE``: one ``recording.*`` parameter of the recorder
+    (``qg_recording.disk_keeper.RecordingPolicy``), checked; ``("recording.NAME", VALUE)``.
+
+    :raises ValueError: naming the setting, for an unknown name or a bad value.
+    """
+    from dataclasses import fields
+
+    from qg_recording.disk_keeper import RecordingPolicy
+    name, sep, value = text.partition("=")
+    kinds = {f.name: f.type for f in fields(RecordingPolicy)}
+    name = name.strip().removeprefix("recording.")
+    if not sep or name not in kinds:
+        raise ValueError(f"--recording takes NAME=VALUE with NAME one of {sorted(kinds)}, "
+                         f"got {text!r}")
+    kind = {"str": str, "int": int, "float": float}[str(kinds[name])]
+    try:
+        RecordingPolicy(**{name: kind(value.strip())})
+    except ValueError as exc:
+        raise ValueError(f"--recording {text}: {exc}") from None
+    return f"recording.{name}", value.strip()
+
+
+def recording_argument(text: str) -> tuple[str, str]:
+    """``recording_setting`` as an argparse type (a bad one refused with the reason)."""
+    try:
+        return recording_setting(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def with_recording(specs: list[ProcessSpec], settings: list[tuple[str, str]]) -> list[ProcessSpec]:
+    """``specs`` with ``-p recording.NAME:=VALUE`` on the processes that record episodes."""
+    if not settings:
+        return specs
+    out = []
+    for spec in specs:
+        if (spec.package, spec.executable) in RECORDING_PROCESSES:
+            ros_args = () if "--ros-args" in spec.args else ("--ros-args",)
+            extra = tuple(x for key, value in settings for x in ("-p", f"{key}:={value}"))
+            spec = replace(spec, args=spec.args + ros_args + extra)
+        out.append(spec)
+    return out
+
+
+def stack_with_recording(config: Path, settings: list[tuple[str, str]], out: Path) -> Path:
+    """Write ``out``: the stack file ``config`` with ``settings`` added to the arguments of
+    the processes that record (a run keeps its stack file, so a continued run records alike)."""
+    load_stack(config)    # a stack file, or the reason why not
+    data = yaml.safe_load(config.read_text())
+    for entry in data.get("processes") or []:
+        if (entry.get("package"), entry.get("executable")) in RECORDING_PROCESSES:
+            args = [str(a) for a in entry.get("args") or []]
+            args += [] if "--ros-args" in args else ["--ros-args"]
+            entry["args"] = args + [x for key, value in settings for x in ("-p", f"{key}:={value}")]
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(f"# {config} with the recording settings of `qgl run --recording`\n"
+                   + yaml.safe_dump(data, sort_keys=False))
+    load_stack(out)       # what it wrote is a stack file
+    return out
 
 
 @dataclass(frozen=True)

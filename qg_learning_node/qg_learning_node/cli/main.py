@@ -14,7 +14,13 @@ from pathlib import Path
 from qg_common.params import ConfigError, config_file
 
 from qg_learning_node.cli.fleet import fleet_specs
-from qg_learning_node.cli.launcher import Launcher, StackConfigError, load_stack
+from qg_learning_node.cli.launcher import (
+    Launcher,
+    StackConfigError,
+    load_stack,
+    recording_argument,
+    with_recording,
+)
 from qg_learning_node.cli.ros_env import exports, stack_env
 
 __all__ = ["main", "build_parser"]
@@ -23,7 +29,7 @@ __all__ = ["main", "build_parser"]
 def _cmd_up(args: argparse.Namespace) -> int:
     from qg_learning_node.cli.episode_guard import supervise
     specs, policy = load_stack(Path(args.config) if args.config else config_file("stack.yaml"))
-    specs = fleet_specs(specs, args.robots)
+    specs = fleet_specs(with_recording(specs, args.recording), args.robots)
     if args.policy:     # the actor of a policy file, frozen: no learner (cli/policy.py)
         from qg_learning_node.cli.policy import frozen_stack
         specs = frozen_stack(specs, Path(args.policy))
@@ -129,6 +135,9 @@ def build_parser() -> argparse.ArgumentParser:
     up.add_argument("--policy", default=None, metavar="FILE",
                     help="run this policy file's actor frozen (`qgl export-policy`), without "
                          "the learner; a file that does not fit the stack is refused at start")
+    up.add_argument("--recording", type=recording_argument, action="append", default=[],
+                    metavar="NAME=VALUE", help="a recording.* setting of the recorder: mode="
+                    "all|rl_rate|every_k, every_k, keep_last, budget_mb, min_free_mb (repeatable)")
     up.set_defaults(func=_cmd_up)
 
     ep = sub.add_parser("episode", help="start or stop an episode")

@@ -281,9 +281,14 @@ def plan_from_args(args: argparse.Namespace, episodes: int, test_every: int) -> 
 
 def _cmd_run(args: argparse.Namespace) -> int:
     try:
-        plan, settings, config = plan_from_args(args, args.episodes, args.test_every)
         run_dir = Path(args.run_dir) if args.run_dir else \
             runs_dir() / time.strftime("run_%Y%m%d_%H%M%S")
+        if args.recording:   # the run's own stack file: a continued run records alike
+            from qg_learning_node.cli.launcher import stack_with_recording
+            stack = Path(args.config).resolve() if args.config else config_file("stack.yaml")
+            args.config = str(stack_with_recording(stack, args.recording,
+                                                   run_dir / "stack_recording.yaml"))
+        plan, settings, config = plan_from_args(args, args.episodes, args.test_every)
         return run_training(run_dir, plan, settings, config, args.episode_timeout,
                             args.random_bar)
     except (ValueError, RunMismatch) as exc:
@@ -315,5 +320,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      help="the run's folder; an existing one is continued (default: a new "
                           "<runs>/run_<time>)")
     from qg_learning_node.cli.demo import add_learning_arguments
+    from qg_learning_node.cli.launcher import recording_argument
     add_learning_arguments(run)
+    run.add_argument("--recording", type=recording_argument, action="append", default=[],
+                     metavar="NAME=VALUE", help="a recording.* setting of the recorder (as "
+                     "`qgl up --recording`); kept in the run's stack file")
     run.set_defaults(func=_cmd_run)
