@@ -10,9 +10,16 @@ the measure, so the figures hold on a machine shared with other jobs. Reports pe
   recording takes from the loop, also given as a share of the 1 ms period,
 - for comparison, the loop-thread CPU of filling rclpy messages and serializing them with rclpy,
 - messages produced vs. written (must be equal), bag size per recorded second,
-- a wall-clock 1 kHz run: ticks that missed their deadline with and without recording.
+- a wall-clock 1 kHz run: ticks that missed their deadline with and without recording,
+- bytes per training episode with `recording.mode` `all` and `rl_rate`: a training episode of
+  the robot process's shape (``--steps`` RL steps of ``--ticks-per-step`` 1 kHz ticks through
+  the robot process's `record_ticks`, its `/tf`, the Panda's latched description, frames and
+  scene, a status, setpoint, at-rest event and transition per step), or, with ``--bags``, the
+  recorded bags of a run: each bag's bytes against its RL-rate copy's (`compact_bag`, which
+  writes what `rl_rate` records). Needs the ROS environment (`eval "$(.venv/bin/qgl env)"`).
 
 Usage: .venv/bin/python benchmarks/recording_bench.py [--ticks 5000] [--work-us 300] [--realtime-s 2]
+       [--episode-only] [--steps 36] [--ticks-per-step 460] [--bags RUN/episodes]
 The last line is one JSON object.
 """
 
@@ -20,13 +27,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 from qg_recording.bag_reader import bag_info
+from qg_recording.disk_keeper import RecordingPolicy, compact_bag, disk_bytes
 from qg_recording.episode_recorder import EpisodeRecorder
+from qg_recording.rosbag2_metadata import read_metadata
 
 NAMES = [f"panda_joint{i}" for i in range(1, 8)]
 PERIOD_NS = 1_000_000
@@ -149,12 +159,151 @@ def run_realtime(runs: Path, seconds: float, work_us: float, record: bool) -> di
     return {"late_ticks": late, "ticks": ticks, "worst_overrun_us": worst * 1e6}
 
 
+def _latched_and_ticks(steps: int, ticks_per_step: int) -> tuple[dict[str, bytes], object, object, list]:
+    """The Panda's latched messages, its tick names, its frames and the episode's ticks as
+    blocks of sample-ring records (smooth motion with sensor noise, the truth every 10th tick)."""
+    from qg_common.conversions import marker_array_msg, time_msg
+    from rclpy.serialization import serialize_message
+    from robot_bridge_node.core.hardware_interface import robot_plugin
+    from robot_bridge_node.core.robot_frames import RobotFrames, base_frame, task_scene
+    from robot_bridge_node.core.sample_ring import HAS_TOOL, HAS_TRUTH, HAS_WRENCH, record_dtype
+    from robot_bridge_node.core.tick_messages import TickNames
+    from robot_bridge_node.robot_process import shipped_loop_spec
+    from std_msgs.msg import String
+
+    spec = shipped_loop_spec("sim_panda")
+    plugin = robot_plugin("sim_panda")
+    description = plugin.describe(spec.robot_params)
+    frames = RobotFrames(description)
+    scene = task_scene("sim_panda", spec.robot_params)
+    latched = {"/robot_description": serialize_message(String(data=frames.urdf)),
+               "/scene_markers": serialize_message(marker_array_msg(scene, frames.base, time_msg(0))),
+               "/tf_static": frames.static_message(0, scene)}
+    names = TickNames(tuple(description.joint_names), base_frame(description), plugin.own_wrench_topic)
+    n, rng = steps * ticks_per_step, np.random.default_rng(0)
+    records = np.zeros(n, dtype=record_dtype(len(names.joint_names)))
+    t = np.arange(n) * 1e-3
+    records["t_ns"] = np.arange(n, dtype=np.int64) * PERIOD_NS + 10**9
+    records["tick"] = np.arange(n)
+    records["flags"] = HAS_WRENCH | HAS_TOOL | np.where(np.arange(n) % 10 == 0, HAS_TRUTH, 0)
+    wave = np.sin(2 * np.pi * t / 2.0)[:, None]
+    records["q"] = 0.3 + 0.01 * wave + rng.normal(0.0, 1e-6, (n, 7))
+    records["dq"] = 0.03 * np.cos(2 * np.pi * t / 2.0)[:, None] + rng.normal(0.0, 1e-4, (n, 7))
+    records["tau"] = 2.0 + 0.5 * wave + rng.normal(0.0, 0.05, (n, 7))
+    records["tau_cmd"] = records["tau"] + rng.normal(0.0, 0.01, (n, 7))
+    records["wrench"] = -5.0 * wave + rng.normal(0.0, 0.3, (n, 6))
+    records["tool_position"] = np.array([0.5, 0.0, 0.3]) + 1e-3 * wave + rng.normal(0.0, 1e-6, (n, 3))
+    angle = 0.01 * wave[:, 0]
+    rot = np.zeros((n, 3, 3))
+    rot[:, 0, 0] = rot[:, 1, 1] = np.cos(angle)
+    rot[:, 0, 1], rot[:, 1, 0], rot[:, 2, 2] = -np.sin(angle), np.sin(angle), 1.0
+    records["tool_rotation"] = rot
+    records["tool_twist"] = rng.normal(0.0, 1e-3, (n, 6))
+    records["truth"] = rng.normal(0.0, 0.1, (n, 14))
+    blocks = [records[i:i + 200] for i in range(0, n, 200)]
+    return latched, names, frames, blocks
+
+
+def training_episode_bytes(folder: Path, mode: str, steps: int, ticks_per_step: int) -> dict[str, float]:
+    """Record one training episode of the robot process's shape with ``recording.mode``
+    ``mode``; its bag's bytes on disk and messages."""
+    from qg_interfaces.msg import AtRest, EpisodeStatus, WrenchSetpoint
+    from rclpy.serialization import serialize_message
+    from robot_bridge_node.core.tick_messages import record_ticks
+
+    latched, names, frames, blocks = _latched_and_ticks(steps, ticks_per_step)
+    rec = EpisodeRecorder(folder / mode, policy=RecordingPolicy(mode=mode))
+    episode_id = "20261128_000000_0000_train_p0"
+    rec.start(episode_id, {"mode": "train", "initial_pose": 0, "reward": "dense"})
+    t0 = int(blocks[0]["t_ns"][0])
+    for topic, data in latched.items():
+        rec.record_raw(topic, t0, data)
+    rng = np.random.default_rng(1)
+    per_step = max(1, len(blocks) // steps)
+    step = 0
+    for k, block in enumerate(blocks):
+        t = int(block["t_ns"][0])
+        if k % per_step == 0 and step < steps:
+            rec.record_raw("/episode_status", t, serialize_message(EpisodeStatus(
+                episode_id=episode_id, state="running", mode="train", step=step, max_steps=steps)))
+            rec.record_raw("/wrench_setpoint", t, serialize_message(WrenchSetpoint(seq=step + 1)))
+        tf = frames.tf_rows(block)
+        record_ticks(rec, block, names, [] if tf is None else [tf])
+        if k % per_step == per_step - 1 and step < steps:
+            t = int(block["t_ns"][-1])
+            rec.record_raw("/ee_at_rest", t, serialize_message(AtRest(seq=step + 1)))
+            rec.record_transition(t, step, rng.normal(size=3), rng.normal(size=6), -1.0,
+                                  rng.normal(size=3), False)
+            step += 1
+    rec.record_raw("/episode_status", int(blocks[-1]["t_ns"][-1]), serialize_message(EpisodeStatus(
+        episode_id=episode_id, state="done", mode="train", step=steps, max_steps=steps)))
+    bag = rec.stop()
+    info = bag_info(bag)
+    return {"bytes": rec.last_bytes, "file_bytes": info.size_bytes, "messages": info.message_count,
+            "transitions": info.count("/transitions"), "topics": len([t for t in info.topics if t.message_count])}
+
+
+def recorded_bags_bytes(episodes: Path, scratch: Path) -> dict[str, float]:
+    """The recorded training bags of a run (custom data ``mode: train``): bytes on disk as
+    recorded against their RL-rate copies (made in ``scratch``), summed."""
+    bags = [p for p in sorted(episodes.iterdir()) if (p / "metadata.yaml").is_file()
+            and (read_metadata(p).get("custom_data") or {}).get("mode") == "train"]
+    full = rl = 0
+    for bag in bags:
+        copy = scratch / bag.name
+        shutil.copytree(bag, copy)
+        full += disk_bytes(copy)
+        rl += compact_bag(copy, "recording_bench")
+        shutil.rmtree(copy)
+    return {"bags": len(bags), "all_bytes": full, "rl_rate_bytes": rl}
+
+
+def episode_main(args: argparse.Namespace) -> dict[str, float]:
+    """Bytes per training episode, ``all`` against ``rl_rate``, printed; the figures."""
+    out: dict[str, float] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        full = training_episode_bytes(Path(tmp), "all", args.steps, args.ticks_per_step)
+        rl = training_episode_bytes(Path(tmp), "rl_rate", args.steps, args.ticks_per_step)
+        print(f"training episode of {args.steps} steps, {args.steps * args.ticks_per_step} ticks: "
+              f"all {full['bytes'] / 1e6:.2f} MB ({full['messages']} messages, {full['topics']} topics), "
+              f"rl_rate {rl['bytes'] / 1e3:.1f} kB ({rl['messages']} messages, {rl['topics']} topics) "
+              f"= {100 * rl['bytes'] / full['bytes']:.2f} % of all; transitions {full['transitions']} "
+              f"and {rl['transitions']}")
+        out.update(episode_steps=args.steps, episode_ticks=args.steps * args.ticks_per_step,
+                   all_bytes_per_episode=full["bytes"], rl_rate_bytes_per_episode=rl["bytes"],
+                   rl_rate_pct_of_all=100 * rl["bytes"] / full["bytes"],
+                   transitions_all=full["transitions"], transitions_rl_rate=rl["transitions"])
+        if args.bags:
+            real = recorded_bags_bytes(Path(args.bags), Path(tmp))
+            if real["bags"]:
+                n = real["bags"]
+                print(f"{n} recorded training bags of {args.bags}: all {real['all_bytes'] / n / 1e6:.2f} MB "
+                      f"per episode, their RL-rate copies {real['rl_rate_bytes'] / n / 1e3:.1f} kB "
+                      f"= {100 * real['rl_rate_bytes'] / real['all_bytes']:.2f} %")
+                out.update(recorded_bags=n, recorded_all_bytes_per_episode=real["all_bytes"] / n,
+                           recorded_rl_rate_bytes_per_episode=real["rl_rate_bytes"] / n,
+                           recorded_rl_rate_pct_of_all=100 * real["rl_rate_bytes"] / real["all_bytes"])
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--ticks", type=int, default=5000)
     parser.add_argument("--work-us", type=float, default=300.0, help="CPU work per tick standing in for the loop")
     parser.add_argument("--realtime-s", type=float, default=2.0)
+    parser.add_argument("--episode-only", action="store_true",
+                        help="only the bytes per training episode (no timing)")
+    parser.add_argument("--steps", type=int, default=36, help="RL steps of the training episode")
+    parser.add_argument("--ticks-per-step", type=int, default=460,
+                        help="1 kHz ticks per RL step (a demo run's bags: 23,051 ticks for 50 steps)")
+    parser.add_argument("--bags", default="", help="a run's episodes folder: its training bags too")
     args = parser.parse_args()
+    if args.steps < 1 or args.ticks_per_step < 1:
+        parser.error("--steps and --ticks-per-step must be >= 1")
+    episode = episode_main(args)
+    if args.episode_only:
+        print(json.dumps(episode))
+        return
     with tempfile.TemporaryDirectory() as tmp:
         runs = Path(tmp)
         run_lockstep(runs, 500, args.work_us, True)  # warm-up: imports, caches
@@ -182,6 +331,7 @@ def main() -> None:
         "realtime_late_ticks_without": rt_base["late_ticks"],
         "realtime_late_ticks_with": rt_rec["late_ticks"],
         "realtime_worst_overrun_us_with": rt_rec["worst_overrun_us"],
+        **episode,
     }
     print(f"per 1 kHz tick, five messages: loop thread {result['loop_thread_cpu_us']:.1f} µs CPU "
           f"(numbers into row buffers), writer thread {result['writer_thread_cpu_us']:.1f} µs CPU, "
