@@ -54,3 +54,25 @@ def test_a_runs_stack_file_keeps_the_settings_and_is_written_alike_again(tmp_pat
     assert [s for s in specs if s.name != "robot"] == [s for s in shipped if s.name != "robot"]
     stack_with_recording(config_file("stack.yaml"), args.recording, out)
     assert out.read_text() == text       # the same command, the same plan: the run continues
+
+
+@pytest.mark.ros
+def test_an_episode_refused_at_a_full_disk_ends_aborted_with_the_reason(stack) -> None:
+    """Robot and executor: the start is accepted, the reset refused (no disk has a billion MiB
+    free), the episode ends ``aborted`` before its first step, and no bag is left."""
+    from test_episodes import ROBOT, Episodes, executor_spec
+
+    name, package, executable, args = ROBOT
+    robot = (name, package, executable, (*args, "-p", "recording.min_free_mb:=1000000000.0"))
+    stack.start(robot, executor_spec(max_steps=3, alone=True))
+    with stack.client() as cli:
+        episodes = Episodes(cli)
+        episodes.wait_for_robot()
+        reply = episodes.start(mode="train")
+        assert reply.success, reply.message
+        final = episodes.final(reply.episode_id, timeout=60.0)
+    assert final.state == "aborted" and final.step == 0, (final.state, final.step)
+    assert f"recording refused for {reply.episode_id}" in final.message, final.message
+    assert "min_free_mb" in final.message
+    episodes_dir = Path(stack.env["QG_RUNS_DIR"]) / "episodes"
+    assert not episodes_dir.exists() or not any(episodes_dir.iterdir())
