@@ -227,3 +227,23 @@ def test_qgl_replay_rebuilds_the_replay_from_rl_rate_and_compacted_bags(
                               str(tmp_path / "learner.yaml")])
     assert args.func(args) == 0
     assert f"transitions: {4 * STEPS} from 4 episode(s)" in capsys.readouterr().out
+
+
+def test_a_compacted_bag_keeps_its_rl_rate_messages_byte_for_byte(tmp_path: Path) -> None:
+    from qg_recording.disk_keeper import compact_bag
+    from rosbags.highlevel import AnyReader
+
+    episodes = Episodes(EpisodeRecorder(tmp_path))
+    bag = episodes.record("ep0", ticks=2000)
+    before = list(read_raw(bag, RL_RATE_TOPICS))
+    full = disk_bytes(bag)
+    after_bytes = compact_bag(bag, "test")
+    assert after_bytes == disk_bytes(bag) < 0.1 * full
+    assert list(read_raw(bag)) == before and len(before) == STEPS
+    assert bag_info(bag).complete
+    with AnyReader([bag]) as reader:      # a reader we did not write
+        counts = {c.topic: c.msgcount for c in reader.connections if c.msgcount}
+        assert {c.topic for c in reader.connections} <= RL_RATE_TOPICS
+        decoded = [reader.deserialize(data, c.msgtype) for c, _, data in reader.messages()]
+    assert counts == {"/transitions": STEPS}
+    assert [m.step for m in decoded] == list(range(STEPS))
