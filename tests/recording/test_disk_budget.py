@@ -17,6 +17,7 @@ from qg_recording.disk_keeper import (
     RecordingRefused,
     disk_bytes,
     free_bytes,
+    holds_high_rate,
 )
 from qg_recording.episode_recorder import EpisodeRecorder
 
@@ -202,6 +203,10 @@ def test_a_resumed_run_goes_on_with_the_bags_already_there(tmp_path: Path) -> No
     assert again.recorder.keeper.next_ordinal == 2
     again.record("a2", ticks=1000)
     assert ["/joint_states" in topics_of(tmp_path / b) for b in ("a0", "a1", "a2")] == \
+        [True, False, True]
+    # the same from metadata.yaml alone
+    assert [holds_high_rate(tmp_path / b) for b in ("a0", "a1", "a2")] == [True, False, True]
+    assert [b.high_rate for b in EpisodeRecorder(tmp_path, policy=policy).keeper.bags] == \
         [True, False, True]
 
 
