@@ -17,7 +17,7 @@ import numpy as np
 
 from qg_experiments import stats
 from qg_experiments.profile import GridBudget, VariantBudget
-from qg_experiments.runner import RunSpec
+from qg_experiments.run_spec import RunSpec
 
 __all__ = ["grid_specs", "pair_key", "paired_values", "variant_specs", "cell_table",
            "test_steps", "seed_means", "pairs", "variant_name", "by_variant", "score_matrices",
@@ -134,7 +134,7 @@ def score_matrices(results: list[dict[str, Any]], a: str = "qgddpg", b: str = "d
 def graph_diagnostics(group: list[dict[str, Any]]) -> dict[str, float]:
     """What the bounds did in these runs: the share of TD targets a lower bound raised (mean
     over all training cycles) and the critic's final mean |Q - Monte-Carlo return| on the
-    goal-reaching training episodes (``runner.MonteCarloCheck``), averaged over runs."""
+    goal-reaching training episodes (``critic_check.MonteCarloCheck``), averaged over runs."""
     raised = [c["frac_raised_lower"] for r in group for c in r["cycles"]
               if "frac_raised_lower" in c]
     errors = [next((c["critic_mc_error"] for c in reversed(r["cycles"])

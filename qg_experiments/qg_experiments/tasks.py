@@ -3,7 +3,7 @@
 Every run is a frozen spec with ``name``, ``experiment`` and ``run() -> dict``; its result goes
 to ``<out>/<experiment>/<name>.json`` the moment it finishes, so an interrupted sweep keeps what
 it did, and a second call with the same specs skips runs whose saved spec and config digest
-(see ``runner.config_digest``) are identical. Only where a run executes depends on the backend:
+(see ``core.config_digest``) are identical. Only where a run executes depends on the backend:
 ``process`` (the default) is a pool of one process per core on this machine, ``ray`` hands the
 runs to a Ray cluster (``ray_backend``); a worker of either calls ``run_worker.run_one``.
 Skipping, saving, the progress bar and the results are the same code for both.
@@ -20,8 +20,8 @@ from typing import Any
 
 from tqdm import tqdm
 
+from qg_experiments.core.stack_settings import config_digest
 from qg_experiments.run_worker import RunnableSpec, run_one
-from qg_experiments.runner import config_digest
 
 __all__ = ["RunnableSpec", "BACKENDS", "DEFAULT_WORKERS", "result_path", "run_specs",
            "run_one", "load_results", "unsaved"]

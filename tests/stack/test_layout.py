@@ -22,6 +22,7 @@ CORE_FILES = [
     *ROOT.glob("robot_bridge_node/robot_bridge_node/core/**/*.py"),
     *ROOT.glob("qg_learning_node/qg_learning_node/executor/**/*.py"),
     *ROOT.glob("qg_learning_node/qg_learning_node/learner/**/*.py"),
+    *ROOT.glob("qg_experiments/qg_experiments/core/**/*.py"),
 ]
 
 
@@ -273,7 +274,12 @@ def test_the_gym_package_imports_no_rclpy_and_no_messages():
         if name not in reached:
             reached.add(name)
             todo.extend(graph[name])
-    assert "qg_experiments.runner" in reached and "robot_bridge_node.core.robot_loop" in reached
+    assert "qg_experiments.core.insertion_robot" in reached
+    assert "robot_bridge_node.core.robot_loop" in reached
+    # the core's robot, not the runner's training loop and its learner
+    assert not [m for m in reached if m.startswith(("qg_experiments.runner",
+                                                    "qg_experiments.training",
+                                                    "qg_learning_node.learner.ddpg"))]
     # the frames' kinematics, not their tf messages; the renderer's lookup, not the CLI; no
     # bag code, which parses the message definitions
     assert "robot_bridge_node.core.frame_kinematics" in reached
@@ -281,9 +287,10 @@ def test_the_gym_package_imports_no_rclpy_and_no_messages():
                                                     "robot_bridge_node.core.robot_frames",
                                                     "robot_bridge_node.core.tick_messages"))]
     outside = {n.split(".")[0] for m in reached for n in imported_modules(modules[m])}
-    assert not outside & {"rclpy", "qg_interfaces", "rosidl_runtime_py", "rosidl_adapter"}, \
+    assert not outside & {"rclpy", "qg_interfaces", "rosidl_runtime_py", "rosidl_adapter",
+                          "torch"}, \
         sorted(m for m in reached if {n.split(".")[0] for n in imported_modules(modules[m])}
-               & {"rclpy", "qg_interfaces", "rosidl_runtime_py", "rosidl_adapter"})
+               & {"rclpy", "qg_interfaces", "rosidl_runtime_py", "rosidl_adapter", "torch"})
     # the scan would see it: the ROS environment's module imports messages and rclpy's client
     assert "qg_interfaces.msg" in imported_modules(modules["qg_experiments.gym_envs.ros_insertion"])
 
@@ -311,7 +318,7 @@ def test_the_gym_environments_work_in_a_plain_python_without_ros():
     """``gymnasium.make("qg_experiments:QGInsertion-v0")``, Gymnasium's checker and an
     ``rgb_array`` frame in the venv's Python with a bare environment (no ROS environment
     sourced, no variable of the stack set), as a Gymnasium user runs it. (3.4-4.7 s on the
-    two cores, 26 s while others load them: most of it torch, both engines and the robot.)"""
+    two cores, 26 s while others load them: most of it both engines and the robot.)"""
     plain = {"PATH": "/usr/bin:/bin", "HOME": str(Path.home())}
     out = subprocess.run(["env", "-i", *(f"{k}={v}" for k, v in plain.items()), sys.executable,
                           "-c", _GYM_IN_A_PLAIN_PYTHON], capture_output=True, text=True,
@@ -323,8 +330,59 @@ def test_the_gym_environments_work_in_a_plain_python_without_ros():
     height, width, channels, dtype, colours = lines["frame"]
     assert (int(height), int(width), int(channels), dtype) == (336, 448, 3, "uint8")
     assert int(colours) > 20                     # a picture, not a blank frame
-    # making the environment loads the simulator and the runner's learner, never ROS
-    assert not {"rclpy", "rosidl_adapter", "qg_interfaces"} & set(lines["made"]), lines["made"]
+    # making the environment loads the simulator, never ROS or the learner's torch
+    assert not {"rclpy", "torch", "rosidl_adapter", "qg_interfaces"} & set(lines["made"]), \
+        lines["made"]
+
+
+#: What the experiments' core (``qg_experiments.core``: settings, robot, task) never loads.
+CORE_MUST_NOT_IMPORT = {"rclpy", "torch", "qg_interfaces", "rosidl_adapter", "rosidl_runtime_py",
+                        "rosbags", "qg_recording"}
+
+
+def test_the_experiments_core_depends_on_nothing_that_composes_it():
+    """The core builds the settings, the robot and the task from the bridge's and executor's
+    cores only: every module it reaches (lazily too) imports no ROS, no torch and no message
+    definitions, and nothing of ``qg_experiments`` outside ``core``; the runner's training, the
+    Gym environment and the run specs are built on it."""
+    modules = project_modules()
+    graph = import_graph(modules)
+    core = [m for m in modules if m.startswith("qg_experiments.core")]
+    assert {"qg_experiments.core.stack_settings", "qg_experiments.core.insertion_robot"} <= set(core)
+    reached, todo = set(), list(core)
+    while todo:
+        name = todo.pop()
+        if name not in reached:
+            reached.add(name)
+            todo.extend(graph[name])
+    assert "robot_bridge_node.core.robot_loop" in reached          # the scan follows the arrows
+    assert [m for m in reached if m.startswith("qg_experiments")
+            and not m.startswith("qg_experiments.core")] == []
+    heavy = {m: sorted({n.split(".")[0] for n in imported_modules(modules[m])}
+                       & CORE_MUST_NOT_IMPORT) for m in reached}
+    assert {m: h for m, h in heavy.items() if h} == {}
+    for user in ("qg_experiments.training", "qg_experiments.run_spec",
+                 "qg_experiments.gym_envs.insertion", "qg_experiments.episodes"):
+        assert any(t.startswith("qg_experiments.core") for t in graph[user]), user
+
+
+def test_the_experiments_core_builds_and_steps_the_robot_where_torch_and_ros_cannot_load():
+    """What the scan above reads, at run time: in a fresh interpreter that refuses rclpy, torch
+    and the message packages, the core loads the settings, builds the robot and takes a step."""
+    code = _REFUSE + r"""
+import numpy as np
+from qg_experiments.core import InsertionRobot, StackSettings
+robot = InsertionRobot(StackSettings.load().with_arm_seed(0))
+start = robot.reset(0)
+after = robot.step(np.zeros(2))
+print("stepped", robot.steps, robot.sim_time > 0, robot.settings.engine,
+      bool(np.isfinite(after.tool_position).all()))
+robot.close()
+"""
+    out = subprocess.run([sys.executable, "-c", code, ",".join(CORE_MUST_NOT_IMPORT)],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert out.stdout.split()[-5:] == ["stepped", "1", "True", "mujoco", "True"], out.stdout
 
 
 def test_executables_are_where_ros2_run_looks():

@@ -1,7 +1,7 @@
-"""``QGInsertion-v0``: the Panda shaft insertion in process, on the fast runner's ``InsertionRobot``.
+"""``QGInsertion-v0``: the Panda shaft insertion in process, on the core's ``InsertionRobot``.
 
-The robot side is the runner's (simulator, the bridge's 1 kHz loop, the EKF, read from the same
-``config/`` files); the MDP is the executor's (:class:`~.residual_env.ResidualEnv`). A run of
+The robot side is the core's (``qg_experiments.core``: simulator, the bridge's 1 kHz loop, the
+EKF, read from the same ``config/`` files); the MDP is the executor's (:class:`~.residual_env.ResidualEnv`). A run of
 ``RunSpec(seed=s)`` and this environment after ``reset(seed=s)`` meet the same robot and, given
 the same actions, take the same steps.
 
@@ -10,8 +10,9 @@ biases, housing error and noise streams; ``arm_seed`` fixes one instead) and the
 0 again, so a seeded episode is the same every time. A reset without a seed goes on with the
 robot as it is.
 
-The runner (and with it the learner and torch) is imported when an environment is made, not
-with this module: registering or listing the environments loads none of it.
+The core (and with it the robot plugin and its physics engine) is imported when an environment
+is made, not with this module: registering or listing the environments loads none of it. Neither
+loads the learner, torch or ROS.
 """
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ from qg_experiments.gym_envs.rendering import RobotView
 from qg_experiments.gym_envs.residual_env import ResidualEnv
 
 if TYPE_CHECKING:
-    from qg_experiments.runner import InsertionRobot
+    from qg_experiments.core.insertion_robot import InsertionRobot
 
 __all__ = ["InsertionEnv", "TRAIN_MAX_STEPS"]
 
@@ -45,7 +46,7 @@ class InsertionEnv(ResidualEnv):
     :param housing_yaw: [rad] the housing's rotation about the vertical (start tilts turn with it).
     :param config_dir: the stack's ``config/``; ``None``: the installed files.
     :param robot: the robot plugin (``sim_panda``, ``sim_panda_mujoco``, ...); ``None``: the
-        runner's default (``runner.DEFAULT_ROBOT``).
+        core's default (``core.DEFAULT_ROBOT``).
     :param render_mode: ``rgb_array`` | ``human`` | None (``residual_env``).
     """
 
@@ -54,7 +55,7 @@ class InsertionEnv(ResidualEnv):
                  arm_seed: int | None = None, estimator: str = "ekf", housing_yaw: float = 0.0,
                  config_dir: str | None = None, robot: str | None = None,
                  render_mode: str | None = None) -> None:
-        from qg_experiments.runner import ARMS, DEFAULT_ROBOT, ESTIMATORS, StackSettings
+        from qg_experiments.core import ARMS, DEFAULT_ROBOT, ESTIMATORS, StackSettings
         if arm not in ARMS:
             raise ValueError(f"arm must be one of {ARMS}, got {arm!r}")
         if estimator not in ESTIMATORS:
@@ -73,7 +74,7 @@ class InsertionEnv(ResidualEnv):
         self._build(seed if self.arm_seed is None else self.arm_seed)
 
     def _build(self, arm_seed: int) -> None:
-        from qg_experiments.runner import InsertionRobot
+        from qg_experiments.core.insertion_robot import InsertionRobot
         self.close()
         self.robot = InsertionRobot(self.settings.with_arm_seed(arm_seed), self.estimator)
 
