@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from qg_experiments import grid
+from qg_experiments.core import StackSettings
 from qg_experiments.profile import Profile
 from qg_experiments.random_baselines import random_bar_of, summarize_baselines
 from qg_experiments.report.aggregate_section import aggregate_section
@@ -21,7 +22,6 @@ from qg_experiments.report.grid_sections import (
 from qg_experiments.report.markdown import APART_BLOCKS, marked_blocks, step_label, table
 from qg_experiments.report.peg_sections import peg_budget, peg_paired, peg_section
 from qg_experiments.report.tables import episodes_csv, write_bar, write_csv
-from qg_experiments.runner import StackSettings
 from qg_experiments.tasks import load_results
 from qg_experiments.tensorboard_log import export_runs
 
