@@ -8,7 +8,10 @@ hardware write, which applies the torques and steps the physics); "loop" is the 
 ``tick``. The hardware write is split once more: the physics engine's own step (the world's
 ``step``) and the scene's Python around it (joint friction, sensor errors, the fit's undoing).
 The wrappers cost ~0.2 us each; the total is also timed without them, in a second pass of the
-same steps. Each robot given (``--robot``, default both engines' Panda) is measured in turn, in
+same steps. On MuJoCo a third pass of the same steps splits the engine's step by MuJoCo's own
+timers (``mjData.timer``, fed by a ``mjcb_time`` clock only during that pass: collision broad
+and narrow phase, constraint making, the solver, the rest); its Python clock callback costs
+~0.1 us per timer, so that pass's engine step is printed beside it. Each robot given (``--robot``, default both engines' Panda) is measured in turn, in
 one run. The last line is one JSON object.
 
 Usage: python benchmarks/tick_bench.py [--steps 40] [--seed 0] [--clock wall|cpu]
@@ -22,6 +25,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import mujoco
 import numpy as np
 from qg_common.types import N_START_POSES, WrenchSetpoint
 from qg_experiments.runner import InsertionRobot, StackSettings
@@ -49,6 +53,39 @@ def timed(function: Callable[..., Any], totals: dict[str, float], name: str
         totals[name] += clock() - start
         return result
     return wrapper
+
+
+#: MuJoCo's timers the engine's step is split into (``mujoco.mjtTimer``), by the name printed.
+ENGINE_PARTS = {"collision_broad": "mjTIMER_COL_BROAD", "collision_narrow": "mjTIMER_COL_NARROW",
+                "kinematics_inertia": ("mjTIMER_POS_KINEMATICS", "mjTIMER_POS_INERTIA"),
+                "make_constraints": ("mjTIMER_POS_MAKE", "mjTIMER_POS_PROJECT"),
+                "velocity_actuation": ("mjTIMER_VELOCITY", "mjTIMER_ACTUATION"),
+                "solver": "mjTIMER_CONSTRAINT", "integrate": "mjTIMER_ADVANCE"}
+
+
+def engine_split(task: InsertionRobot, steps: int, seed: int) -> dict[str, float]:
+    """The MuJoCo step of ``task`` split by MuJoCo's timers over ``steps`` RL steps [us per tick].
+
+    Why: collision and solver cannot be told apart from outside ``mj_step``.
+    """
+    data = task.loop.simulation.scene.world.data
+    ids = {name: [int(getattr(mujoco.mjtTimer, t)) for t in ((ts,) if isinstance(ts, str) else ts)]
+           for name, ts in ENGINE_PARTS.items()}
+    step_id = int(mujoco.mjtTimer.mjTIMER_STEP)
+    mujoco.set_mjcb_time(lambda: clock() * 1e6)        # MuJoCo's timers in microseconds
+    try:
+        before = np.array(data.timer.duration, dtype=float)
+        calls_before = int(data.timer.number[step_id])
+        run_steps(task, steps, seed)
+        spent = np.array(data.timer.duration, dtype=float) - before
+        steps_taken = int(data.timer.number[step_id]) - calls_before
+    finally:
+        mujoco.set_mjcb_time(None)
+    us = {name: float(spent[i].sum()) / steps_taken for name, i in ids.items()}
+    step = float(spent[step_id]) / steps_taken
+    us["other"] = step - sum(us.values())
+    us["engine_step (timed)"] = step
+    return us
 
 
 def run_steps(task: InsertionRobot, steps: int, seed: int) -> tuple[int, float]:
@@ -85,14 +122,18 @@ def measure(robot: str, steps: int, seed: int) -> dict[str, Any]:
     us["write"] -= us["engine_step"]          # what remains: the scene's Python around it
     us["loop"] = 1e6 * split_busy / split_ticks - sum(us.values())
     total = 1e6 * busy / ticks
+    engine = engine_split(task, steps, seed) if task.settings.engine == "mujoco" else {}
     task.close()
     print(f"{robot} ({task.settings.engine}):")
     for name, value in us.items():
         print(f"  {name:18s} {value:6.1f} us")
+    for name, value in engine.items():
+        print(f"    engine: {name:20s} {value:6.1f} us")
     print(f"  {'tick (unwrapped)':18s} {total:6.1f} us over {ticks} ticks; outside the engine's "
           f"step: ~{total - us['engine_step']:.0f} us", flush=True)
     return {"engine": task.settings.engine, "us_per_tick": round(total, 1),
-            "us_per_part": {k: round(v, 1) for k, v in us.items()}, "ticks": ticks}
+            "us_per_part": {k: round(v, 1) for k, v in us.items()},
+            "engine_us_per_part": {k: round(v, 2) for k, v in engine.items()}, "ticks": ticks}
 
 
 def main() -> None:
