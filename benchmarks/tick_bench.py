@@ -9,9 +9,9 @@ hardware write, which applies the torques and steps the physics); "loop" is the 
 ``step``) and the scene's Python around it (joint friction, sensor errors, the fit's undoing).
 The wrappers cost ~0.2 us each; the total is also timed without them, in a second pass of the
 same steps. On MuJoCo a third pass of the same steps splits the engine's step by MuJoCo's own
-timers (``mjData.timer``, fed by a ``mjcb_time`` clock only during that pass: collision broad
-and narrow phase, constraint making, the solver, the rest); its Python clock callback costs
-~0.1 us per timer, so that pass's engine step is printed beside it. Each robot given (``--robot``, default both engines' Panda) is measured in turn, in
+timers (``mjData.timer``, fed by ``time.perf_counter`` as ``mjcb_time`` only during that pass:
+collision broad and narrow phase, constraint making, the solver, the rest); the Python clock
+callback costs a little per timer, so that pass's engine step is printed beside it. Each robot given (``--robot``, default both engines' Panda) is measured in turn, in
 one run. The last line is one JSON object.
 
 Usage: python benchmarks/tick_bench.py [--steps 40] [--seed 0] [--clock wall|cpu]
@@ -72,7 +72,7 @@ def engine_split(task: InsertionRobot, steps: int, seed: int) -> dict[str, float
     ids = {name: [int(getattr(mujoco.mjtTimer, t)) for t in ((ts,) if isinstance(ts, str) else ts)]
            for name, ts in ENGINE_PARTS.items()}
     step_id = int(mujoco.mjtTimer.mjTIMER_STEP)
-    mujoco.set_mjcb_time(lambda: clock() * 1e6)        # MuJoCo's timers in microseconds
+    mujoco.set_mjcb_time(time.perf_counter)      # the wall clock whatever --clock: the cheapest
     try:
         before = np.array(data.timer.duration, dtype=float)
         calls_before = int(data.timer.number[step_id])
@@ -81,6 +81,7 @@ def engine_split(task: InsertionRobot, steps: int, seed: int) -> dict[str, float
         steps_taken = int(data.timer.number[step_id]) - calls_before
     finally:
         mujoco.set_mjcb_time(None)
+    spent *= 1e6                                  # [us]
     us = {name: float(spent[i].sum()) / steps_taken for name, i in ids.items()}
     step = float(spent[step_id]) / steps_taken
     us["other"] = step - sum(us.values())
