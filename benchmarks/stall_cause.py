@@ -20,6 +20,7 @@ One JSON line a stalled pose, one a seed, the last line the summary over the see
 
 Usage: python benchmarks/stall_cause.py [--seeds 0 1 2 3 4] [--algorithm qgddpg] [--lr 1e-2]
            [--iterations 50] [--mc 2] [--clean-fraction P] [--self-loop-tol T] [--no-probe]
+           [--ddpg KEY=VALUE ...]   (any DDPGConfig field, e.g. twin_critics=true target_noise=0.2)
 """
 from __future__ import annotations
 
@@ -32,6 +33,7 @@ from typing import Any
 
 import numpy as np
 import torch
+import yaml
 from qg_common.types import N_START_POSES
 from qg_experiments.runner import (
     InsertionRobot,
@@ -89,9 +91,11 @@ def drive(env: InsertionRobot, episode: Episode, actor: Any, on_step: Any = None
 
 
 def train(seed: int, algorithm: str, clean_fraction: float, self_loop_tol: float,
-          episodes: int = 40, critic_lr: float = 1e-2, iterations: int = 50) -> Trained:
-    """The probe's learning (``stall_probe.trained``) for ``algorithm``, with the remedies' two
-    settings, keeping the true depth before and after every training step."""
+          episodes: int = 40, critic_lr: float = 1e-2, iterations: int = 50,
+          ddpg: dict[str, Any] | None = None) -> Trained:
+    """The probe's learning (``stall_probe.trained``) for ``algorithm``, with the remedies'
+    settings (``ddpg``: DDPGConfig fields to override), keeping the true depth before and after
+    every training step."""
     spec = RunSpec(algorithm, critic_lr, iterations, seed, train_episodes=episodes,
                    train_max_steps=50)
     settings = StackSettings.load(spec.config_dir, spec.arm, spec.robot).with_arm_seed(seed)
@@ -105,6 +109,8 @@ def train(seed: int, algorithm: str, clean_fraction: float, self_loop_tol: float
     if self_loop_tol >= 0:
         config = dataclasses.replace(config, ddpg=dataclasses.replace(
             config.ddpg, self_loop_tol=self_loop_tol))
+    if ddpg:
+        config = dataclasses.replace(config, ddpg=dataclasses.replace(config.ddpg, **ddpg))
     learner = LearnerCore(config, env.residual.state_dim, ACTION_DIM)
     policy = LivePolicy(learner.agent)
     log: dict[str, list] = {k: [] for k in ("s", "a", "r", "s2", "term", "depth0", "depth1")}
@@ -139,18 +145,17 @@ def discounted(rewards: list[float], gamma: float) -> float:
 
 def critic_over_actions(run: Trained, s: np.ndarray, a: np.ndarray) -> dict[str, Any]:
     """Is ``a`` a local maximum of Q(s, .)? Gradient, a grid over the box, random neighbours."""
-    critic = run.learner.agent.critic
+    agent = run.learner.agent
     rng = np.random.default_rng(0)
     st = torch.tensor(s[None], dtype=torch.float32)
     at = torch.tensor(a[None], dtype=torch.float32, requires_grad=True)
-    q = critic(st, at)
+    q = agent.q(st, at)     # the value the actor maximises
     (grad,) = torch.autograd.grad(q.sum(), at)
     q_sa = float(q.item())
     axis = np.linspace(-1.0, 1.0, 41)
     grid = np.stack(np.meshgrid(axis, axis, indexing="ij"), -1).reshape(-1, 2)
     near = np.clip(a + rng.normal(0.0, 0.1, (512, 2)), -1.0, 1.0)
     noisy = np.clip(a + rng.normal(0.0, run.settings.noise.sigma, (512, 2)), -1.0, 1.0)
-    agent = run.learner.agent
     q_grid = agent.q_values(np.repeat(s[None], len(grid), 0), grid)
     q_near = agent.q_values(np.repeat(s[None], len(near), 0), near)
     q_noisy = agent.q_values(np.repeat(s[None], len(noisy), 0), noisy)
@@ -321,13 +326,17 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=40, help="training episodes")
     parser.add_argument("--no-probe", action="store_true",
                         help="count stalls only (the remedies' protocol)")
+    parser.add_argument("--ddpg", nargs="*", default=[], metavar="KEY=VALUE",
+                        help="DDPGConfig fields to override (values read as YAML)")
     args = parser.parse_args()
+    ddpg = {key: yaml.safe_load(value) for key, _, value in
+            (item.partition("=") for item in args.ddpg)}
     torch.set_num_threads(1)
     rows, per_seed = [], []
     for seed in args.seeds:
         start = time.perf_counter()
         run = train(seed, args.algorithm, args.clean_fraction, args.self_loop_tol,
-                    args.episodes, args.lr, args.iterations)
+                    args.episodes, args.lr, args.iterations, ddpg)
         moved = np.abs(run.steps["s2"] - run.steps["s"]).max(1)
         loops = (moved <= LOOP_TOL) & (run.steps["term"] == 0)
         seed_rows = []
@@ -351,7 +360,7 @@ def main() -> None:
         print(json.dumps(per_seed[-1]), flush=True)
     print(json.dumps({"algorithm": args.algorithm, "lr": args.lr, "iterations": args.iterations,
                       "clean_fraction": args.clean_fraction,
-                      "self_loop_tol": args.self_loop_tol, "seeds": per_seed,
+                      "self_loop_tol": args.self_loop_tol, "ddpg": ddpg, "seeds": per_seed,
                       **summary(rows)}))
 
 

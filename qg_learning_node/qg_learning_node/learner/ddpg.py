@@ -16,6 +16,10 @@ With ``DDPGConfig.self_loop_tol`` set, a transition whose state did not move (at
 deterministic world, a self-loop) takes ``r / (1 - gamma)`` as its TD target before the bounds:
 the exact value of repeating its action forever.
 
+With ``DDPGConfig.twin_critics`` (TD3's clipped double Q) two critics are fitted to one target
+built from the minimum of both, and the actor maximises that minimum; ``target_noise`` smooths
+the target action (TD3's target policy smoothing). Both are off by default (the thesis).
+
 The actor's loss is ``-Q(s, pi(s))``, plus, if ``DDPGConfig.actor_preact_penalty`` is set, that
 weight times the mean squared pre-tanh output: a bound that lifts a whole goal-reaching chain at
 once can drive the tanh into saturation on every state, where it passes no gradient back.
@@ -94,6 +98,13 @@ class Critic(nn.Module):
         return self.net(torch.cat([states, actions], dim=-1)).squeeze(-1)
 
 
+def _min_q(critic: Critic, twin: Critic | None, states: torch.Tensor,
+           actions: torch.Tensor) -> torch.Tensor:
+    """``critic``'s value, or the minimum of it and its ``twin``'s."""
+    q = critic(states, actions)
+    return q if twin is None else torch.minimum(q, twin(states, actions))
+
+
 class DDPG:
     """Actor-critic pair with the bounded train step of thesis Algorithm 4.
 
@@ -114,6 +125,17 @@ class DDPG:
         self.critic_target = copy.deepcopy(self.critic) if config.target_networks else self.critic
         self.actor_opt = Adam(self.actor.parameters(), lr=config.effective_actor_lr)
         self.critic_opt = Adam(self.critic.parameters(), lr=config.critic_lr)
+        # The twin (drawn after the thesis's networks, so they are the same with or without it).
+        self.critic2: Critic | None = None
+        self.critic2_target: Critic | None = None
+        self.critic2_opt: Adam | None = None
+        if config.twin_critics:
+            self.critic2 = Critic(build_mlp([state_dim + action_dim, *config.critic_hidden, 1],
+                                            nn.ReLU, None, config.critic_init, generator))
+            self.critic2_target = (copy.deepcopy(self.critic2) if config.target_networks
+                                   else self.critic2)
+            self.critic2_opt = Adam(self.critic2.parameters(), lr=config.critic_lr)
+        self.target_noise_rng = torch.Generator().manual_seed(config.seed + 1)
         self.range = realisable_range(config.r_min, config.r_max, config.gamma)
         self.train_steps = 0
 
@@ -123,10 +145,23 @@ class DDPG:
             return self.actor(torch.as_tensor(state, dtype=torch.float32)).double().numpy()
 
     def q_values(self, states: np.ndarray, actions: np.ndarray) -> np.ndarray:
-        """Critic predictions for a batch of state-action pairs."""
+        """Critic predictions for a batch of state-action pairs (:meth:`q`, without gradients)."""
         with torch.no_grad():
-            return self.critic(torch.as_tensor(states, dtype=torch.float32),
-                               torch.as_tensor(actions, dtype=torch.float32)).double().numpy()
+            return self.q(torch.as_tensor(states, dtype=torch.float32),
+                          torch.as_tensor(actions, dtype=torch.float32)).double().numpy()
+
+    def q(self, states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        """The value the actor maximises: the critic's, or with twins their minimum."""
+        return _min_q(self.critic, self.critic2, states, actions)
+
+    def _target_q(self, next_states: torch.Tensor) -> torch.Tensor:
+        """The target critics' value of the target actor's (smoothed) action at ``next_states``."""
+        actions = self.actor_target(next_states)
+        sigma = self.config.target_noise
+        if sigma > 0:
+            noise = torch.randn(actions.shape, generator=self.target_noise_rng) * sigma
+            actions = torch.clamp(actions + noise.clamp(-2.5 * sigma, 2.5 * sigma), -1.0, 1.0)
+        return _min_q(self.critic_target, self.critic2_target, next_states, actions)
 
     def _target_bounds(self, batch: Batch, reward_range: tuple[float, float] | None
                        ) -> tuple[np.ndarray | float, float]:
@@ -179,8 +214,7 @@ class DDPG:
         s, a, r, s2 = f(batch.states), f(batch.actions), f(batch.rewards), f(batch.next_states)
         done = f(batch.terminals)
         with torch.no_grad():
-            y_td = r + self.config.gamma * (1.0 - done) * self.critic_target(
-                s2, self.actor_target(s2))
+            y_td = r + self.config.gamma * (1.0 - done) * self._target_q(s2)
             if self.config.self_loop_tol > 0:
                 y_td = torch.where(self._self_loops(batch), r / (1.0 - self.config.gamma), y_td)
         lower, upper = self._target_bounds(batch, reward_range)
@@ -201,18 +235,24 @@ class DDPG:
                 + torch.relu(torch.where(torch.isfinite(he_upper), q - he_upper, 0.0)) ** 2)
             frac_raised = (y_td < he_lower).float().mean().item()
             frac_lowered = (y_td > he_upper).float().mean().item()
-        self.critic_opt.zero_grad()
-        critic_loss.backward()
-        self.critic_opt.step()
+        fitted = critic_loss
+        if self.critic2 is not None:
+            fitted = fitted + torch.mean((y - self.critic2(s, a)) ** 2)
+        for opt in self._critic_opts():
+            opt.zero_grad()
+        fitted.backward()
+        for opt in self._critic_opts():
+            opt.step()
 
         pre_tanh = self.actor[:-1](s)      # the actor without its output tanh
-        actor_loss = -self.critic(s, torch.tanh(pre_tanh)).mean()
+        actor_loss = -self.q(s, torch.tanh(pre_tanh)).mean()
         if self.config.actor_preact_penalty > 0:
             actor_loss = actor_loss + self.config.actor_preact_penalty * torch.mean(pre_tanh ** 2)
         self.actor_opt.zero_grad()
         actor_loss.backward()
         self.actor_opt.step()
-        self.critic_opt.zero_grad()  # the actor loss also filled critic gradients
+        for opt in self._critic_opts():
+            opt.zero_grad()  # the actor loss also filled critic gradients
 
         if self.config.target_networks:
             self._soft_update()
@@ -228,10 +268,16 @@ class DDPG:
             'frac_outside_range': float(np.mean((q_np < lo) | (q_np > hi))),
         }
 
+    def _critic_opts(self) -> list[Adam]:
+        return [self.critic_opt] + ([self.critic2_opt] if self.critic2_opt is not None else [])
+
     def _soft_update(self) -> None:
         tau = self.config.tau
+        pairs = [(self.actor, self.actor_target), (self.critic, self.critic_target)]
+        if self.critic2 is not None:
+            pairs.append((self.critic2, self.critic2_target))
         with torch.no_grad():
-            for net, target in ((self.actor, self.actor_target), (self.critic, self.critic_target)):
+            for net, target in pairs:
                 for p, p_t in zip(net.parameters(), target.parameters()):
                     p_t.mul_(1.0 - tau).add_(tau * p)
 
@@ -244,7 +290,8 @@ class DDPG:
         """Use these Adam step sizes from the next train step on (the moments are kept)."""
         if not critic_lr > 0 or not actor_lr > 0:
             raise ValueError(f'learning rates must be > 0, got {critic_lr}, {actor_lr}')
-        for optimizer, lr in ((self.critic_opt, critic_lr), (self.actor_opt, actor_lr)):
+        for optimizer, lr in [(opt, critic_lr) for opt in self._critic_opts()] + [
+                (self.actor_opt, actor_lr)]:
             for group in optimizer.param_groups:
                 group['lr'] = lr
 
@@ -255,6 +302,11 @@ class DDPG:
         if self.config.target_networks:
             state['actor_target'] = self.actor_target.state_dict()
             state['critic_target'] = self.critic_target.state_dict()
+        if self.critic2 is not None:
+            state['critic2'] = self.critic2.state_dict()
+            state['critic2_opt'] = self.critic2_opt.state_dict()
+            if self.config.target_networks:
+                state['critic2_target'] = self.critic2_target.state_dict()
         return copy.deepcopy(state)  # a snapshot: live tensors would keep changing
 
     def load_state_dict(self, state: dict) -> None:
@@ -266,3 +318,10 @@ class DDPG:
         if self.config.target_networks:
             self.actor_target.load_state_dict(state['actor_target'])
             self.critic_target.load_state_dict(state['critic_target'])
+        if self.critic2 is not None:
+            if 'critic2' not in state:
+                raise ValueError('this checkpoint has one critic; ddpg.twin_critics needs two')
+            self.critic2.load_state_dict(state['critic2'])
+            self.critic2_opt.load_state_dict(state['critic2_opt'])
+            if self.config.target_networks:
+                self.critic2_target.load_state_dict(state['critic2_target'])

@@ -71,6 +71,15 @@ class DDPGConfig:
         time; a deterministic actor that chose it stays there, and ``r / (1 - gamma)`` is
         that actor's exact value (docs/learning.md section 17). Bootstrapping the same loop
         from the critic only shrinks its error by ``gamma`` per pass.
+    :param twin_critics: two critics from different initialisations, both fitted to the same
+        target ``r + gamma * min(Q1, Q2)(s', a')``, the actor maximising ``min(Q1, Q2)``
+        (TD3's clipped double Q, with the actor pessimistic too, as SAC's). Why: the stalled
+        actor sits where its single critic overestimates an action replay never held; two
+        critics disagree most where neither has data, and their minimum is lower there.
+    :param target_noise: standard deviation of the noise added to the target action ``a' =
+        pi(s')`` (clipped to 2.5 times itself and to the action box), 0 = none (TD3's target
+        policy smoothing uses 0.2): the target then values a neighbourhood of the actor's
+        action, not a single point the critic can overfit.
     :param seed: seed of the network initialisation.
     """
 
@@ -91,6 +100,8 @@ class DDPGConfig:
     he_lambda: float = 0.01
     actor_preact_penalty: float = 0.0
     self_loop_tol: float = 0.0
+    twin_critics: bool = False
+    target_noise: float = 0.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -118,6 +129,8 @@ class DDPGConfig:
             raise ValueError('he_horizon must be >= 1 and he_lambda >= 0')
         if not 0.0 <= self.self_loop_tol < math.inf:
             raise ValueError(f'self_loop_tol must be a finite number >= 0, got {self.self_loop_tol}')
+        if not 0.0 <= self.target_noise < math.inf:
+            raise ValueError(f'target_noise must be a finite number >= 0, got {self.target_noise}')
         if not 0.0 <= self.actor_preact_penalty < math.inf:
             raise ValueError('actor_preact_penalty must be a finite number >= 0, got '
                              f'{self.actor_preact_penalty}')
