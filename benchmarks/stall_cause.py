@@ -21,6 +21,7 @@ One JSON line a stalled pose, one a seed, the last line the summary over the see
 Usage: python benchmarks/stall_cause.py [--seeds 0 1 2 3 4] [--algorithm qgddpg] [--lr 1e-2]
            [--iterations 50] [--mc 2] [--clean-fraction P] [--self-loop-tol T] [--no-probe]
            [--ddpg KEY=VALUE ...]   (any DDPGConfig field, e.g. twin_critics=true target_noise=0.2)
+           [--noise KEY=VALUE ...]  (any NoiseConfig field, e.g. clean_episode_fraction=0.25)
 """
 from __future__ import annotations
 
@@ -92,9 +93,9 @@ def drive(env: InsertionRobot, episode: Episode, actor: Any, on_step: Any = None
 
 def train(seed: int, algorithm: str, clean_fraction: float, self_loop_tol: float,
           episodes: int = 40, critic_lr: float = 1e-2, iterations: int = 50,
-          ddpg: dict[str, Any] | None = None) -> Trained:
+          ddpg: dict[str, Any] | None = None, noise: dict[str, Any] | None = None) -> Trained:
     """The probe's learning (``stall_probe.trained``) for ``algorithm``, with the remedies'
-    settings (``ddpg``: DDPGConfig fields to override), keeping the true depth before and after
+    settings (``ddpg``, ``noise``: DDPGConfig and NoiseConfig fields to override), keeping the true depth before and after
     every training step."""
     spec = RunSpec(algorithm, critic_lr, iterations, seed, train_episodes=episodes,
                    train_max_steps=50)
@@ -102,6 +103,7 @@ def train(seed: int, algorithm: str, clean_fraction: float, self_loop_tol: float
     noise_config = settings.noise
     if clean_fraction >= 0:
         noise_config = dataclasses.replace(noise_config, clean_fraction=clean_fraction)
+    noise_config = dataclasses.replace(noise_config, **(noise or {}))
     settings = dataclasses.replace(settings, noise=noise_config, task=dataclasses.replace(
         settings.task, train_max_steps=spec.train_max_steps, test_max_steps=TEST_CAP))
     env = InsertionRobot(settings, spec.estimator)
@@ -328,15 +330,17 @@ def main() -> None:
                         help="count stalls only (the remedies' protocol)")
     parser.add_argument("--ddpg", nargs="*", default=[], metavar="KEY=VALUE",
                         help="DDPGConfig fields to override (values read as YAML)")
+    parser.add_argument("--noise", nargs="*", default=[], metavar="KEY=VALUE",
+                        help="NoiseConfig fields to override (values read as YAML)")
     args = parser.parse_args()
-    ddpg = {key: yaml.safe_load(value) for key, _, value in
-            (item.partition("=") for item in args.ddpg)}
+    ddpg, noise = ({key: yaml.safe_load(value) for key, _, value in
+                    (item.partition("=") for item in items)} for items in (args.ddpg, args.noise))
     torch.set_num_threads(1)
     rows, per_seed = [], []
     for seed in args.seeds:
         start = time.perf_counter()
         run = train(seed, args.algorithm, args.clean_fraction, args.self_loop_tol,
-                    args.episodes, args.lr, args.iterations, ddpg)
+                    args.episodes, args.lr, args.iterations, ddpg, noise)
         moved = np.abs(run.steps["s2"] - run.steps["s"]).max(1)
         loops = (moved <= LOOP_TOL) & (run.steps["term"] == 0)
         seed_rows = []
@@ -360,7 +364,7 @@ def main() -> None:
         print(json.dumps(per_seed[-1]), flush=True)
     print(json.dumps({"algorithm": args.algorithm, "lr": args.lr, "iterations": args.iterations,
                       "clean_fraction": args.clean_fraction,
-                      "self_loop_tol": args.self_loop_tol, "ddpg": ddpg, "seeds": per_seed,
+                      "self_loop_tol": args.self_loop_tol, "ddpg": ddpg, "noise": noise, "seeds": per_seed,
                       **summary(rows)}))
 
 

@@ -36,9 +36,10 @@ __all__ = ["BaselineSpec", "baseline_noise", "baseline_specs", "run_baseline", "
 
 def baseline_noise(noise: NoiseConfig, spec: BaselineSpec) -> NoiseConfig:
     """The executor's ``noise`` as a random policy of ``spec``'s kind and sigma: every step
-    noisy (``clean_fraction`` 0: the zero actor has no action of its own to send clean, so a
-    clean step would be the zero residual, a different policy)."""
-    return dataclasses.replace(noise, kind=spec.kind, sigma=spec.sigma, clean_fraction=0.0)
+    noisy (no clean steps or episodes: the zero actor has no action of its own to send clean,
+    so a clean step would be the zero residual, a different policy)."""
+    return dataclasses.replace(noise, kind=spec.kind, sigma=spec.sigma, clean_fraction=0.0,
+                               clean_episode_fraction=0.0)
 
 
 @dataclass(frozen=True)

@@ -95,7 +95,28 @@ def test_clean_fraction_is_checked():
 
 def test_a_random_baseline_sends_noise_on_every_step_whatever_the_executors_clean_steps():
     from qg_experiments.random_baselines import BaselineSpec, baseline_noise
-    config = baseline_noise(NoiseConfig(clean_fraction=0.2), BaselineSpec('uniform', 0.3))
-    assert (config.kind, config.clean_fraction) == ('uniform', 0.0)
+    config = baseline_noise(NoiseConfig(clean_fraction=0.2, clean_episode_fraction=0.5),
+                            BaselineSpec('uniform', 0.3))
+    assert (config.kind, config.clean_fraction, config.clean_episode_fraction) == ('uniform', 0.0, 0.0)
     noise = ActionNoise(config, 2, seed=1)
     assert not any(np.all(noise.explore(np.zeros(2)) == 0.0) for _ in range(500))
+
+
+def test_a_clean_episode_sends_the_actors_own_action_on_every_step():
+    config = NoiseConfig(clean_fraction=0.0, clean_episode_fraction=0.25)
+    clean = []
+    for seed in range(400):
+        noise = ActionNoise(config, 2, seed=seed)
+        action = np.array([0.3, -0.4])
+        steps = [noise.explore(action) for _ in range(5)]
+        all_clean = all(np.array_equal(a, action) for a in steps)
+        assert all_clean == noise.clean_episode          # a whole episode, or no step
+        clean.append(all_clean)
+    assert 0.19 < np.mean(clean) < 0.31                  # a quarter of the episodes
+    # the noisy episodes keep the thesis's samples
+    noisy_seed = clean.index(False)
+    thesis = ActionNoise(NoiseConfig(clean_fraction=0.0), 2, seed=noisy_seed)
+    ours = ActionNoise(config, 2, seed=noisy_seed)
+    np.testing.assert_array_equal(ours.explore(np.zeros(2)), thesis.explore(np.zeros(2)))
+    with pytest.raises(ValueError, match='clean_episode_fraction'):
+        NoiseConfig(clean_episode_fraction=1.2)

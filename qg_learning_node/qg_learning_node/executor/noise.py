@@ -28,12 +28,17 @@ class NoiseConfig:
         noise on every step that action never reaches replay, and the critic never learns
         what it is worth (docs/learning.md section 17). A random policy (a zero actor) has no
         action of its own: its baselines keep 0.
+    :param clean_episode_fraction: share of training episodes that send the actor's own action
+        on every step (0: none). Why: the deterministic test actor follows its own path, which
+        noisy episodes leave after a step or two; a clean episode puts that whole path, and a
+        stall at its end, into replay, where the critic learns what the stall is worth.
     """
     kind: str = "gaussian"
     sigma: float = 0.3
     theta: float = 1.0
     dt: float = 0.01
     clean_fraction: float = 0.2
+    clean_episode_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -42,6 +47,9 @@ class NoiseConfig:
             raise ValueError(f"noise needs sigma >= 0, theta >= 0, dt > 0; got {self}")
         if not 0.0 <= self.clean_fraction <= 1.0:
             raise ValueError(f"noise clean_fraction must lie in [0, 1], got {self.clean_fraction}")
+        if not 0.0 <= self.clean_episode_fraction <= 1.0:
+            raise ValueError("noise clean_episode_fraction must lie in [0, 1], got "
+                             f"{self.clean_episode_fraction}")
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> NoiseConfig:
@@ -64,6 +72,9 @@ class ActionNoise:
         self.rng = np.random.default_rng(seed)
         # the clean steps draw from their own stream: the noise samples stay those of the seed
         self.clean_rng = np.random.default_rng([seed, 1])
+        fraction = self.config.clean_episode_fraction
+        self.clean_episode = fraction > 0 and bool(
+            np.random.default_rng([seed, 2]).random() < fraction)
         self.ou_state = np.zeros(self.dim)
 
     def sample(self) -> np.ndarray:
@@ -83,8 +94,10 @@ class ActionNoise:
         return np.clip(action + self.sample(), -1.0, 1.0)
 
     def clean_step(self) -> bool:
-        """Whether this training step goes without noise (``clean_fraction`` of them, drawn
-        from their own seeded stream)."""
+        """Whether this training step goes without noise (every step of a clean episode, else
+        ``clean_fraction`` of them, drawn from their own seeded stream)."""
+        if self.clean_episode:
+            return True
         return self.config.clean_fraction > 0 and bool(
             self.clean_rng.random() < self.config.clean_fraction)
 
