@@ -39,7 +39,7 @@ def run_demo(robots: int, seed: int, args: argparse.Namespace, runs: Path) -> di
     """One ``qgl demo`` run; its figures from its ``episodes.json``."""
     folder = runs / f"robots{robots}_seed{seed}"
     folder.mkdir(parents=True, exist_ok=True)
-    command = [sys.executable, "-m", "qg_learning_node.cli.main", "demo", "--robots",
+    command = [sys.executable, "-m", "qg_bringup.main", "demo", "--robots",
                str(robots), "--seed", str(seed), "--train-episodes", str(args.train_episodes),
                "--test-poses", str(args.test_poses), "--runs-dir", str(folder), *args.demo_args]
     started = time.monotonic()

@@ -22,13 +22,13 @@ import time
 from pathlib import Path
 
 import torch
+from qg_bringup.policy import export_core
 from qg_common.types import N_START_POSES
 from qg_experiments.runner import (
     InsertionRobot,
     RunSpec,
     run_episode,
 )
-from qg_learning_node.cli.policy import export_core
 from qg_learning_node.executor.episode import Episode
 from qg_learning_node.learner.learner_core import LearnerCore
 from qg_learning_node.policy_file import load_policy

@@ -23,13 +23,13 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+from qg_bringup.demo import DemoSettings, _with_demo_settings, wait_for_stack
+from qg_bringup.episode_schedule import EpisodeJob, run_lanes
+from qg_bringup.fleet import fleet_specs, robot_namespace
+from qg_bringup.launcher import Launcher, load_stack_config
+from qg_bringup.ros_env import stack_env
 from qg_common.params import config_file
-from qg_learning_node.cli.demo import DemoSettings, _with_demo_settings, wait_for_stack
-from qg_learning_node.cli.episode_schedule import EpisodeJob, run_lanes
-from qg_learning_node.cli.fleet import fleet_specs, robot_namespace
-from qg_learning_node.cli.launcher import Launcher, load_stack_config
-from qg_learning_node.cli.ros_client import CliNode
-from qg_learning_node.cli.ros_env import stack_env
+from qg_common.ros_client import CliNode
 from robot_bridge_node.core.tick_timing import TimingSnapshot
 
 REALTIME = {("robot_bridge_node", "robot"): ("-p", "sim.clock_mode:=realtime")}

@@ -34,13 +34,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
+from qg_bringup.demo import DemoSettings, start_stack
+from qg_bringup.episode_wait import FINAL_STATES
+from qg_bringup.fleet import robot_namespace
 from qg_common import topics
 from qg_common.params import config_file
+from qg_common.ros_client import CliNode, call_service
 from qg_common.topics import LATCHED
-from qg_learning_node.cli.demo import DemoSettings, start_stack
-from qg_learning_node.cli.episode_wait import FINAL_STATES
-from qg_learning_node.cli.fleet import robot_namespace
-from qg_learning_node.cli.ros_client import CliNode, call_service
 from qg_recording.bag_reader import bag_info
 
 

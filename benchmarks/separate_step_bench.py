@@ -9,7 +9,7 @@ before the loop took its clock from the stamps and the separate processes handed
 every 0.1 ms. The last line is one JSON object.
 
 Usage: python benchmarks/separate_step_bench.py [--steps 8]
-(in the stack environment: eval "$(.venv/bin/python -m qg_learning_node.cli.ros_env)")
+(in the stack environment: eval "$(.venv/bin/python -m qg_bringup.ros_env)")
 """
 from __future__ import annotations
 
@@ -28,15 +28,15 @@ WRENCHES = ((0.0, 0.0, -8.0, 0.0, 0.3, 0.0), (0.0, 0.0, -8.0, 0.3, 0.0, 0.0),
 
 
 def run(steps: int, domain_id: str) -> dict:
+    from qg_bringup.launcher import Launcher, ProcessSpec
+    from qg_bringup.ros_env import stack_env
     from qg_common.conversions import setpoint_msg, start_pose_request, time_msg
     from qg_common.params import config_file, load_ros_params
+    from qg_common.ros_client import CliNode, call_service
     from qg_common.shaft_task import ShaftTaskGeometry
     from qg_common.types import WrenchSetpoint as Setpoint
     from qg_interfaces.msg import AtRest, WrenchSetpoint
     from qg_interfaces.srv import MoveToStart
-    from qg_learning_node.cli.launcher import Launcher, ProcessSpec
-    from qg_learning_node.cli.ros_client import CliNode, call_service
-    from qg_learning_node.cli.ros_env import stack_env
 
     work = Path(tempfile.mkdtemp(prefix="separate_step_"))
     env = stack_env(domain_id=domain_id, log_dir=work / "ros_log")

@@ -21,14 +21,14 @@ import tempfile
 import time
 from pathlib import Path
 
-from qg_common.params import config_file
-from qg_learning_node.cli.demo import (
+from qg_bringup.demo import (
     DemoSettings,
     run_episode_by_service,
     start_stack,
     wait_for_stack,
 )
-from qg_learning_node.cli.ros_client import CliNode
+from qg_common.params import config_file
+from qg_common.ros_client import CliNode
 from qg_recording.bag_reader import bag_info
 from tqdm import tqdm
 

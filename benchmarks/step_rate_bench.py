@@ -111,15 +111,15 @@ def step_time_split(setpoints: list[tuple[float, int]], rests: list[tuple[float,
 
 
 def through_ros(episodes: int) -> dict:
-    from qg_common.params import config_file
-    from qg_interfaces.msg import AtRest, WrenchSetpoint
-    from qg_learning_node.cli.demo import (
+    from qg_bringup.demo import (
         DemoSettings,
         run_episode_by_service,
         start_stack,
         wait_for_stack,
     )
-    from qg_learning_node.cli.ros_client import CliNode
+    from qg_common.params import config_file
+    from qg_common.ros_client import CliNode
+    from qg_interfaces.msg import AtRest, WrenchSetpoint
 
     settings = DemoSettings(train_max_steps=CAP, critic_lr=CRITIC_LR, iterations=ITERATIONS)
     launcher, env = start_stack(Path(tempfile.mkdtemp(prefix="step_rate_")), settings,

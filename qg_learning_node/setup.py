@@ -29,7 +29,6 @@ setup(
         'console_scripts': [
             'executor = qg_learning_node.executor_node:main',
             'learner = qg_learning_node.learner_node:main',
-            'qgl = qg_learning_node.cli.main:main',
         ],
     },
 )

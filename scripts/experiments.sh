@@ -12,7 +12,7 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 bash scripts/setup.sh
 export QG_ROS_INSTALL="$ROOT/ros_ws/install"    # the workspace the Python side runs from
-eval "$(.venv/bin/python -m qg_learning_node.cli.ros_env)"   # config files via the ament index
+eval "$(.venv/bin/python -m qg_bringup.ros_env)"   # config files via the ament index
 args=("$@")
 [[ " ${args[*]-} " == *" --profile "* ]] || args=(--profile thesis "${args[@]}")
 exec .venv/bin/python -m qg_experiments "${args[@]}"

@@ -61,7 +61,7 @@ fi
 #    environment), with their metadata: robots and environments are plugins found through
 #    entry points (egg-info beside each source tree), and `qgl` is a console script of the venv.
 PY_PACKAGES=(ros_ws/src/qg_common ros_ws/src/qg_recording sim_robot_node franka_robot_node franka_sim_node robot_bridge_node qg_learning_node
-             qg_experiments)
+             qg_experiments qg_bringup)
 site="$("$PY" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
 printf "$ROOT/%s\n" "${PY_PACKAGES[@]}" > "$site/qg_stack_sources.pth"
 # A plain interpreter of the venv (no ROS environment sourced: a Gymnasium user's) finds the
@@ -76,7 +76,7 @@ if [[ "$(cat "$STAMPS/egg_info" 2>/dev/null)" != "$meta_hash" ]]; then
   done
   echo "$meta_hash" > "$STAMPS/egg_info"
 fi
-# `qgl` is the console script qg_learning_node declares; this is the wrapper pip would write,
+# `qgl` is the console script qg_bringup declares; this is the wrapper pip would write,
 # plus where the workspace is (a sourced shell's ament index says it too).
 cat > "$VENV/bin/qgl" <<EOF
 #!$PY
@@ -90,7 +90,7 @@ EOF
 chmod +x "$VENV/bin/qgl"
 
 # 5. colcon build of the workspace (the interface packages qg_interfaces and tf2_msgs, which no
-#    wheel ships, + the seven ament_python packages).
+#    wheel ships, + the ament_python packages of PY_PACKAGES).
 src_hash="$(cd "$ROOT" && find ros_ws/src/qg_interfaces ros_ws/src/tf2_msgs "${PY_PACKAGES[@]}" \
   -type f \( -name '*.msg' -o -name '*.srv' -o -name 'CMakeLists.txt' -o -name 'package.xml' \
   -o -name 'setup.py' -o -name 'setup.cfg' \) -print0 | sort -z | xargs -0 cat | sha256sum | cut -c1-16)"

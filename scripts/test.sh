@@ -8,7 +8,7 @@ bash scripts/setup.sh
 export QG_ROS_INSTALL="$ROOT/ros_ws/install"    # the workspace the Python side runs from
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_LOG_DIR="${ROS_LOG_DIR:-$ROOT/runs/ros_log}"
-eval "$(.venv/bin/python -m qg_learning_node.cli.ros_env)"
+eval "$(.venv/bin/python -m qg_bringup.ros_env)"
 # Three workers (pytest-xdist) on the two cores, each taking whole files, so a file's shared
 # stack is started once. Many tests wait on their ROS processes (a step, a discovery, a reply)
 # and two workers left the cores 17 % idle: 180-208 s against 166-172 s with three, the cores

@@ -2,7 +2,7 @@
 
 Tests marked ``ros`` need the stack's ROS environment (what ``scripts/test.sh`` sets up). Started
 any other way (``.venv/bin/python -m pytest``), pytest re-executes itself once in that
-environment, built as ``scripts/test.sh`` builds it (``qg_learning_node.cli.ros_env``): the
+environment, built as ``scripts/test.sh`` builds it (``qg_bringup.ros_env``): the
 interface libraries must be on ``LD_LIBRARY_PATH`` before Python starts, so setting variables
 here would not do. If the environment cannot be built (no ``scripts/setup.sh`` yet), the header
 says why and every ``ros`` test fails with that reason.
@@ -79,7 +79,7 @@ def pytest_configure(config: pytest.Config) -> None:
     if ROS_READY:
         return
     try:
-        from qg_learning_node.cli.ros_env import stack_env
+        from qg_bringup.ros_env import stack_env
         # what scripts/test.sh exports before it builds the same environment
         os.environ.setdefault("QG_ROS_INSTALL", str(ROOT / "ros_ws" / "install"))
         os.environ.setdefault("ROS_LOG_DIR", str(ROOT / "runs" / "ros_log"))
@@ -141,14 +141,14 @@ SHORT_STEP = ("-p", "rest.max_time:=0.25")
 
 
 class Stack:
-    """Node processes started for one test (see :class:`qg_learning_node.cli.launcher.Launcher`)."""
+    """Node processes started for one test (see :class:`qg_bringup.launcher.Launcher`)."""
 
     def __init__(self, tmp_path: Path) -> None:
         if _current_test is not None and "ros" not in _current_test.keywords:
             pytest.fail(f"{_current_test.nodeid} starts ROS processes: mark it `ros` (the fast "
                         "tier, -m 'not ros', must not start any)", pytrace=False)
-        from qg_learning_node.cli.launcher import Launcher
-        from qg_learning_node.cli.ros_env import stack_env
+        from qg_bringup.launcher import Launcher
+        from qg_bringup.ros_env import stack_env
         self.domain_id, self._domain_lock = _take_domain()
         self.log_dir = tmp_path / "logs"
         self.env = stack_env(domain_id=str(self.domain_id), log_dir=tmp_path / "ros_log")
@@ -156,11 +156,11 @@ class Stack:
         self.launcher = Launcher(env=self.env, out=None, log_dir=self.log_dir)
 
     def start(self, *specs: tuple[str, str, str] | tuple[str, str, str, tuple[str, ...]]) -> None:
-        from qg_learning_node.cli.launcher import ProcessSpec
+        from qg_bringup.launcher import ProcessSpec
         self.launcher.start([ProcessSpec(*s) for s in specs])
 
     def client(self, name: str = "test"):
-        from qg_learning_node.cli.ros_client import CliNode
+        from qg_common.ros_client import CliNode
         return CliNode(name, domain_id=self.domain_id)
 
     def logs(self) -> str:

@@ -7,14 +7,14 @@ from rcl_interfaces.srv import DescribeParameters, GetParameters, ListParameters
 
 
 def listed(cli, node: str) -> set[str]:
-    from qg_learning_node.cli.ros_client import RESEND_AFTER, call_service
+    from qg_common.ros_client import RESEND_AFTER, call_service
     reply = call_service(cli, ListParameters, f"{node}/list_parameters",
                          ListParameters.Request(), timeout=30.0, resend_after=RESEND_AFTER)
     return set(reply.result.names)
 
 
 def get(cli, node: str, *names: str) -> list:
-    from qg_learning_node.cli.ros_client import RESEND_AFTER, call_service
+    from qg_common.ros_client import RESEND_AFTER, call_service
     from rclpy.parameter import parameter_value_to_python
     values = call_service(cli, GetParameters, f"{node}/get_parameters",
                           GetParameters.Request(names=list(names)),
@@ -23,7 +23,7 @@ def get(cli, node: str, *names: str) -> list:
 
 
 def describe(cli, node: str, name: str):
-    from qg_learning_node.cli.ros_client import RESEND_AFTER, call_service
+    from qg_common.ros_client import RESEND_AFTER, call_service
     return call_service(cli, DescribeParameters, f"{node}/describe_parameters",
                         DescribeParameters.Request(names=[name]),
                         resend_after=RESEND_AFTER).descriptors[0]
@@ -35,7 +35,7 @@ def set_double(cli, node: str, name: str, value: float):
 
 
 def set_value(cli, node: str, name: str, value: ParameterValue):
-    from qg_learning_node.cli.ros_client import RESEND_AFTER, call_service
+    from qg_common.ros_client import RESEND_AFTER, call_service
     request = SetParameters.Request(parameters=[Parameter(name=name, value=value)])
     return call_service(cli, SetParameters, f"{node}/set_parameters", request,
                         resend_after=RESEND_AFTER).results[0]

@@ -77,7 +77,7 @@ def test_a_ray_worker_that_reads_other_config_files_saves_nothing(tmp_path: Path
 def test_qgl_and_the_pool_never_import_ray(tmp_path: Path) -> None:
     """Ray is optional: the CLI, the suite and a pool run work without loading it."""
     code = ("import sys\n"
-            "import qg_learning_node.cli.main, qg_experiments.__main__\n"
+            "import qg_bringup.main, qg_experiments.__main__\n"
             "from qg_experiments.tasks import run_specs\n"
             "from qg_experiments import peg\n"
             "from qg_experiments.profile import load_profile\n"

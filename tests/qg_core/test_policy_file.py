@@ -11,10 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from qg_bringup.launcher import ProcessSpec, StackConfigError
+from qg_bringup.policy import export_core, frozen_stack, stack_robot
 from qg_common.peg_task import PegCell
 from qg_common.shaft_task import ShaftTaskGeometry
-from qg_learning_node.cli.launcher import ProcessSpec, StackConfigError
-from qg_learning_node.cli.policy import export_core, frozen_stack, stack_robot
 from qg_learning_node.executor.peg_task import PegTask, PegTaskConfig
 from qg_learning_node.executor.residual_task import ResidualTask, TaskConfig
 from qg_learning_node.learner.actor_mlp import ActorMLP
@@ -214,7 +214,7 @@ def test_a_relu_actor_runs_as_trained(tmp_path: Path) -> None:
 def test_a_runs_task_is_read_from_its_executors_logs(tmp_path: Path) -> None:
     """``export-policy --run`` takes the state the run's executor logged at start, from the
     launcher's logs or the ROS logs; two different tasks in one run are refused, not guessed."""
-    from qg_learning_node.cli.policy import logged_task
+    from qg_bringup.policy import logged_task
     line = "[INFO] [1795888735.798370886] [executor]: task residual, observation {}: {}-D " \
            "states, 2-D actions\n"
     assert logged_task(tmp_path) is None

@@ -37,7 +37,7 @@ def test_replay_at_rate_two_takes_half_the_time(stack, tmp_path: Path, machine_t
     # The player starts beside the other workers and waits for its subscribers, which come
     # only with the machine to this test: the timed part is the replay, not a process start.
     player = subprocess.Popen(
-        [sys.executable, "-m", "qg_learning_node.cli.main", "replay", str(tmp_path / "bag"),
+        [sys.executable, "-m", "qg_bringup.main", "replay", str(tmp_path / "bag"),
          "--rate", "2", "--topics", "/wrench_estimate", "--wait-for-subscribers", "120",
          "--start-delay", "0.5"],
         env=stack.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

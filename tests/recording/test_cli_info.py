@@ -11,7 +11,7 @@ from qg_recording.episode_recorder import EpisodeRecorder
 
 
 def qgl(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "qg_learning_node.cli.main", *args],
+    return subprocess.run([sys.executable, "-m", "qg_bringup.main", *args],
                           capture_output=True, text=True, timeout=60)
 
 

@@ -213,7 +213,7 @@ def test_a_resumed_run_goes_on_with_the_bags_already_there(tmp_path: Path) -> No
 def test_qgl_replay_rebuilds_the_replay_from_rl_rate_and_compacted_bags(
         tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     pytest.importorskip("torch")
-    from qg_learning_node.cli.bag_commands import add_parsers
+    from qg_bringup.bag_commands import add_parsers
 
     runs = tmp_path / "episodes"
     policy = RecordingPolicy(mode="every_k", every_k=4, keep_last=1)

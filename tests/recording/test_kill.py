@@ -82,7 +82,7 @@ def test_reindex_makes_a_killed_bag_readable_by_stock_readers(tmp_path: Path) ->
     with pytest.raises(AnyReaderError, match="end magic"):  # what a stock reader says before
         with AnyReader([bag]):
             pass
-    out = subprocess.run([sys.executable, "-m", "qg_learning_node.cli.main", "bag", "reindex", str(bag)],
+    out = subprocess.run([sys.executable, "-m", "qg_bringup.main", "bag", "reindex", str(bag)],
                          capture_output=True, text=True, timeout=60)
     assert out.returncode == 0 and "killed_0.mcap: repaired" in out.stdout, out.stdout + out.stderr
     with AnyReader([bag]) as reader:  # rosbags, with the bag's own type definitions
@@ -99,11 +99,11 @@ def test_reindex_makes_a_killed_bag_readable_by_stock_readers(tmp_path: Path) ->
     assert yaml.safe_load(record.metadata["serialized_metadata"]) == meta
     assert bag_info(bag).complete
     before = (bag / "killed_0.mcap").read_bytes()
-    again = subprocess.run([sys.executable, "-m", "qg_learning_node.cli.main", "bag", "reindex", str(bag)],
+    again = subprocess.run([sys.executable, "-m", "qg_bringup.main", "bag", "reindex", str(bag)],
                            capture_output=True, text=True, timeout=60)
     assert again.returncode == 0 and "killed_0.mcap: complete" in again.stdout
     assert (bag / "killed_0.mcap").read_bytes() == before  # a complete file is left alone
-    missing = subprocess.run([sys.executable, "-m", "qg_learning_node.cli.main", "bag", "reindex",
+    missing = subprocess.run([sys.executable, "-m", "qg_bringup.main", "bag", "reindex",
                               str(tmp_path / "nothing")], capture_output=True, text=True, timeout=60)
     assert missing.returncode == 2 and "no such bag" in missing.stderr
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("torch")
-from qg_learning_node.cli.bag_commands import add_parsers  # noqa: E402
+from qg_bringup.bag_commands import add_parsers  # noqa: E402
 from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore  # noqa: E402
 from qg_learning_node.learner.offline import rebuild_from_bags  # noqa: E402
 from qg_recording.episode_recorder import EpisodeRecorder  # noqa: E402

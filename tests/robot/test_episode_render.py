@@ -101,7 +101,7 @@ def test_qgl_render_writes_a_video_of_an_episode_bag(tmp_path: Path) -> None:
     assert len(video) == 11
     moved = [np.abs(a.astype(int) - b).max(axis=2).mean() for a, b in zip(video, video[1:])]
     assert min(moved) > 0.5, moved                      # every frame shows the arm further on
-    missing = subprocess.run([sys.executable, "-m", "qg_learning_node.cli.main", "render",
+    missing = subprocess.run([sys.executable, "-m", "qg_bringup.main", "render",
                               str(tmp_path / "nothing")], capture_output=True, text=True,
                              timeout=60)
     assert missing.returncode == 2 and "no such bag" in missing.stderr

@@ -9,10 +9,10 @@ from qg_common import conversions, types
 from qg_common.conversions import start_pose_request, time_msg
 from qg_common.params import config_file, load_ros_params
 from qg_common.peg_task import PegCell
+from qg_common.ros_client import RESEND_AFTER, CliNode, call_service
 from qg_common.shaft_task import ShaftTaskGeometry
 from qg_interfaces.msg import AtRest, WrenchSetpoint
 from qg_interfaces.srv import MoveToStart
-from qg_learning_node.cli.ros_client import RESEND_AFTER, CliNode, call_service
 
 
 def shaft_start(index: int) -> types.StartPose:

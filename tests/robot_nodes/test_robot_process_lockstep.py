@@ -103,8 +103,8 @@ def test_a_reset_asked_again_with_its_request_id_is_answered_not_redone(
     """A client whose reply got lost asks again with the same id: it gets the first reply, and
     the arm, which has moved on, is not reset again (no settling: the lockstep clock stands)."""
     from qg_common.conversions import start_pose_request
+    from qg_common.ros_client import call_service
     from qg_interfaces.srv import MoveToStart
-    from qg_learning_node.cli.ros_client import call_service
     from rosgraph_msgs.msg import Clock
     stack = robot_process
     with stack.client() as cli:

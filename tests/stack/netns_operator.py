@@ -14,7 +14,7 @@ from pathlib import Path
 
 sys.path[:0] = [str(Path(__file__).parent), str(Path(__file__).parents[1])]
 
-from qg_learning_node.cli.ros_client import CliNode  # noqa: E402
+from qg_common.ros_client import CliNode  # noqa: E402
 from test_episodes import Episodes  # noqa: E402
 
 

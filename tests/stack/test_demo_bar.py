@@ -4,7 +4,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from qg_learning_node.cli.demo import EpisodeOutcome, _plot, default_random_bar, load_random_bar
+from qg_bringup.demo import EpisodeOutcome, _plot, default_random_bar, load_random_bar
 
 ROOT = Path(__file__).resolve().parents[2]
 

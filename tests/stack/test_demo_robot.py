@@ -2,9 +2,9 @@
 changes."""
 from __future__ import annotations
 
+from qg_bringup.demo import DemoSettings, _with_demo_settings
+from qg_bringup.launcher import ProcessSpec, load_stack_config
 from qg_common.params import config_file
-from qg_learning_node.cli.demo import DemoSettings, _with_demo_settings
-from qg_learning_node.cli.launcher import ProcessSpec, load_stack_config
 
 
 def test_the_robot_goes_to_the_processes_that_load_a_robot_and_to_no_other() -> None:

@@ -71,9 +71,9 @@ class Episodes:
         """StartEpisode, asked again with its request id if the reply is lost."""
         import uuid
 
+        from qg_common.ros_client import RESEND_AFTER, call_service
         from qg_common.topics import robot_topic
         from qg_interfaces.srv import StartEpisode
-        from qg_learning_node.cli.ros_client import RESEND_AFTER, call_service
         fields.setdefault("request_id", uuid.uuid4().hex)
         return call_service(self.cli, StartEpisode, robot_topic(self.robot, "executor/start_episode"),
                             StartEpisode.Request(**fields), timeout=60.0, resend_after=RESEND_AFTER)
@@ -169,7 +169,7 @@ def test_train_episode_is_recorded_and_replays_into_the_same_graph(stack, tmp_pa
     with stack.client("replay_listener") as cli:
         live = LiveCapture(cli, replayed)
         player = subprocess.Popen(
-            [sys.executable, "-m", "qg_learning_node.cli.main", "replay", str(bag), "--rate", "4",
+            [sys.executable, "-m", "qg_bringup.main", "replay", str(bag), "--rate", "4",
              "--topics", *replayed, "--wait-for-subscribers", "20", "--start-delay", "1.0"],
             env=stack.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:
@@ -358,8 +358,8 @@ def test_bad_requests_are_refused_and_the_stack_stays_up(stack):
         assert (again.success, again.episode_id) == (True, running.episode_id), again
         busy = episodes.start(mode="test")
         assert not busy.success and "still running" in busy.message
+        from qg_common.ros_client import call_service
         from qg_interfaces.srv import StopEpisode
-        from qg_learning_node.cli.ros_client import call_service
         stopped = call_service(cli, StopEpisode, "/executor/stop_episode",
                                StopEpisode.Request(reason="test"), timeout=30.0)
         assert stopped.success and stopped.episode_id == running.episode_id

@@ -39,7 +39,7 @@ def demo_run(tmp_path_factory: pytest.TempPathFactory) -> DemoRun:
         "  - {name: executor, package: qg_learning_node, executable: executor,\n"
         f"     args: [--ros-args, -p, 'task.test_max_steps:={TEST_MAX_STEPS}']}}\n")
     demo = subprocess.run(
-        [sys.executable, "-m", "qg_learning_node.cli.main", "demo", "--robots", "2",
+        [sys.executable, "-m", "qg_bringup.main", "demo", "--robots", "2",
          "--train-episodes", "2", "--train-max-steps", str(TRAIN_MAX_STEPS), "--test-poses", "1",
          "--episode-timeout", "120", "--config", str(tmp / "stack.yaml"),
          "--runs-dir", str(tmp / "runs")],

@@ -18,7 +18,7 @@ CORE_FILES = [
     *ROOT.glob("franka_sim_node/franka_sim_node/core/**/*.py"),
     *(p for p in ROOT.glob("ros_ws/src/qg_common/qg_common/*.py")
       if p.name not in ("callback_executor.py", "conversions.py", "node_parameters.py",
-                        "node_runtime.py", "topics.py")),
+                        "node_runtime.py", "ros_client.py", "topics.py")),
     *ROOT.glob("robot_bridge_node/robot_bridge_node/core/**/*.py"),
     *ROOT.glob("qg_learning_node/qg_learning_node/executor/**/*.py"),
     *ROOT.glob("qg_learning_node/qg_learning_node/learner/**/*.py"),
@@ -37,7 +37,8 @@ def test_cores_do_not_import_rclpy():
 PACKAGE_DIRS = {"qg_common": "ros_ws/src/qg_common", "qg_recording": "ros_ws/src/qg_recording",
                 "robot_bridge_node": "robot_bridge_node", "sim_robot_node": "sim_robot_node",
                 "franka_robot_node": "franka_robot_node", "franka_sim_node": "franka_sim_node",
-                "qg_learning_node": "qg_learning_node", "qg_experiments": "qg_experiments"}
+                "qg_learning_node": "qg_learning_node", "qg_experiments": "qg_experiments",
+                "qg_bringup": "qg_bringup"}
 PROJECT = {*PACKAGE_DIRS, "qg_interfaces"}
 #: What the executor and learner may import from the project: nothing of a robot stack.
 LEARNING_MAY_IMPORT = {"qg_common", "qg_interfaces", "qg_recording", "qg_learning_node"}
@@ -129,7 +130,7 @@ def test_executor_and_learner_cores_import_no_rclpy_and_nothing_above_them():
 
 def test_only_the_experiments_compose_the_bridge_and_the_learner():
     """The bridge and learning packages never meet except in qg_experiments, and nothing
-    imports the experiments."""
+    imports the experiments or the command line."""
     imports = {package: top_levels(sources(package)) & PROJECT - {package}
                for package in PACKAGE_DIRS}
     composers = {p for p, used in imports.items()
@@ -137,6 +138,9 @@ def test_only_the_experiments_compose_the_bridge_and_the_learner():
     assert composers == {"qg_experiments"}
     assert imports["qg_experiments"] >= {"robot_bridge_node", "qg_learning_node", "qg_common"}
     assert [p for p, used in imports.items() if "qg_experiments" in used] == []
+    # qgl drives the processes: it starts without the robot stack, and nothing imports it
+    assert not imports["qg_bringup"] & LEARNING_MUST_NOT_IMPORT
+    assert [p for p, used in imports.items() if "qg_bringup" in used] == []
     # Robots are loaded by name; only franky-sim's rehearsal (a simulator itself) builds on the
     # simulated cell and the Franka's description, and the real-arm plugin imports no simulator.
     assert [p for p, used in imports.items() if "sim_robot_node" in used] == ["franka_sim_node"]
@@ -283,7 +287,7 @@ def test_the_gym_package_imports_no_rclpy_and_no_messages():
     # the frames' kinematics, not their tf messages; the renderer's lookup, not the CLI; no
     # bag code, which parses the message definitions
     assert "robot_bridge_node.core.frame_kinematics" in reached
-    assert not [m for m in reached if m.startswith(("qg_recording", "qg_learning_node.cli",
+    assert not [m for m in reached if m.startswith(("qg_recording", "qg_bringup",
                                                     "robot_bridge_node.core.robot_frames",
                                                     "robot_bridge_node.core.tick_messages"))]
     outside = {n.split(".")[0] for m in reached for n in imported_modules(modules[m])}
@@ -390,7 +394,7 @@ def test_executables_are_where_ros2_run_looks():
     for pkg, exe in [("sim_robot_node", "sim"), ("robot_bridge_node", "bridge"),
                      ("robot_bridge_node", "wrench_estimator"), ("robot_bridge_node", "robot"),
                      ("qg_learning_node", "executor"), ("qg_learning_node", "learner"),
-                     ("qg_learning_node", "qgl")]:
+                     ("qg_bringup", "qgl")]:
         assert (install / pkg / "lib" / pkg / exe).is_file(), f"{pkg}/{exe}"
         marker = install / pkg / "share" / "ament_index" / "resource_index" / "packages" / pkg
         assert marker.is_file(), marker
@@ -469,7 +473,7 @@ def test_the_nodes_and_qgl_start_without_torch_or_scipy():
     checked without it, ``learner_config``). Importing torch and SciPy made every executor
     start 1.5 s slower (1.71 s against 0.22 s to import the node)."""
     code = _REFUSE + ("import qg_learning_node.executor_node, robot_bridge_node.robot_process, "
-                      "qg_learning_node.learner_node, qg_learning_node.cli.main\n")
+                      "qg_learning_node.learner_node, qg_bringup.main\n")
     out = subprocess.run([sys.executable, "-c", code, "torch,scipy"], capture_output=True,
                          text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-3000:]
@@ -481,10 +485,11 @@ def test_learning_imports_where_no_robot_stack_can():
     simulator nor experiments can: what the scan above reads, checked at run time. (Pinocchio
     still loads in the nodes, through qg_common's message conversions: ``qg_common.rotations``
     is Pinocchio's SO(3) maps. The cores import without it, see the plain-session test.)"""
-    names = import_everything(LEARNING_MUST_NOT_IMPORT - {"pinocchio"}, ["qg_learning_node"])
+    names = import_everything(LEARNING_MUST_NOT_IMPORT - {"pinocchio"},
+                              ["qg_learning_node", "qg_bringup"])
     assert len(names) >= 25, names
     for module in ("qg_learning_node.executor_node", "qg_learning_node.learner_node",
-                   "qg_learning_node.cli.main", "qg_learning_node.learner.learner_core"):
+                   "qg_bringup.main", "qg_learning_node.learner.learner_core"):
         assert module in names
 
 

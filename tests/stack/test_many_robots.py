@@ -37,9 +37,9 @@ class TwoRobots:
 
 @pytest.fixture(scope="module")
 def two_robots(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TwoRobots]:
+    from qg_bringup.fleet import fleet_specs
+    from qg_bringup.launcher import ProcessSpec
     from qg_interfaces.srv import StartEpisode
-    from qg_learning_node.cli.fleet import fleet_specs
-    from qg_learning_node.cli.launcher import ProcessSpec
 
     tmp_path = tmp_path_factory.mktemp("two_robots")
     stack = Stack(tmp_path)
@@ -51,7 +51,7 @@ def two_robots(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TwoRobots]:
             episodes = {ns: Episodes(cli, ns) for ns in ROBOTS}
             episodes["robot0"].wait_for_learner()
             # robot1's episode by `qgl episode start --robot robot1`, robot0's by a service call
-            qgl = subprocess.run([sys.executable, "-m", "qg_learning_node.cli.main", "episode",
+            qgl = subprocess.run([sys.executable, "-m", "qg_bringup.main", "episode",
                                   "start", "--robot", "robot1", "--initial-pose", "1", "--seed",
                                   "5", "--timeout", "60"],
                                  env=stack.env, capture_output=True, text=True, timeout=120)

@@ -32,8 +32,8 @@ def test_the_peg_task_and_the_nextage_scene_read_one_cell():
 
 @pytest.mark.ros
 def test_stack_nextage_names_the_installed_peg_files():
+    from qg_bringup.launcher import load_stack_config
     from qg_common.params import config_file
-    from qg_learning_node.cli.launcher import load_stack_config
     specs = {s.name: s for s in load_stack_config(config_file("stack_nextage.yaml"))}
     assert specs["robot"].args == ("--ros-args", "-p", "robot:=sim_nextage")
     for name, file in (("executor", "executor_nextage.yaml"), ("learner", "learner_nextage.yaml")):

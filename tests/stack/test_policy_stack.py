@@ -20,7 +20,7 @@ STEPS = 6       # [steps] the test episode's cap here
 def _export(tmp_path: Path, name: str, state_dim: int, observation: str, kind: str = "residual",
             robot: str = "sim_panda") -> Path:
     """A policy file of a seeded, untrained actor (its actions still vary with the state)."""
-    from qg_learning_node.cli.policy import executor_task, export_core
+    from qg_bringup.policy import executor_task, export_core
     from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore
     action_dim = 3 if kind == "peg" else 2
     config = LearnerConfig.from_dict({"ddpg": {"actor_hidden": [16, 16], "seed": 5},
@@ -32,12 +32,12 @@ def _export(tmp_path: Path, name: str, state_dim: int, observation: str, kind: s
 
 
 def _qgl(env: dict, *args: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "qg_learning_node.cli.main", *args], env=env,
+    return subprocess.run([sys.executable, "-m", "qg_bringup.main", *args], env=env,
                           capture_output=True, text=True, timeout=timeout)
 
 
 def test_an_executor_refuses_a_file_that_does_not_fit_at_start(stack, tmp_path):
-    from qg_learning_node.cli.launcher import ProcessSpec
+    from qg_bringup.launcher import ProcessSpec
     executor = ProcessSpec("executor", "qg_learning_node", "executor").command()
     tilt = _export(tmp_path, "tilt.npz", 6, "tilt")
     thesis = _export(tmp_path, "thesis.npz", 4, "thesis")
@@ -101,7 +101,7 @@ def test_qgl_up_policy_runs_the_frozen_actor_without_a_learner(stack, tmp_path):
         "  - {name: learner, package: qg_learning_node, executable: learner}\n"
         "  - {name: executor, package: qg_learning_node, executable: executor,\n"
         f"     args: [--ros-args, -p, 'task.test_max_steps:={STEPS}']}}\n")
-    up = subprocess.Popen([sys.executable, "-m", "qg_learning_node.cli.main", "up", "--config",
+    up = subprocess.Popen([sys.executable, "-m", "qg_bringup.main", "up", "--config",
                            str(config), "--policy", str(path), "--log-dir", str(tmp_path / "up")],
                           env=stack.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                           text=True)

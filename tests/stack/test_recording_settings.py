@@ -6,9 +6,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from qg_bringup.launcher import load_stack, stack_with_recording, with_recording
+from qg_bringup.main import build_parser
 from qg_common.params import config_file
-from qg_learning_node.cli.launcher import load_stack, stack_with_recording, with_recording
-from qg_learning_node.cli.main import build_parser
 
 
 def test_qgl_up_puts_the_settings_on_the_robot_process_only() -> None:

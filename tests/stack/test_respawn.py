@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
-from qg_learning_node.cli.launcher import (
+from qg_bringup.launcher import (
     Launcher,
     ProcessSpec,
     RespawnPolicy,

@@ -6,8 +6,8 @@ from __future__ import annotations
 import json
 
 import pytest
-from qg_learning_node.cli.episode_schedule import EpisodeOutcome
-from qg_learning_node.cli.run_journal import RunJournal, RunMismatch, RunPlan
+from qg_bringup.episode_schedule import EpisodeOutcome
+from qg_bringup.run_journal import RunJournal, RunMismatch, RunPlan
 
 
 def _outcome(slot: int, mode: str, steps: int, episode_id: str = "") -> EpisodeOutcome:

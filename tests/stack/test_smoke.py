@@ -46,8 +46,8 @@ def test_every_executable_starts_and_is_discovered(every_executable):
 
 
 def test_start_episode_crosses_processes_and_rejects_bad_fields(every_executable):
+    from qg_common.ros_client import RESEND_AFTER, call_service
     from qg_interfaces.srv import StartEpisode
-    from qg_learning_node.cli.ros_client import RESEND_AFTER, call_service
     stack = every_executable
     with stack.client() as cli:
         bad = call_service(cli, StartEpisode, "/executor/start_episode",
@@ -81,7 +81,7 @@ def test_every_executable_exits_zero_on_sigint(every_executable):
 
 
 def qgl(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "qg_learning_node.cli.main", *args],
+    return subprocess.run([sys.executable, "-m", "qg_bringup.main", *args],
                           capture_output=True, text=True, timeout=timeout)
 
 
@@ -126,7 +126,7 @@ def test_killing_qgl_up_stops_every_node_it_started(tmp_path):
     cfg.write_text("processes:\n"
                    "  - {name: executor, package: qg_learning_node, executable: executor}\n"
                    "  - {name: learner, package: qg_learning_node, executable: learner}\n")
-    up = subprocess.Popen([sys.executable, "-m", "qg_learning_node.cli.main", "up", "--config",
+    up = subprocess.Popen([sys.executable, "-m", "qg_bringup.main", "up", "--config",
                            str(cfg)], stdout=subprocess.PIPE, text=True)
     line = up.stdout.readline()
     while "[qgl] started" not in line:

@@ -20,9 +20,9 @@ CAP = 100
 
 
 def test_the_executor_recovers_a_stalled_test_episode_and_says_so(stack, capsys):
+    from qg_bringup.episode_wait import wait_for_episode
     from qg_common.topics import LATCHED
     from qg_interfaces.msg import ActorParameters
-    from qg_learning_node.cli.episode_wait import wait_for_episode
     from qg_learning_node.conversions import actor_to_msg
     from qg_recording.player import message_class
     from rclpy.serialization import deserialize_message

@@ -30,9 +30,9 @@ import numpy as np
 from qg_common import topics
 from qg_common.conversions import setpoint_msg, start_pose_request
 from qg_common.params import config_file, load_ros_params
+from qg_common.ros_client import CliNode, call_service
 from qg_interfaces.msg import AtRest, WrenchSetpoint
 from qg_interfaces.srv import MoveToStart
-from qg_learning_node.cli.ros_client import CliNode, call_service
 from qg_learning_node.conversions import observation_from_msg
 from qg_learning_node.executor.parameters import load_geometry
 from qg_learning_node.executor.residual_task import Observation, TaskConfig

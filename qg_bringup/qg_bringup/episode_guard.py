@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Any
 
-from qg_learning_node.cli.launcher import ProcessSpec, Respawn
+from qg_bringup.launcher import ProcessSpec, Respawn
 
 __all__ = ["EpisodeGuard", "ProcessRole", "process_roles"]
 
@@ -59,7 +59,7 @@ class EpisodeGuard:
         from qg_interfaces.msg import EpisodeStatus
         from qg_interfaces.srv import StopEpisode
 
-        from qg_learning_node.cli.episode_schedule import robot_name
+        from qg_bringup.episode_schedule import robot_name
         self.cli, self.roles = cli, roles
         self.robots = sorted({r.robot for r in roles.values() if r.robot is not None}) or [""]
         self.last: dict[str, Any] = {}          # robot -> its executor's last status
@@ -118,7 +118,7 @@ def supervise(launcher: Any, specs: Sequence[ProcessSpec], period: float = 0.2) 
     process stays dead; its name and exit code (``launcher.reasons`` says why)."""
     if not any(spec.respawn for spec in specs):
         return launcher.wait_any(period)
-    from qg_learning_node.cli.ros_client import CliNode
+    from qg_common.ros_client import CliNode
     with CliNode("qgl_up") as cli:
         guard = EpisodeGuard(cli, process_roles(specs))
         while True:

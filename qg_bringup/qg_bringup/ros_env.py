@@ -96,5 +96,5 @@ def exports(base: Mapping[str, str] | None = None) -> str:
 
 
 if __name__ == "__main__":
-    # `eval "$(python -m qg_learning_node.cli.ros_env)"` gives a shell the stack's environment.
+    # `eval "$(python -m qg_bringup.ros_env)"` gives a shell the stack's environment.
     print(exports())

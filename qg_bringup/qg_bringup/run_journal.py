@@ -24,7 +24,7 @@ from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from qg_learning_node.cli.episode_schedule import EpisodeJob, EpisodeOutcome
+from qg_bringup.episode_schedule import EpisodeJob, EpisodeOutcome
 
 __all__ = ["RunPlan", "RunJournal", "RunMismatch", "write_json_atomically", "N_POSES"]
 

@@ -1,4 +1,4 @@
-"""Short-lived rclpy clients for the CLI: call a service, list the graph.
+"""Short-lived rclpy clients (command line, tools, tests): call a service, list the graph.
 
 This rclpy's ``spin_until_future_complete`` costs 4-21 ms per call, so we spin the executor
 ourselves until the future is done.

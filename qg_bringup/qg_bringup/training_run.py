@@ -25,8 +25,8 @@ from typing import Any
 
 from qg_common.params import config_file, runs_dir
 
-from qg_learning_node.cli.episode_schedule import EpisodeJob, EpisodeOutcome
-from qg_learning_node.cli.run_journal import RunJournal, RunMismatch, RunPlan
+from qg_bringup.episode_schedule import EpisodeJob, EpisodeOutcome
+from qg_bringup.run_journal import RunJournal, RunMismatch, RunPlan
 
 __all__ = ["add_parser", "run_training", "learner_record", "MAX_ATTEMPTS"]
 
@@ -76,13 +76,13 @@ def run_training(run_dir: Path, plan: RunPlan, settings: Any, config: Path,
                  label: str = "qgl run") -> int:
     """Run (or continue) the run in ``run_dir``; 0 once its schedule is complete, 130 when
     stopped by Ctrl-C/SIGTERM (the same call continues it), 1 if the stack failed."""
+    from qg_common.ros_client import CliNode
+    from qg_learning_node.learner.training_log import TrainingLog
     from tqdm import tqdm
 
-    from qg_learning_node.cli import demo
-    from qg_learning_node.cli.episode_guard import EpisodeGuard, process_roles
-    from qg_learning_node.cli.episode_schedule import Lane
-    from qg_learning_node.cli.ros_client import CliNode
-    from qg_learning_node.learner.training_log import TrainingLog
+    from qg_bringup import demo
+    from qg_bringup.episode_guard import EpisodeGuard, process_roles
+    from qg_bringup.episode_schedule import Lane
     journal = RunJournal.open(run_dir, plan)
     resumed = bool(journal.sessions)
     if resumed:
@@ -240,7 +240,7 @@ def _finish(journal: RunJournal, run_dir: Path, plan: RunPlan, random_bar: Path 
             wall: float, learner_transitions: int | None, codes: dict[str, int],
             label: str, render: bool = True) -> int:
     """The completed run's outputs: episodes.json, the plot, the last test's video, a summary."""
-    from qg_learning_node.cli import demo
+    from qg_bringup import demo
     outcomes = _write_outcomes(journal, run_dir)
     demo._plot(outcomes, run_dir / "learning_curve.png",
                demo.load_random_bar(random_bar or demo.default_random_bar()),
@@ -268,7 +268,7 @@ def plan_from_args(args: argparse.Namespace, episodes: int, test_every: int) -> 
                                                                                        Path]:
     """The run's plan, learning settings and stack file from ``qgl run``/``qgl demo``'s
     arguments."""
-    from qg_learning_node.cli.demo import DemoSettings
+    from qg_bringup.demo import DemoSettings
     settings = DemoSettings(train_max_steps=args.train_max_steps, critic_lr=args.critic_lr,
                             iterations=args.iterations, schedule=args.schedule,
                             updates_per_step=args.updates_per_step)
@@ -284,7 +284,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         run_dir = Path(args.run_dir) if args.run_dir else \
             runs_dir() / time.strftime("run_%Y%m%d_%H%M%S")
         if args.recording:   # the run's own stack file: a continued run records alike
-            from qg_learning_node.cli.launcher import stack_with_recording
+            from qg_bringup.launcher import stack_with_recording
             stack = Path(args.config).resolve() if args.config else config_file("stack.yaml")
             args.config = str(stack_with_recording(stack, args.recording,
                                                    run_dir / "stack_recording.yaml"))
@@ -319,8 +319,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     run.add_argument("--run-dir", default=None,
                      help="the run's folder; an existing one is continued (default: a new "
                           "<runs>/run_<time>)")
-    from qg_learning_node.cli.demo import add_learning_arguments
-    from qg_learning_node.cli.launcher import recording_argument
+    from qg_bringup.demo import add_learning_arguments
+    from qg_bringup.launcher import recording_argument
     add_learning_arguments(run)
     run.add_argument("--recording", type=recording_argument, action="append", default=[],
                      metavar="NAME=VALUE", help="a recording.* setting of the recorder (as "

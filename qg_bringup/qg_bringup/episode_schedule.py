@@ -79,12 +79,12 @@ class _Lane:
 
     def __init__(self, cli: Any, robot: str, jobs: Sequence[EpisodeJob],
                  observer: EpisodeObserver | None, timeout: float) -> None:
+        from qg_common.ros_client import RESEND_AFTER
         from qg_common.topics import EPISODE_STATUS, LATCHED, START_EPISODE
         from qg_interfaces.msg import EpisodeStatus
         from qg_interfaces.srv import StartEpisode
 
-        from qg_learning_node.cli.episode_wait import FINAL_STATES
-        from qg_learning_node.cli.ros_client import RESEND_AFTER
+        from qg_bringup.episode_wait import FINAL_STATES
         self.cli, self.robot, self.observer, self.timeout = cli, robot, observer, timeout
         self.resend_after = RESEND_AFTER   # [s] unanswered this long, a start is asked again
         self.request_type = StartEpisode.Request

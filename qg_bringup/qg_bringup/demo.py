@@ -24,8 +24,10 @@ from functools import partial
 from pathlib import Path
 
 from qg_common.params import config_file, runs_dir
+from qg_learning_node.learner.learner_config import SCHEDULES
+from qg_learning_node.learner.training_log import TrainingLog
 
-from qg_learning_node.cli.episode_schedule import (
+from qg_bringup.episode_schedule import (
     EpisodeJob,
     EpisodeOutcome,
     robot_name,
@@ -33,11 +35,9 @@ from qg_learning_node.cli.episode_schedule import (
     run_lanes,
     split_over_robots,
 )
-from qg_learning_node.cli.fleet import fleet_specs, robot_namespace
-from qg_learning_node.cli.launcher import Launcher, ProcessSpec, load_stack
-from qg_learning_node.cli.ros_env import install_dir, stack_env
-from qg_learning_node.learner.learner_config import SCHEDULES
-from qg_learning_node.learner.training_log import TrainingLog
+from qg_bringup.fleet import fleet_specs, robot_namespace
+from qg_bringup.launcher import Launcher, ProcessSpec, load_stack
+from qg_bringup.ros_env import install_dir, stack_env
 
 __all__ = ["add_parser", "DemoSettings", "EpisodeOutcome", "StepMonitor", "demo_schedule",
            "run_episode_by_service", "start_stack", "wait_for_stack"]
@@ -330,9 +330,8 @@ def _summary(outcomes: list[EpisodeOutcome], run_dir: Path, robots: Sequence[str
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
+    from qg_common.ros_client import CliNode
     from tqdm import tqdm
-
-    from qg_learning_node.cli.ros_client import CliNode
     if args.robots < 1:
         print(f"qgl demo: --robots must be >= 1, got {args.robots}", file=sys.stderr)
         return 2
@@ -400,7 +399,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 def _render_last_test(outcomes: list[EpisodeOutcome], run_dir: Path) -> None:
     """The last test episode as a video beside the learning curve (``qgl render``); a demo
     without a renderer or that bag says why and goes on."""
-    from qg_learning_node.cli.render import render_episode
+    from qg_bringup.render import render_episode
     tests = [o for o in outcomes if o.mode == "test"]
     if not tests:
         return

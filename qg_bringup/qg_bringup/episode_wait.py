@@ -2,10 +2,9 @@
 from __future__ import annotations
 
 from qg_common import topics
+from qg_common.ros_client import CliNode
 from qg_common.topics import LATCHED
 from qg_interfaces.msg import EpisodeStatus
-
-from qg_learning_node.cli.ros_client import CliNode
 
 __all__ = ["wait_for_episode", "FINAL_STATES"]
 

@@ -13,25 +13,25 @@ from pathlib import Path
 
 from qg_common.params import ConfigError, config_file
 
-from qg_learning_node.cli.fleet import fleet_specs
-from qg_learning_node.cli.launcher import (
+from qg_bringup.fleet import fleet_specs
+from qg_bringup.launcher import (
     Launcher,
     StackConfigError,
     load_stack,
     recording_argument,
     with_recording,
 )
-from qg_learning_node.cli.ros_env import exports, stack_env
+from qg_bringup.ros_env import exports, stack_env
 
 __all__ = ["main", "build_parser"]
 
 
 def _cmd_up(args: argparse.Namespace) -> int:
-    from qg_learning_node.cli.episode_guard import supervise
+    from qg_bringup.episode_guard import supervise
     specs, policy = load_stack(Path(args.config) if args.config else config_file("stack.yaml"))
     specs = fleet_specs(with_recording(specs, args.recording), args.robots)
     if args.policy:     # the actor of a policy file, frozen: no learner (cli/policy.py)
-        from qg_learning_node.cli.policy import frozen_stack
+        from qg_bringup.policy import frozen_stack
         specs = frozen_stack(specs, Path(args.policy))
     launcher = Launcher(env=stack_env(), log_dir=Path(args.log_dir) if args.log_dir else None,
                         policy=policy)
@@ -63,10 +63,10 @@ def _cmd_episode(args: argparse.Namespace) -> int:
     import uuid
 
     from qg_common import topics
+    from qg_common.ros_client import RESEND_AFTER, CliNode, call_service
     from qg_interfaces.srv import StartEpisode, StopEpisode
 
-    from qg_learning_node.cli.episode_wait import wait_for_episode
-    from qg_learning_node.cli.ros_client import RESEND_AFTER, CliNode, call_service
+    from qg_bringup.episode_wait import wait_for_episode
     with CliNode() as cli:
         if args.action == "start":
             req = StartEpisode.Request(mode=args.mode, initial_pose=args.initial_pose,
@@ -86,7 +86,7 @@ def _cmd_episode(args: argparse.Namespace) -> int:
 
 
 def _cmd_nodes(args: argparse.Namespace) -> int:
-    from qg_learning_node.cli.ros_client import CliNode
+    from qg_common.ros_client import CliNode
     with CliNode() as cli:
         cli.spin_for(args.wait)
         own = cli.node.get_fully_qualified_name()
@@ -165,14 +165,14 @@ def build_parser() -> argparse.ArgumentParser:
     # (answered before qgl enters the stack's environment, see main())
     sub.add_parser("env", help='print the stack\'s environment as exports: eval "$(qgl env)"')
 
-    from qg_learning_node.cli import demo, policy, render, train, training_run
+    from qg_bringup import demo, policy, render, train, training_run
     demo.add_parser(sub, one_robot=training_run.run_demo)
     training_run.add_parser(sub)
     policy.add_parser(sub)
     train.add_parser(sub)
     render.add_parser(sub)
     try:
-        from qg_learning_node.cli import bag_commands
+        from qg_bringup import bag_commands
     except ImportError:
         bag_commands = None
     if bag_commands is not None:
@@ -196,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
         except FileNotFoundError as exc:
             print(f"qgl: {exc}", file=sys.stderr)
             return 2
-        os.execve(sys.executable, [sys.executable, "-m", "qg_learning_node.cli.main", *argv], env)
+        os.execve(sys.executable, [sys.executable, "-m", "qg_bringup.main", *argv], env)
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)

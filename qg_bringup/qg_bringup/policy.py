@@ -27,9 +27,9 @@ from qg_common.params import (
     merge_params,
     unflatten,
 )
-
-from qg_learning_node.cli.launcher import ProcessSpec, StackConfigError
 from qg_learning_node.policy_file import PolicyFileError, load_policy, save_policy, spec_for_task
+
+from qg_bringup.launcher import ProcessSpec, StackConfigError
 
 __all__ = ["add_parser", "executor_task", "export_core", "run_checkpoint", "logged_task",
            "frozen_stack", "stack_robot"]
@@ -49,7 +49,6 @@ def executor_task(files: list[Path] | None = None,
     --params-file F -p name:=value`` would run."""
     from qg_common.peg_task import PEG_TASK_FILE, PegCell
     from qg_common.shaft_task import SHAFT_TASK_FILE
-
     from qg_learning_node.executor.parameters import load_geometry, load_task
     from qg_learning_node.executor.peg_task import PegTask, PegTaskConfig
     from qg_learning_node.executor.residual_task import ResidualTask

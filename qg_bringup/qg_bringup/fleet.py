@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from qg_learning_node.cli.launcher import ProcessSpec, StackConfigError
+from qg_bringup.launcher import ProcessSpec, StackConfigError
 
 __all__ = ["robot_namespace", "fleet_specs", "LEARNER_REMAPS"]
 

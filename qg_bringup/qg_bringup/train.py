@@ -14,7 +14,6 @@ import argparse
 import time
 
 from qg_common.params import runs_dir
-
 from qg_learning_node.learner import algorithms
 
 __all__ = ["add_parser"]
@@ -32,7 +31,6 @@ def _setting(text: str) -> tuple[str, object]:
 def _cmd_train(args: argparse.Namespace) -> int:
     import gymnasium
     import numpy as np
-
     from qg_learning_node.learner.gym_agent import QGDDPG, SB3_DDPG_SETTINGS
     settings = {**(SB3_DDPG_SETTINGS if args.preset == "sb3" else {}),
                 "algorithm": args.algorithm, "seed": args.seed, **dict(args.set)}
