@@ -8,8 +8,8 @@ render``) next to the MCAP episodes the stack recorded. The progress bar follows
 ``/transitions``, so it moves at every RL step.
 
 ``--robot NAME`` runs another robot plugin (``sim_xarm7``) in the same stack.
-``--robots N`` brings up N namespaced robots and one learner (``cli/fleet.py``) and deals the
-training episodes to them, which run them all at once (``cli/episode_schedule.py``): the same
+``--robots N`` brings up N namespaced robots and one learner (``fleet.py``) and deals the
+training episodes to them, which run them all at once (``episode_schedule.py``): the same
 number of robot steps in less wall time. The tests then run on ``robot0``.
 """
 from __future__ import annotations
@@ -270,7 +270,7 @@ def start_stack(run_dir: Path, settings: DemoSettings, config: Path,
                 robot: str | None = None, resume: bool = False
                 ) -> tuple[Launcher, dict[str, str]]:
     """Start the processes of ``config`` with ``settings`` (``robots`` > 1: that many robots and
-    one learner, ``cli/fleet.py``); episodes, checkpoints, logs and ROS logs go under
+    one learner, ``fleet.py``); episodes, checkpoints, logs and ROS logs go under
     ``run_dir``; processes respawn as the stack file says. :param robot: the robot plugin to
     run (``None``: the processes' default). :param resume: the learner starts from the
     checkpoint in ``run_dir`` if there is one (a training run that continues).

@@ -10,7 +10,7 @@ its state. The guard follows every robot's ``episode_status`` and, for a running
   ``aborted`` status with the reason on the executor's latched topic: the recorder closes its
   bag, the learner does not checkpoint it, a client waiting for it is told.
 
-Which robot a process belongs to comes from its ``-r __ns:=/<robot>`` (``cli/fleet.py``).
+Which robot a process belongs to comes from its ``-r __ns:=/<robot>`` (``fleet.py``).
 """
 from __future__ import annotations
 

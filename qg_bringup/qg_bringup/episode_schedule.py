@@ -184,7 +184,7 @@ class _Lane:
         self.cli.node.destroy_subscription(self.subscription)
 
 
-#: One robot's queue of episodes, for a caller that runs its own loop (``cli/training_run.py``).
+#: One robot's queue of episodes, for a caller that runs its own loop (``training_run.py``).
 Lane = _Lane
 
 

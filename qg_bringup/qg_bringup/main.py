@@ -30,7 +30,7 @@ def _cmd_up(args: argparse.Namespace) -> int:
     from qg_bringup.episode_guard import supervise
     specs, policy = load_stack(Path(args.config) if args.config else config_file("stack.yaml"))
     specs = fleet_specs(with_recording(specs, args.recording), args.robots)
-    if args.policy:     # the actor of a policy file, frozen: no learner (cli/policy.py)
+    if args.policy:     # the actor of a policy file, frozen: no learner (policy.py)
         from qg_bringup.policy import frozen_stack
         specs = frozen_stack(specs, Path(args.policy))
     launcher = Launcher(env=stack_env(), log_dir=Path(args.log_dir) if args.log_dir else None,
@@ -131,7 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
     up.add_argument("--log-dir", default=None, help="also write each process's output here")
     up.add_argument("--robots", type=int, default=1,
                     help="N > 1: N robot stacks in the namespaces /robot0../robot<N-1> and one "
-                         "learner at the root that learns from all of them (see cli/fleet.py)")
+                         "learner at the root that learns from all of them (see qg_bringup/fleet.py)")
     up.add_argument("--policy", default=None, metavar="FILE",
                     help="run this policy file's actor frozen (`qgl export-policy`), without "
                          "the learner; a file that does not fit the stack is refused at start")

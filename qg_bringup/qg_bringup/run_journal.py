@@ -13,7 +13,7 @@
 
 The schedule is fixed by the plan: slot ``i`` always has the same mode, pose and seed, so a
 resumed run neither repeats nor skips one; a slot whose episode was cut short is run again.
-Pure Python: the node-facing part is ``cli/training_run.py``.
+Pure Python: the node-facing part is ``training_run.py``.
 """
 from __future__ import annotations
 

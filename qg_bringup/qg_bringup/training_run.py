@@ -1,7 +1,7 @@
 """``qgl run`` — a training run through the stack that continues where it stopped.
 
 ``qgl run --episodes N [--test-every K] --run-dir DIR`` brings the stack up with its learner's
-checkpoint in ``DIR`` and runs the run's schedule (``cli/run_journal.py``) one slot after
+checkpoint in ``DIR`` and runs the run's schedule (``run_journal.py``) one slot after
 another by ``/executor/start_episode``; the journal in ``DIR`` notes each completed slot once
 the learner has checkpointed after it. The same command on the same folder, after a Ctrl-C, a
 crash or a reboot, continues at the first slot not completed, with the learner resumed from
@@ -9,7 +9,7 @@ its checkpoint: no slot is repeated or skipped, and the learner holds the comple
 transitions and no others (it does not checkpoint an aborted episode).
 
 A process of the stack that dies is restarted by the launcher (the stack file's ``respawn``);
-the episode it cut short ends ``aborted`` with the reason (``cli/episode_guard.py``) and its
+the episode it cut short ends ``aborted`` with the reason (``episode_guard.py``) and its
 slot runs again. ``qgl demo`` is this command with the demo's numbers.
 """
 from __future__ import annotations
@@ -297,7 +297,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def run_demo(args: argparse.Namespace) -> int:
-    """``qgl run`` with the demo's numbers (``cli/training_run.py``): in a new
+    """``qgl run`` with the demo's numbers (``training_run.py``): in a new
     ``<runs>/demo_<time>`` folder, or continuing the one ``--run-dir`` names."""
     try:
         plan, settings, config = plan_from_args(args, args.train_episodes, 0)

@@ -14,7 +14,7 @@ diagnostics. At the end of
 every episode that ended ``done`` (training or test: it learns from both) it checkpoints
 networks, optimizers, Q-Graph and replay memory, then writes ``learner.json`` beside the
 checkpoint (the episode it follows, the transitions in it), which a training run's journal
-waits for (``cli/run_journal.py``); with ``resume: true`` a restarted learner continues from
+waits for (``qg_bringup/run_journal.py``); with ``resume: true`` a restarted learner continues from
 the last checkpoint. An ``aborted`` episode is not checkpointed: a training run reruns its slot,
 and a learner restarted from the checkpoint then holds exactly the completed episodes'
 transitions (one that runs on keeps the aborted part in memory, and in its next checkpoint).

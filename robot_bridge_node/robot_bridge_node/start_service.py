@@ -41,7 +41,7 @@ def serve_move_to_start(node: Node, mover: StartMover) -> None:
 
     The call blocks until the robot has settled (a motion takes seconds), so the service has a
     callback group of its own and the node's other callbacks keep running meanwhile. A reply can
-    be lost (a client the server has not matched yet, ``cli/ros_client.py``), so a client retries
+    be lost (a client the server has not matched yet, ``qg_common/ros_client.py``), so a client retries
     with the same ``request_id``; that retry is answered with the first reply, and the robot,
     which may have moved on since, is not moved twice (``qg_common.retried_requests``).
     """

@@ -1,4 +1,4 @@
-"""A training run's plan and journal (``cli/run_journal.py``): the schedule is fixed by the
+"""A training run's plan and journal (``qg_bringup/run_journal.py``): the schedule is fixed by the
 plan, the journal is whole after every change, and a resumed run settles the slot that was
 running when it stopped."""
 from __future__ import annotations

@@ -30,7 +30,7 @@ class LearnerNodeConfig:
     :param resume: restore networks, optimizers, graph and replay at start.
     :param robot_namespaces: the robots whose ``<ns>/transitions`` and ``<ns>/episode_status``
         this learner learns from; "" is the learner's own namespace (one robot, the default).
-        ``qgl up --robots 2`` gives ``[robot0, robot1]`` (see ``cli/fleet.py``).
+        ``qgl up --robots 2`` gives ``[robot0, robot1]`` (see ``qg_bringup/fleet.py``).
     """
     checkpoint_dir: str = ""
     resume: bool = False
