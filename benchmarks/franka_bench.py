@@ -38,7 +38,8 @@ from franka_sim_node.franka_sim import spawn
 from qg_common.params import load_ros_params, merge_params, package_config
 from qg_common.types import WrenchSetpoint
 from robot_bridge_node.core.hardware_interface import robot_defaults
-from robot_bridge_node.core.robot_loop import MAX_STATE_GAP, RobotLoop, StateClock, build_loop
+from robot_bridge_node.core.loop_clock import MAX_STATE_GAP, StateClock
+from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from robot_bridge_node.core.torque_kind import build_ekf
 
 PUSH = 15.0        # [N] along the tool axis, each way

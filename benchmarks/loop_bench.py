@@ -17,7 +17,8 @@ import time
 import numpy as np
 from qg_common.types import WrenchSetpoint
 from robot_bridge_node.core.hardware_interface import load_robot
-from robot_bridge_node.core.robot_loop import MeasuredWrench, build_loop
+from robot_bridge_node.core.robot_loop import build_loop
+from robot_bridge_node.core.wrench_source import MeasuredWrench
 
 
 def main() -> None:

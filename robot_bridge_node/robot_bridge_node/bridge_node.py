@@ -52,6 +52,8 @@ from robot_bridge_node.core.hardware_interface import (
 )
 from robot_bridge_node.core.impedance import ToolState
 from robot_bridge_node.core.interface_kinds import interface_kind
+from robot_bridge_node.core.loop_clock import MAX_STATE_GAP, StateClock
+from robot_bridge_node.core.loop_core import LoopCore
 from robot_bridge_node.core.loop_runner import (
     LoopRunner,
     ResetCommand,
@@ -59,7 +61,6 @@ from robot_bridge_node.core.loop_runner import (
     StepEvent,
     ThreadMailbox,
 )
-from robot_bridge_node.core.robot_loop import MAX_STATE_GAP, RobotLoop, StateClock
 
 __all__ = ["BridgeNode", "RosOutlet", "log_at", "RemoteRobot", "LatestWrench",
            "main"]
@@ -117,7 +118,7 @@ class RosOutlet:
     def __init__(self, bridge: BridgeNode) -> None:
         self.bridge = bridge
 
-    def sample(self, t_ns: int, loop: RobotLoop, publish: bool) -> None:
+    def sample(self, t_ns: int, loop: LoopCore, publish: bool) -> None:
         tool = loop.controller.tool
         if publish and tool is not None:
             self.bridge.publish_tool(time_msg(t_ns), tool)

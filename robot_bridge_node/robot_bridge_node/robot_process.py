@@ -41,12 +41,12 @@ from rclpy.node import Node
 
 from robot_bridge_node.bridge_node import BridgeNode, log_at
 from robot_bridge_node.core.hardware_interface import robot_defaults, robot_plugin
+from robot_bridge_node.core.loop_core import LoopConfig
 from robot_bridge_node.core.loop_link import ForkedLoopProcess, LoopLink
 from robot_bridge_node.core.loop_process import LoopSpec
 from robot_bridge_node.core.loop_runner import SetpointCommand, StepEvent
 from robot_bridge_node.core.paced_publisher import PacedPublisher
 from robot_bridge_node.core.robot_frames import RobotFrames, base_frame, task_scene
-from robot_bridge_node.core.robot_loop import LoopConfig
 from robot_bridge_node.core.sample_ring import PUBLISH
 from robot_bridge_node.core.tick_messages import TickNames, TopicRows, serialized_ticks
 from robot_bridge_node.core.tick_timing import TimingSnapshot

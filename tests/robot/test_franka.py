@@ -24,7 +24,8 @@ from qg_common.shaft_task import ShaftTaskGeometry
 from qg_common.types import WrenchSetpoint
 from robot_bridge_node.core.arm_model import ArmModel
 from robot_bridge_node.core.hardware_interface import robot_defaults
-from robot_bridge_node.core.robot_loop import MAX_STATE_GAP, StateClock, build_loop
+from robot_bridge_node.core.loop_clock import MAX_STATE_GAP, StateClock
+from robot_bridge_node.core.robot_loop import build_loop
 from sim_robot_node.core.shaft_scene_config import ShaftSceneConfig
 
 #: A loopback address of this test run's own (franky-sim binds libfranka's fixed port 1337).

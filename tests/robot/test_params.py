@@ -7,8 +7,8 @@ import pytest
 from qg_common.params import ConfigError, config_file, load_ros_params, unflatten
 from qg_common.shaft_task import ShaftTaskGeometry
 from robot_bridge_node.core.impedance import ImpedanceConfig
+from robot_bridge_node.core.loop_core import LoopConfig
 from robot_bridge_node.core.rest_detector import RestConfig
-from robot_bridge_node.core.robot_loop import LoopConfig
 from robot_bridge_node.core.safety import SafetyLimits
 from robot_bridge_node.core.start_motion import ResetConfig
 from sim_robot_node.core.shaft_scene_config import ShaftSceneConfig

@@ -13,15 +13,11 @@ import pytest
 from arms import ideal, start
 from qg_common.types import N_START_POSES, PoseReference, WrenchSetpoint
 from robot_bridge_node.core.hardware_interface import load_robot, robot_defaults, robot_plugin
-from robot_bridge_node.core.robot_loop import (
-    LoopConfig,
-    MeasuredWrench,
-    RobotLoop,
-    StateClock,
-    TickClock,
-    build_loop,
-)
+from robot_bridge_node.core.loop_clock import StateClock, TickClock
+from robot_bridge_node.core.loop_core import LoopConfig
+from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from robot_bridge_node.core.safety import SetpointRejected
+from robot_bridge_node.core.wrench_source import MeasuredWrench
 
 PUSH = -15.0  # [N] the constant base policy (contact convention: pressing in)
 

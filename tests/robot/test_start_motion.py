@@ -11,8 +11,9 @@ import pytest
 from qg_common.params import config_file, load_ros_params, merge_params
 from qg_common.types import WrenchSetpoint
 from robot_bridge_node.core.hardware_interface import load_robot
-from robot_bridge_node.core.robot_loop import MeasuredWrench, RobotLoop, build_loop
+from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from robot_bridge_node.core.start_motion import ResetConfig
+from robot_bridge_node.core.wrench_source import MeasuredWrench
 
 ROBOT = "sim_panda_mujoco"
 

@@ -11,8 +11,9 @@ from qg_common.types import StepResult, WrenchSetpoint
 from qg_learning_node.executor.observation import observation_from_step
 from qg_learning_node.executor.residual_task import Observation, ResidualTask
 from robot_bridge_node.core.hardware_interface import load_robot
-from robot_bridge_node.core.robot_loop import MeasuredWrench, RobotLoop, build_loop
+from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
+from robot_bridge_node.core.wrench_source import MeasuredWrench
 
 from qg_experiments.core.stack_settings import StackSettings
 

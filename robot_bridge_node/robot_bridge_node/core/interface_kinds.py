@@ -25,9 +25,11 @@ from robot_bridge_node.core.hardware_interface import (
     load_registered,
     registered_names,
 )
+from robot_bridge_node.core.loop_clock import LoopClock
+from robot_bridge_node.core.loop_core import LoopConfig, LoopCore
 from robot_bridge_node.core.rest_detector import RestConfig
-from robot_bridge_node.core.robot_loop import LoopClock, LoopConfig, RobotLoop, WrenchEstimator
 from robot_bridge_node.core.start_motion import ResetConfig
+from robot_bridge_node.core.wrench_source import WrenchEstimator
 
 __all__ = ["InterfaceKind", "CommandHold", "LoopBuilder", "STEP_SECTIONS", "INTERFACE_GROUP",
            "interface_kind", "interface_kind_names"]
@@ -67,7 +69,7 @@ class LoopBuilder(Protocol):
 
     def __call__(self, robot: Robot, bridge_params: dict[str, Any],
                  estimator_params: dict[str, Any], *, wrench: WrenchEstimator | None = None,
-                 clock: LoopClock | None = None) -> RobotLoop:
+                 clock: LoopClock | None = None) -> LoopCore:
         """:param bridge_params: the bridge's parameters (the kind's ``controller_sections``).
         :param estimator_params: the wrench estimator's (the kind's ``estimator_sections``).
         :param wrench: the wrench source instead of the kind's own (a separate process's

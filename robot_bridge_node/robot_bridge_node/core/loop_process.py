@@ -38,8 +38,9 @@ from qg_common.realtime_pacer import DEFAULT_SPIN, FIFO_SPIN, RealtimePacer, fif
 
 from robot_bridge_node.core.hardware_interface import Robot, robot_plugin
 from robot_bridge_node.core.interface_kinds import interface_kind
+from robot_bridge_node.core.loop_clock import MAX_STATE_GAP, StateClock
+from robot_bridge_node.core.loop_core import LoopCore
 from robot_bridge_node.core.loop_runner import LoopRunner, ResetCommand, SetpointCommand, StepEvent
-from robot_bridge_node.core.robot_loop import MAX_STATE_GAP, RobotLoop, StateClock
 from robot_bridge_node.core.sample_ring import (
     HAS_OWN_WRENCH,
     HAS_TOOL,
@@ -100,7 +101,7 @@ class RingOutlet:
         self.ticks = 0
         self.published = 0
 
-    def sample(self, t_ns: int, loop: RobotLoop, publish: bool) -> None:
+    def sample(self, t_ns: int, loop: LoopCore, publish: bool) -> None:
         state = loop.hardware.read()
         flags = PUBLISH if publish else 0
         wrench = loop.wrench_estimate
@@ -203,7 +204,7 @@ class PipeMailbox:
         return setpoint, reset
 
 
-def _build(spec: LoopSpec) -> tuple[RobotLoop, Robot]:
+def _build(spec: LoopSpec) -> tuple[LoopCore, Robot]:
     """The robot's loop, and the robot (``paced_by_hardware``: its loop ticks on its states'
     clock; ``own_wrench``)."""
     plugin = robot_plugin(spec.robot)

@@ -1,4 +1,4 @@
-"""Drives one ``RobotLoop``: setpoints and resets in, ticks, samples and at-rest events out.
+"""Drives one loop: setpoints and resets in, ticks, samples and at-rest events out.
 
 The same driver runs the loop in its own process (``loop_process``: the composed robot) and on
 a thread of the separate bridge (``bridge_node``); what differs is where its commands come from
@@ -28,7 +28,7 @@ import numpy as np
 from qg_common.types import StartPose, StepResult, WrenchSetpoint
 
 from robot_bridge_node.core.hardware_interface import HardwareFault
-from robot_bridge_node.core.robot_loop import RobotLoop
+from robot_bridge_node.core.loop_core import LoopCore
 from robot_bridge_node.core.safety import SetpointRejected
 
 __all__ = ["SetpointCommand", "ResetCommand", "StepEvent", "LoopOutlet", "Mailbox",
@@ -44,7 +44,7 @@ class SetpointCommand:
 
 @dataclass(frozen=True)
 class ResetCommand:
-    """Get the robot to a start and settle (``RobotLoop.reset``); ``job`` names it in the
+    """Get the robot to a start and settle (``LoopCore.reset``); ``job`` names it in the
     answer. ``start`` None: the robot has already been put somewhere (the separate sim
     teleported): only restart and settle where it is."""
     start: StartPose | None
@@ -64,7 +64,7 @@ class StepEvent:
 class LoopOutlet(Protocol):
     """Where the runner's output goes."""
 
-    def sample(self, t_ns: int, loop: RobotLoop, publish: bool) -> None:
+    def sample(self, t_ns: int, loop: LoopCore, publish: bool) -> None:
         """After every tick, and once when a reset has settled (``publish``: a tick of the
         publishing rate)."""
         ...
@@ -118,7 +118,7 @@ class ThreadMailbox:
 
 
 class LoopRunner:
-    """Runs one ``RobotLoop`` from a ``Mailbox`` into a ``LoopOutlet`` (see the module doc).
+    """Runs one loop from a ``Mailbox`` into a ``LoopOutlet`` (see the module doc).
 
     :param loop: the loop; its ``config.realtime`` turns the watchdog on.
     :param mailbox: setpoints and resets.
@@ -134,7 +134,7 @@ class LoopRunner:
         state (``RemoteRobot.take_restart``).
     """
 
-    def __init__(self, loop: RobotLoop, mailbox: Mailbox, outlet: LoopOutlet, *,
+    def __init__(self, loop: LoopCore, mailbox: Mailbox, outlet: LoopOutlet, *,
                  lockstep: bool, pace: Callable[[], bool] | None = None,
                  after_reset: Callable[[], None] | None = None,
                  publish_every: int = 1,
@@ -158,7 +158,7 @@ class LoopRunner:
         self.fault = ""                         # why the robot stopped, until a reset
 
     def run(self, stop: threading.Event) -> None:
-        """Hold the robot where it is (``RobotLoop.begin``: no motion at start-up) once it has a
+        """Hold the robot where it is (``LoopCore.begin``: no motion at start-up) once it has a
         state (the first tick due: a remote robot's first state), then tick until ``stop`` is
         set (the body of the loop's thread or process)."""
         while not (self.lockstep or stop.is_set() or self.pace()):

@@ -15,9 +15,10 @@ from qg_common.types import JointState
 
 from robot_bridge_node.core.hardware_interface import Robot
 from robot_bridge_node.core.interface_kinds import STEP_SECTIONS, InterfaceKind
+from robot_bridge_node.core.loop_clock import LoopClock
 from robot_bridge_node.core.position_control import PositionControlConfig
 from robot_bridge_node.core.position_loop import PositionLoop, build_position_loop
-from robot_bridge_node.core.robot_loop import LoopClock, WrenchEstimator
+from robot_bridge_node.core.wrench_source import WrenchEstimator
 
 __all__ = ["POSITION", "PositionHold"]
 

@@ -1,7 +1,7 @@
 """The 1 kHz loop of a position-controlled robot (the Nextage): read, sense, IK, write.
 
-The same bookkeeping as the torque robot's ``RobotLoop`` (robot time, resets, the rest detector
-that ends an RL step, the one ``StepResult``), with another tick: the setpoint's pose reference
+The loop core's bookkeeping (``loop_core``: robot time, resets, the rest detector that ends an
+RL step, the one ``StepResult``), with the position robot's tick: the setpoint's pose reference
 goes through the task-space position controller (``position_control``) to joint targets, and the
 wrench is what the wrist force-torque sensor measures, not an estimate. A position robot has no
 feed-forward wrench: the setpoint's wrench is ignored, its reference is the command.
@@ -14,26 +14,22 @@ import numpy as np
 from qg_common.types import StartPose, WrenchSetpoint
 
 from robot_bridge_node.core.hardware_interface import PositionInterface, Robot, SimulationInterface
+from robot_bridge_node.core.loop_clock import LoopClock
+from robot_bridge_node.core.loop_core import LoopConfig, LoopCore
 from robot_bridge_node.core.position_control import (
     PositionControlConfig,
     TaskSpacePositionController,
     pose_matrix,
 )
 from robot_bridge_node.core.rest_detector import RestConfig, RestDetector
-from robot_bridge_node.core.robot_loop import (
-    LoopClock,
-    LoopConfig,
-    MeasuredWrench,
-    RobotLoop,
-    WrenchEstimator,
-)
 from robot_bridge_node.core.safety import SetpointRejected
 from robot_bridge_node.core.start_motion import ResetConfig
+from robot_bridge_node.core.wrench_source import MeasuredWrench, WrenchEstimator
 
 __all__ = ["PositionLoop", "build_position_loop"]
 
 
-class PositionLoop(RobotLoop):
+class PositionLoop(LoopCore):
     """One episode's 1 kHz control of a position-controlled robot.
 
     :param controller: pose reference in, joint targets out (clamped to its workspace box and
@@ -45,6 +41,9 @@ class PositionLoop(RobotLoop):
     MOVE_TIMEOUT = 10.0
     MOVE_TOLERANCE = 1e-3
 
+    hardware: PositionInterface
+    controller: TaskSpacePositionController
+
     def __init__(self, hardware: PositionInterface, controller: TaskSpacePositionController,
                  rest_detector: RestDetector, estimator: WrenchEstimator | None = None,
                  config: LoopConfig | None = None,
@@ -52,8 +51,8 @@ class PositionLoop(RobotLoop):
                  clock: LoopClock | None = None,
                  reset_config: ResetConfig | None = None) -> None:
         # No torque safety filter: the controller clamps and rate-limits its own targets.
-        super().__init__(hardware, controller, None, rest_detector, estimator,  # type: ignore
-                         config, simulation, clock, reset_config)
+        super().__init__(hardware, controller, rest_detector, estimator, config, simulation,
+                         clock, reset_config)
         self.reference = np.eye(4)
 
     def begin(self) -> None:
@@ -63,25 +62,12 @@ class PositionLoop(RobotLoop):
         self.controller.measure(state.q, state.dq)
         self.reference = self.controller.pose_command
 
-    def reset(self, start: StartPose) -> None:
-        """New episode: the arm at ``start`` (a simulation's teleport, or moved there by the
-        task-space controller: it is speed-limited and clamped to its workspace), settled.
-
-        :raises RuntimeError: if a motion does not reach the start within ``MOVE_TIMEOUT``.
-        """
-        if self.teleports:
-            self.simulation.teleport(start)
-        else:
-            self._move_to(start)
-        self.settle_here()
-
-    def settle_here(self) -> None:
-        """Restart the clock where the arm is and hold the pose for ``settle_time``."""
-        self.begin()
-        self._settle()
-
     def _move_to(self, start: StartPose) -> None:
-        """Move the tool's reference to ``start`` and tick until the tool is there."""
+        """Move the tool's reference to ``start`` and tick until the tool is there (the
+        task-space controller is speed-limited and clamped to its workspace).
+
+        :raises RuntimeError: if the start is not reached within ``MOVE_TIMEOUT``.
+        """
         self.reference = pose_matrix(np.asarray(start.position, float),
                                      np.asarray(start.rotation, float))
         began = self.time
@@ -114,13 +100,9 @@ class PositionLoop(RobotLoop):
     def tick(self) -> bool:
         """One control period. True when the current step has come to rest or timed out."""
         state = self.hardware.read()
-        dt = self.clock.period()
-        if self.estimator is not None and dt > 0.0:   # (0: the same state read again)
-            self.wrench_estimate = self.estimator.update(state.q, state.dq, state.tau, dt)
+        dt = self._sense(state)
         self.hardware.write(self.controller.step(state.q, self.reference))
-        self.ticks += 1
-        self.ticks_run += 1
-        self.clock.advance(dt)
+        self._count(dt)
         state = self.hardware.read()
         tool = self.controller.measure(state.q, state.dq)
         return self.rest.update(tool.linear_speed, tool.angular_speed, dt)

@@ -17,9 +17,11 @@ from robot_bridge_node.core.arm_model import ArmModel
 from robot_bridge_node.core.hardware_interface import Robot, RobotDescription
 from robot_bridge_node.core.impedance import ImpedanceConfig
 from robot_bridge_node.core.interface_kinds import STEP_SECTIONS, InterfaceKind
-from robot_bridge_node.core.robot_loop import LoopClock, RobotLoop, WrenchEstimator, build_loop
+from robot_bridge_node.core.loop_clock import LoopClock
+from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from robot_bridge_node.core.safety import HARD_LIMITS, SafetyLimits
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
+from robot_bridge_node.core.wrench_source import WrenchEstimator
 
 __all__ = ["TORQUE", "EKF_SECTION", "GravityHold", "build_ekf"]
 
