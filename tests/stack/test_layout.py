@@ -344,6 +344,39 @@ CORE_MUST_NOT_IMPORT = {"rclpy", "torch", "qg_interfaces", "rosidl_adapter", "ro
                         "rosbags", "qg_recording"}
 
 
+#: Words of one task (the shaft in its bearing) that the hardware-agnostic bridge never names.
+TASK_WORDS = ("shaft", "bore", "bearing", "housing", "peg")
+
+
+def task_identifiers(path: Path) -> set[str]:
+    """The names ``path`` defines or uses (functions, classes, arguments, variables,
+    attributes) that contain one of ``TASK_WORDS``; docstrings and comments do not count."""
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        names = []
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            names.append(node.name)
+        elif isinstance(node, ast.arg):
+            names.append(node.arg)
+        elif isinstance(node, ast.Name):
+            names.append(node.id)
+        elif isinstance(node, ast.Attribute):
+            names.append(node.attr)
+        found.update(n for n in names if any(w in n.lower() for w in TASK_WORDS))
+    return found
+
+
+def test_the_bridge_names_no_task(tmp_path):
+    """The bridge drives any arm at any task: its code names no part of the shaft task (its
+    resets speak of a held part, a fixture and an approach axis)."""
+    sneaky = tmp_path / "sneaky.py"
+    sneaky.write_text("def _withdraw(start):\n    out_of_bore = -start.axis\n    return out_of_bore\n")
+    assert task_identifiers(sneaky) == {"out_of_bore"}
+    offenders = {str(p.relative_to(ROOT)): sorted(task_identifiers(p))
+                 for p in sources("robot_bridge_node") if task_identifiers(p)}
+    assert offenders == {}
+
+
 def test_the_experiments_core_depends_on_nothing_that_composes_it():
     """The core builds the settings, the robot and the task from the bridge's and executor's
     cores only: every module it reaches (lazily too) imports no ROS, no torch and no message

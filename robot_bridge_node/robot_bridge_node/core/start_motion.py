@@ -1,22 +1,22 @@
 """The way a torque arm gets from wherever it is to an episode's start: a motion, not a teleport.
 
 A real arm cannot be put at a start pose; between episodes it has to back out of the task and
-move there, as a robot's operator would teach it. First the part comes out of the fixture
-compliantly: ``RobotLoop.reset`` pulls the shaft out along the bore's axis with
-``withdraw_force``, growing to the safety filter's force limit while it stays in, under the
-task's hybrid controller (soft laterally and in rotation, so the bore guides the shaft) until
-the tool is level with the approach point ``start - approach``. A stiff withdrawal
+move there, as a robot's operator would teach it. First the held part comes out of its fixture
+compliantly (``reset_motion.retreat``): a pull along the fixture's axis, the start's approach,
+with ``withdraw_force``, growing to the safety filter's force limit while the part stays in,
+under the task's hybrid controller (soft laterally and in rotation, so the fixture guides the
+part) until the tool is level with the approach point ``start - approach``. A stiff withdrawal
 jams: the joint law below holds the tool's orientation to a fraction of a degree, a fully
-inserted shaft in a bore of 0.1 mm clearance allows 1 degree, and the arm locked in 1 of 4
+inserted part in a fit of 0.1 mm clearance allows 1 degree, and the arm locked in 1 of 4
 withdrawals on the simulated Panda and on franky-sim's FR3 (not a millimetre of motion while
 its targets left by 45 mm). Then the path has three legs, all tracked by a stiff joint impedance
 law (``JointHold``: libfranka's joint impedance example's gains) on joint targets that move
 along it:
 
-1. **back out**: straight back along the start's approach axis (the bore's axis) until the tool
-   is level with the approach point, clear of the housing (a straight line of the tool: the
-   joint targets are its inverse kinematics, each from the one before; after the withdrawal
-   there is nothing left of it);
+1. **back out**: straight back along the start's approach axis until the tool is level with the
+   approach point, clear of the fixture (a straight line of the tool: the joint targets are its
+   inverse kinematics, each from the one before; after the withdrawal there is nothing left of
+   it);
 2. **joint motion**: a minimum-jerk interpolation of the joints from there to the configuration
    that puts the tool at the approach point with the start's orientation (inverse kinematics of
    the bridge's model from the current joints, so the posture changes least);
@@ -27,9 +27,9 @@ stiffness is what makes the arrival precise: the task-space holding gains (10 Nm
 tool) leave a wrist held by 0.2-1 Nm of joint friction a degree or more from where it should be,
 the joint law's 50-600 Nm/rad a hundredth of that.
 
-``StartMotion`` is the plan as a function of time; ``RobotLoop.reset`` ticks through it with
-``JointHold`` and settles at the start. Speeds, gains and tolerances are the bridge's
-``reset.*`` parameters.
+``StartMotion`` is the plan as a function of time; ``reset_motion.move_to_start`` ticks through
+it with ``JointHold`` and the loop settles at the start. Speeds, gains and tolerances are the
+bridge's ``reset.*`` parameters.
 """
 from __future__ import annotations
 
@@ -53,7 +53,7 @@ class ResetConfig:
 
     :param teleport: a simulated robot is put at the start at once (its simulation's shortcut);
         false moves it there as a real arm is moved. A robot without a simulation always moves.
-    :param withdraw_force: [N] the pull along the bore's axis that takes the part out of the
+    :param withdraw_force: [N] the pull along the fixture's axis that takes the part out of the
         fixture, under the task's compliant controller (the task pushes with 15 N); it grows to
         ``withdraw_force_max`` over half the timeout while the part stays in.
     :param withdraw_force_max: [N] the strongest pull (the safety filter's ``force_max`` caps
