@@ -188,11 +188,11 @@ class RunJournal:
         self.running = None
         self._save()
 
-    def cut(self, slot: int, episode_id: str, reason: str) -> None:
+    def cut(self, slot: int, episode_id: str, reason: str, steps: int = 0) -> None:
         """The attempt at ``slot`` ended without completing it (aborted, its executor died,
-        the run stopped): the slot runs again."""
+        the run stopped, the learner lost it): the slot runs again. ``steps``: how far it got."""
         self.cut_short.append({"slot": slot, "episode_id": episode_id, "reason": reason,
-                               "at": time.time()})
+                               "steps": steps, "at": time.time()})
         self.running = None
         self._save()
 

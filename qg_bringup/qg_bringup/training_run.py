@@ -142,7 +142,14 @@ def run_training(run_dir: Path, plan: RunPlan, settings: Any, config: Path,
 
 
 class _SlotRunner:
-    """Runs one slot to completion: again after an attempt cut short, waiting out restarts."""
+    """Runs one slot to completion: again after an attempt cut short, waiting out restarts.
+
+    A slot is complete once its episode ended ``done`` and the learner checkpointed after it.
+    If the learner died before that checkpoint, the episode's transitions died with it (the
+    restarted learner resumes from the checkpoint before), so the slot runs again; and after
+    any restart the next attempt waits until the stack answers again (a learner that is not yet
+    subscribed would miss the transitions).
+    """
 
     def __init__(self, cli: Any, launcher: Any, guard: Any, lane: Any, journal: RunJournal,
                  run_dir: Path, label: str) -> None:
@@ -150,18 +157,26 @@ class _SlotRunner:
         self.journal, self.run_dir, self.label = journal, run_dir, label
         self.refusals = 0
         self.deaths: list[str] = []     # restarts seen during the running attempt
+        self.restarted = False          # a process came back: wait for the stack to answer
+        self.learner_died = False       # during the running attempt or before its checkpoint
 
     def run(self, job: EpisodeJob) -> None:
-        """Until ``job``'s slot is complete in the journal.
+        """One attempt at ``job``'s slot: complete in the journal, or cut short (the caller
+        runs the slot again).
 
         :raises RuntimeError: a process stays dead, or the slot keeps failing.
         """
+        from qg_bringup.demo import wait_for_stack
         self.lane.queue.append(job)
+        self.learner_died = False
         while True:
             self._check_processes()
             if self.launcher.restarting():      # not before the stack is whole again
                 self.cli.spin_for(0.1)
                 continue
+            if self.restarted and self.lane.job is None:
+                wait_for_stack(self.cli, timeout=STACK_TIMEOUT)
+                self.restarted = False
             try:
                 outcome = self.lane.advance()
             except RuntimeError as exc:         # refused: a restarted peer not yet discovered
@@ -178,9 +193,15 @@ class _SlotRunner:
             self.cli.executor.spin_once(timeout_sec=0.01)
         self.refusals, deaths, self.deaths = 0, self.deaths, []
         if outcome.state == "done":
-            self.journal.complete(outcome, self._learner_after(outcome.episode_id))
+            record = self._learner_after(outcome.episode_id)
+            if record is not None or not self.learner_died:
+                self.journal.complete(outcome, record)
+                return
+            self._cut(job, outcome.episode_id, "the learner restarted before it checkpointed "
+                      "the episode: its transitions are lost", outcome.steps)
             return
-        self._cut(job, outcome.episode_id, "; ".join([outcome.message or "aborted", *deaths]))
+        self._cut(job, outcome.episode_id, "; ".join([outcome.message or "aborted", *deaths]),
+                  outcome.steps)
 
     def _check_processes(self) -> None:
         died = self.launcher.poll()
@@ -191,9 +212,12 @@ class _SlotRunner:
         for death in self.launcher.take_respawns():
             ended = self.guard.process_died(death)
             self.deaths.append(death.reason)
+            self.restarted = True
+            role = self.guard.roles.get(death.name)
+            if role is not None and role.robot is None:
+                self.learner_died = True
             print(f"[{self.label}] {death.reason} in {death.delay:.1f} s"
                   + (f"; episode {', '.join(ended)} ended aborted" if ended else ""), flush=True)
-            role = self.guard.roles.get(death.name)
             if role is not None and role.executor and self.lane.job is not None \
                     and not self.lane.episode_id:
                 # It died before naming the episode: no status will ever end it.
@@ -206,8 +230,8 @@ class _SlotRunner:
         if not self.lane.queue:
             self.lane.queue.append(job)
 
-    def _cut(self, job: EpisodeJob, episode_id: str, reason: str) -> None:
-        self.journal.cut(job.index, episode_id, reason)
+    def _cut(self, job: EpisodeJob, episode_id: str, reason: str, steps: int = 0) -> None:
+        self.journal.cut(job.index, episode_id, reason, steps)
         attempts = self.journal.attempts(job.index)
         print(f"[{self.label}] slot {job.index + 1} ({job.mode}) cut short ({reason}): "
               f"running it again (attempt {attempts + 1})", flush=True)
@@ -224,6 +248,8 @@ class _SlotRunner:
             if record is not None and record.get("episode_id") == episode_id:
                 return record
             self._check_processes()
+            if self.learner_died:               # its checkpoint of this episode never comes
+                return None
             self.cli.spin_for(0.05)
         print(f"[{self.label}] the learner did not checkpoint after {episode_id} within "
               f"{CHECKPOINT_WAIT:.0f} s; the journal goes on without its count", flush=True)
