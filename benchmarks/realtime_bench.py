@@ -23,11 +23,11 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from qg_bringup.demo import DemoSettings, _with_demo_settings, wait_for_stack
 from qg_bringup.episode_schedule import EpisodeJob, run_lanes
 from qg_bringup.fleet import fleet_specs, robot_namespace
 from qg_bringup.launcher import Launcher, load_stack_config
 from qg_bringup.ros_env import stack_env
+from qg_bringup.stack_start import DemoSettings, wait_for_stack, with_run_settings
 from qg_common.params import config_file
 from qg_common.ros_client import CliNode
 from robot_bridge_node.core.tick_timing import TimingSnapshot
@@ -40,7 +40,7 @@ def realtime_specs(robots: int, robot_args: tuple[str, ...]) -> list:
     ``robot_args``, ``-p name:=value`` pairs, added to the robot process's parameters)."""
     specs = []
     for spec in load_stack_config(config_file("stack.yaml")):
-        spec = _with_demo_settings(spec, DemoSettings(train_max_steps=50))
+        spec = with_run_settings(spec, DemoSettings(train_max_steps=50))
         extra = REALTIME.get((spec.package, spec.executable))
         if extra:
             if spec.executable == "robot":

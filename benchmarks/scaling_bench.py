@@ -34,9 +34,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
-from qg_bringup.demo import DemoSettings, start_stack
 from qg_bringup.episode_wait import FINAL_STATES
 from qg_bringup.fleet import robot_namespace
+from qg_bringup.stack_start import DemoSettings, start_stack
 from qg_common import topics
 from qg_common.params import config_file
 from qg_common.ros_client import CliNode, call_service

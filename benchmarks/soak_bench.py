@@ -21,12 +21,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from qg_bringup.demo import (
-    DemoSettings,
-    run_episode_by_service,
-    start_stack,
-    wait_for_stack,
-)
+from qg_bringup.episode_schedule import run_episode_by_service
+from qg_bringup.stack_start import DemoSettings, start_stack, wait_for_stack
 from qg_common.params import config_file
 from qg_common.ros_client import CliNode
 from qg_recording.bag_reader import bag_info

@@ -111,12 +111,8 @@ def step_time_split(setpoints: list[tuple[float, int]], rests: list[tuple[float,
 
 
 def through_ros(episodes: int) -> dict:
-    from qg_bringup.demo import (
-        DemoSettings,
-        run_episode_by_service,
-        start_stack,
-        wait_for_stack,
-    )
+    from qg_bringup.episode_schedule import run_episode_by_service
+    from qg_bringup.stack_start import DemoSettings, start_stack, wait_for_stack
     from qg_common.params import config_file
     from qg_common.ros_client import CliNode
     from qg_interfaces.msg import AtRest, WrenchSetpoint

@@ -4,9 +4,11 @@ from setuptools import find_packages, setup
 
 package_name = 'qg_experiments'
 # The repository's config/ is the one source of the numbers; this package installs the
-# experiments' profiles from there to share/qg_experiments/config (symlinked by
-# --symlink-install). The stack files the runs read are the node packages' own.
-config_files = [os.path.join('..', 'config', 'experiments.yaml')]
+# experiments' profiles and the report's random bar (the demo's plot draws it) from there to
+# share/qg_experiments/config (symlinked by --symlink-install). The stack files the runs read
+# are the node packages' own.
+config_files = [os.path.join('..', 'config', name) for name in ('experiments.yaml',
+                                                               'random_bar.json')]
 
 setup(
     name=package_name,

@@ -80,9 +80,10 @@ def run_training(run_dir: Path, plan: RunPlan, settings: Any, config: Path,
     from qg_learning_node.learner.training_log import TrainingLog
     from tqdm import tqdm
 
-    from qg_bringup import demo
     from qg_bringup.episode_guard import EpisodeGuard, process_roles
     from qg_bringup.episode_schedule import Lane
+    from qg_bringup.stack_start import start_stack, wait_for_stack
+    from qg_bringup.step_monitor import StepMonitor
     journal = RunJournal.open(run_dir, plan)
     resumed = bool(journal.sessions)
     if resumed:
@@ -98,7 +99,7 @@ def run_training(run_dir: Path, plan: RunPlan, settings: Any, config: Path,
         raise _Stopped
 
     previous = signal.signal(signal.SIGTERM, on_sigterm)
-    launcher, env = demo.start_stack(run_dir, settings, config, robot=plan.robot, resume=True)
+    launcher, env = start_stack(run_dir, settings, config, robot=plan.robot, resume=True)
     specs = [r.spec for r in launcher.running]
     log = TrainingLog(run_dir / "tensorboard")
     started = time.monotonic()
@@ -112,8 +113,8 @@ def run_training(run_dir: Path, plan: RunPlan, settings: Any, config: Path,
         with CliNode("qgl_run", domain_id=int(env["ROS_DOMAIN_ID"])) as cli, \
                 tqdm(total=len(journal.slots), initial=journal.next_slot, unit="episode",
                      dynamic_ncols=True) as bar:
-            demo.wait_for_stack(cli, timeout=STACK_TIMEOUT)
-            monitor = demo.StepMonitor(cli, bar, log, len(journal.slots))
+            wait_for_stack(cli, timeout=STACK_TIMEOUT)
+            monitor = StepMonitor(cli, bar, log, len(journal.slots))
             monitor.steps = journal.steps()
             guard = EpisodeGuard(cli, process_roles(specs))
             lane = Lane(cli, "", [], _RunObserver(journal, monitor), episode_timeout)
@@ -166,7 +167,7 @@ class _SlotRunner:
 
         :raises RuntimeError: a process stays dead, or the slot keeps failing.
         """
-        from qg_bringup.demo import wait_for_stack
+        from qg_bringup.stack_start import wait_for_stack
         self.lane.queue.append(job)
         self.learner_died = False
         while True:
@@ -266,13 +267,18 @@ def _finish(journal: RunJournal, run_dir: Path, plan: RunPlan, random_bar: Path 
             wall: float, learner_transitions: int | None, codes: dict[str, int],
             label: str, render: bool = True) -> int:
     """The completed run's outputs: episodes.json, the plot, the last test's video, a summary."""
-    from qg_bringup import demo
+    from qg_bringup.run_report import (
+        default_random_bar,
+        load_random_bar,
+        plot_learning_curve,
+        render_last_test,
+    )
     outcomes = _write_outcomes(journal, run_dir)
-    demo._plot(outcomes, run_dir / "learning_curve.png",
-               demo.load_random_bar(random_bar or demo.default_random_bar()),
-               "the simulated Panda" if plan.robot is None else plan.robot)
+    plot_learning_curve(outcomes, run_dir / "learning_curve.png",
+                        load_random_bar(random_bar or default_random_bar()),
+                        "the simulated Panda" if plan.robot is None else plan.robot)
     if render:
-        demo._render_last_test(outcomes, run_dir)
+        render_last_test(outcomes, run_dir)
     tests = [o for o in outcomes if o.mode == "test"]
     train = [o for o in outcomes if o.mode == "train"]
     record = learner_record(run_dir) or {}
@@ -294,7 +300,7 @@ def plan_from_args(args: argparse.Namespace, episodes: int, test_every: int) -> 
                                                                                        Path]:
     """The run's plan, learning settings and stack file from ``qgl run``/``qgl demo``'s
     arguments."""
-    from qg_bringup.demo import DemoSettings
+    from qg_bringup.stack_start import DemoSettings
     settings = DemoSettings(train_max_steps=args.train_max_steps, critic_lr=args.critic_lr,
                             iterations=args.iterations, schedule=args.schedule,
                             updates_per_step=args.updates_per_step)

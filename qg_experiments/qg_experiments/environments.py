@@ -8,8 +8,9 @@ clearance-fit peg of experiment 5). An environment has ``state_dim``, ``action_d
 """
 from __future__ import annotations
 
-from importlib.metadata import entry_points
 from typing import Any
+
+from qg_common.plugins import load_registered
 
 __all__ = ["ENVIRONMENT_GROUP", "make_environment"]
 
@@ -21,8 +22,4 @@ def make_environment(name: str, params: dict[str, Any], **overrides: Any) -> Any
 
     :raises ValueError: if no installed package registers ``name``.
     """
-    found = [ep for ep in entry_points(group=ENVIRONMENT_GROUP) if ep.name == name]
-    if not found:
-        known = sorted(ep.name for ep in entry_points(group=ENVIRONMENT_GROUP))
-        raise ValueError(f"no environment named {name!r}; installed: {known}")
-    return found[0].load()(params, **overrides)
+    return load_registered(ENVIRONMENT_GROUP, name, what="environment")(params, **overrides)

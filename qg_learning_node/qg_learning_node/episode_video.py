@@ -9,9 +9,10 @@ and no command line; without a renderer installed, a lookup says so.
 from __future__ import annotations
 
 import time
-from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any
+
+from qg_common.plugins import load_registered, registered_names
 
 __all__ = ["RENDERER_GROUP", "renderer", "render_episode", "default_video_path"]
 
@@ -23,15 +24,13 @@ def renderer(name: str | None = None) -> Any:
 
     :raises RuntimeError: if none (or none of that name) is installed.
     """
-    found = sorted(entry_points(group=RENDERER_GROUP), key=lambda ep: ep.name)
-    if name is not None:
-        found = [ep for ep in found if ep.name == name]
-    if not found:
-        known = sorted(ep.name for ep in entry_points(group=RENDERER_GROUP))
+    known = registered_names(RENDERER_GROUP)
+    if not known or (name is not None and name not in known):
         raise RuntimeError(f"no episode renderer{'' if name is None else f' {name!r}'} "
                            f"installed (entry points {RENDERER_GROUP}: {known}); "
                            "sim_robot_node provides 'pybullet'")
-    return found[0].load()
+    return load_registered(RENDERER_GROUP, known[0] if name is None else name,
+                           what="episode renderer")
 
 
 def default_video_path(bag: Path) -> Path:

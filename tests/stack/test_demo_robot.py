@@ -2,8 +2,8 @@
 changes."""
 from __future__ import annotations
 
-from qg_bringup.demo import DemoSettings, _with_demo_settings
 from qg_bringup.launcher import ProcessSpec, load_stack_config
+from qg_bringup.stack_start import DemoSettings, with_run_settings
 from qg_common.params import config_file
 
 
@@ -12,8 +12,8 @@ def test_the_robot_goes_to_the_processes_that_load_a_robot_and_to_no_other() -> 
     specs = load_stack_config(config_file("stack.yaml")) + [
         ProcessSpec("sim", "sim_robot_node", "sim"),
         ProcessSpec("bridge", "robot_bridge_node", "bridge", ("--ros-args", "-p", "x:=1"))]
-    given = {spec.name: _with_demo_settings(spec, settings, "sim_xarm7").args for spec in specs}
-    default = {spec.name: _with_demo_settings(spec, settings).args for spec in specs}
+    given = {spec.name: with_run_settings(spec, settings, "sim_xarm7").args for spec in specs}
+    default = {spec.name: with_run_settings(spec, settings).args for spec in specs}
     for name in ("robot", "sim", "bridge"):
         assert given[name][-2:] == ("-p", "robot:=sim_xarm7"), given[name]
         assert given[name].count("--ros-args") == 1

@@ -21,13 +21,12 @@ from xml.etree import ElementTree
 
 import numpy as np
 import pinocchio as pin
+from qg_common.plugins import load_registered, registered_names
 from qg_common.task_scene import TOOL, TaskScene
 
 from robot_bridge_node.core.arm_model import driven_model
 from robot_bridge_node.core.hardware_interface import (
     RobotDescription,
-    load_registered,
-    registered_names,
 )
 
 __all__ = ["TASK_SCENE_GROUP", "Transform", "FrameKinematics", "base_frame", "urdf_root_link",

@@ -20,22 +20,19 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from importlib.metadata import entry_points
 from typing import Any, Protocol
 
 import numpy as np
 from qg_common.params import ParameterSection, load_ros_params, merge_params, package_config
+from qg_common.plugins import ROBOT_PLUGIN_GROUP, load_registered, registered_names
 from qg_common.types import GroundTruth, JointState, StartPose
 
 __all__ = ["HardwareFault", "Recoverable", "TorqueInterface", "PositionInterface",
            "StampedStates", "ForceTorqueSensor",
            "SimulationInterface", "ToolDescription",
            "RobotDescription", "Robot", "RobotPlugin", "RobotChoice", "ROBOT_SECTION",
-           "ROBOT_PLUGIN_GROUP", "robot_names", "robot_plugin", "load_robot", "robot_defaults",
-           "registered_names", "load_registered"]
+           "ROBOT_PLUGIN_GROUP", "robot_names", "robot_plugin", "load_robot", "robot_defaults"]
 
-#: The entry-point group robots register under (``name = module:RobotPlugin instance``).
-ROBOT_PLUGIN_GROUP = "robot_bridge_node.robots"
 
 
 class HardwareFault(RuntimeError):
@@ -228,28 +225,6 @@ class RobotChoice:
 
 #: The ``robot`` parameter (declared by the node that loads the plugin).
 ROBOT_SECTION = ParameterSection("", RobotChoice)
-
-
-def registered_names(group: str) -> list[str]:
-    """Names registered under the entry-point ``group``."""
-    return sorted(ep.name for ep in entry_points(group=group))
-
-
-def load_registered(group: str, name: str, expected: type, what: str) -> Any:
-    """The object registered as ``name`` under the entry-point ``group``.
-
-    :param what: what it is, for the messages (``robot plugin``).
-    :raises ValueError: if no installed package registers that name (lists those that do).
-    :raises TypeError: if the entry point is not an ``expected``.
-    """
-    found = [ep for ep in entry_points(group=group) if ep.name == name]
-    if not found:
-        raise ValueError(f"no {what} named {name!r}; installed: {registered_names(group)}")
-    loaded = found[0].load()
-    if not isinstance(loaded, expected):
-        raise TypeError(f"entry point {name!r} is {type(loaded).__name__}, "
-                        f"not a {expected.__name__}")
-    return loaded
 
 
 def robot_names() -> list[str]:

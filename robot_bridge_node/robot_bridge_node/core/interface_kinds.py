@@ -17,13 +17,12 @@ from typing import Any, Protocol
 
 import numpy as np
 from qg_common.params import ParameterSection
+from qg_common.plugins import load_registered, registered_names
 from qg_common.types import JointState
 
 from robot_bridge_node.core.hardware_interface import (
     Robot,
     RobotDescription,
-    load_registered,
-    registered_names,
 )
 from robot_bridge_node.core.loop_clock import LoopClock
 from robot_bridge_node.core.loop_core import LoopConfig, LoopCore
