@@ -25,8 +25,9 @@ from pathlib import Path
 
 from qg_bringup.episode_schedule import EpisodeJob, run_lanes
 from qg_bringup.fleet import fleet_specs, robot_namespace
-from qg_bringup.launcher import Launcher, load_stack_config
+from qg_bringup.launcher import Launcher
 from qg_bringup.ros_env import stack_env
+from qg_bringup.stack_file import load_stack_config
 from qg_bringup.stack_start import DemoSettings, wait_for_stack, with_run_settings
 from qg_common.params import config_file
 from qg_common.ros_client import CliNode

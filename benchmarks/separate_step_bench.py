@@ -28,8 +28,9 @@ WRENCHES = ((0.0, 0.0, -8.0, 0.0, 0.3, 0.0), (0.0, 0.0, -8.0, 0.3, 0.0, 0.0),
 
 
 def run(steps: int, domain_id: str) -> dict:
-    from qg_bringup.launcher import Launcher, ProcessSpec
+    from qg_bringup.launcher import Launcher
     from qg_bringup.ros_env import stack_env
+    from qg_bringup.stack_file import ProcessSpec
     from qg_common.conversions import setpoint_msg, start_pose_request, time_msg
     from qg_common.params import config_file, load_ros_params
     from qg_common.ros_client import CliNode, call_service

@@ -40,8 +40,9 @@ def main() -> None:
     args = parser.parse_args()
 
     import rclpy
-    from qg_bringup.launcher import Launcher, ProcessSpec
+    from qg_bringup.launcher import Launcher
     from qg_bringup.ros_env import stack_env
+    from qg_bringup.stack_file import ProcessSpec
     from qg_recording.episode_recorder import TOPICS
     from qg_recording.player import message_class
     from rclpy.executors import SingleThreadedExecutor

@@ -156,7 +156,7 @@ class Stack:
         self.launcher = Launcher(env=self.env, out=None, log_dir=self.log_dir)
 
     def start(self, *specs: tuple[str, str, str] | tuple[str, str, str, tuple[str, ...]]) -> None:
-        from qg_bringup.launcher import ProcessSpec
+        from qg_bringup.stack_file import ProcessSpec
         self.launcher.start([ProcessSpec(*s) for s in specs])
 
     def client(self, name: str = "test"):

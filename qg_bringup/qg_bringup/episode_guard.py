@@ -19,7 +19,8 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Any
 
-from qg_bringup.launcher import ProcessSpec, Respawn
+from qg_bringup.launcher import Respawn
+from qg_bringup.stack_file import ProcessSpec
 
 __all__ = ["EpisodeGuard", "ProcessRole", "process_roles"]
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from qg_bringup.launcher import ProcessSpec, StackConfigError
+from qg_bringup.stack_file import ProcessSpec, StackConfigError
 
 __all__ = ["robot_namespace", "fleet_specs", "LEARNER_REMAPS"]
 

@@ -14,14 +14,9 @@ from pathlib import Path
 from qg_common.params import ConfigError, config_file
 
 from qg_bringup.fleet import fleet_specs
-from qg_bringup.launcher import (
-    Launcher,
-    StackConfigError,
-    load_stack,
-    recording_argument,
-    with_recording,
-)
+from qg_bringup.launcher import Launcher
 from qg_bringup.ros_env import exports, stack_env
+from qg_bringup.stack_file import StackConfigError, load_stack, recording_argument, with_recording
 
 __all__ = ["main", "build_parser"]
 

@@ -29,7 +29,7 @@ from qg_common.params import (
 )
 from qg_learning_node.policy_file import PolicyFileError, load_policy, save_policy, spec_for_task
 
-from qg_bringup.launcher import ProcessSpec, StackConfigError
+from qg_bringup.stack_file import ProcessSpec, StackConfigError
 
 __all__ = ["add_parser", "executor_task", "export_core", "run_checkpoint", "logged_task",
            "frozen_stack", "stack_robot"]

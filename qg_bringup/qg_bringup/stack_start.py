@@ -16,8 +16,9 @@ from qg_common.plugins import ROBOT_PLUGIN_GROUP, registering_packages
 
 from qg_bringup.episode_schedule import robot_name
 from qg_bringup.fleet import fleet_specs
-from qg_bringup.launcher import Launcher, ProcessSpec, load_stack
+from qg_bringup.launcher import Launcher
 from qg_bringup.ros_env import stack_env
+from qg_bringup.stack_file import ProcessSpec, load_stack
 
 __all__ = ["DemoSettings", "robot_executables", "with_parameters",
            "with_run_settings", "start_stack", "is_learner", "wait_for_stack"]

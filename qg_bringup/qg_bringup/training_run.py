@@ -316,7 +316,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         run_dir = Path(args.run_dir) if args.run_dir else \
             runs_dir() / time.strftime("run_%Y%m%d_%H%M%S")
         if args.recording:   # the run's own stack file: a continued run records alike
-            from qg_bringup.launcher import stack_with_recording
+            from qg_bringup.stack_file import stack_with_recording
             stack = Path(args.config).resolve() if args.config else config_file("stack.yaml")
             args.config = str(stack_with_recording(stack, args.recording,
                                                    run_dir / "stack_recording.yaml"))
@@ -352,7 +352,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      help="the run's folder; an existing one is continued (default: a new "
                           "<runs>/run_<time>)")
     from qg_bringup.demo import add_learning_arguments
-    from qg_bringup.launcher import recording_argument
+    from qg_bringup.stack_file import recording_argument
     add_learning_arguments(run)
     run.add_argument("--recording", type=recording_argument, action="append", default=[],
                      metavar="NAME=VALUE", help="a recording.* setting of the recorder (as "

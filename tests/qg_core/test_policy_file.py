@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from qg_bringup.launcher import ProcessSpec, StackConfigError
 from qg_bringup.policy import export_core, frozen_stack, stack_robot
+from qg_bringup.stack_file import ProcessSpec, StackConfigError
 from qg_common.peg_task import PegCell
 from qg_common.shaft_task import ShaftTaskGeometry
 from qg_learning_node.executor.peg_task import PegTask, PegTaskConfig

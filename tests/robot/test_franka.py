@@ -248,7 +248,7 @@ def test_the_real_arms_stack_is_the_rehearsals_without_franky_sim():
     ``enforce``, nothing else changed."""
     from pathlib import Path
 
-    from qg_bringup.launcher import load_stack_config
+    from qg_bringup.stack_file import load_stack_config
     from qg_common.params import load_ros_params, merge_params, package_config
     config = Path(__file__).resolve().parents[2] / "config"
     rehearsal = {s.name: s for s in load_stack_config(config / "stack_franka.yaml")}

@@ -107,7 +107,8 @@ def host_env(stack, side: Path, discovery: str, peer: str) -> dict[str, str]:
 
 @pytest.mark.parametrize("discovery", sorted(DISCOVERY))
 def test_learner_and_robot_on_two_hosts_run_an_episode_over_the_link(stack, tmp_path, discovery):
-    from qg_bringup.launcher import Launcher, ProcessSpec
+    from qg_bringup.launcher import Launcher
+    from qg_bringup.stack_file import ProcessSpec
 
     learner_side, robot_side = tmp_path / "learner_host", tmp_path / "robot_host"
     learner_env = host_env(stack, learner_side, discovery, peer=ROBOT_ADDRESS)

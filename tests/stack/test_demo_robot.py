@@ -2,7 +2,7 @@
 changes."""
 from __future__ import annotations
 
-from qg_bringup.launcher import ProcessSpec, load_stack_config
+from qg_bringup.stack_file import ProcessSpec, load_stack_config
 from qg_bringup.stack_start import DemoSettings, with_run_settings
 from qg_common.params import config_file
 

@@ -38,7 +38,7 @@ class TwoRobots:
 @pytest.fixture(scope="module")
 def two_robots(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TwoRobots]:
     from qg_bringup.fleet import fleet_specs
-    from qg_bringup.launcher import ProcessSpec
+    from qg_bringup.stack_file import ProcessSpec
     from qg_interfaces.srv import StartEpisode
 
     tmp_path = tmp_path_factory.mktemp("two_robots")

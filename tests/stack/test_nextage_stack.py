@@ -32,7 +32,7 @@ def test_the_peg_task_and_the_nextage_scene_read_one_cell():
 
 @pytest.mark.ros
 def test_stack_nextage_names_the_installed_peg_files():
-    from qg_bringup.launcher import load_stack_config
+    from qg_bringup.stack_file import load_stack_config
     from qg_common.params import config_file
     specs = {s.name: s for s in load_stack_config(config_file("stack_nextage.yaml"))}
     assert specs["robot"].args == ("--ros-args", "-p", "robot:=sim_nextage")

@@ -37,7 +37,7 @@ def _qgl(env: dict, *args: str, timeout: float = 120.0) -> subprocess.CompletedP
 
 
 def test_an_executor_refuses_a_file_that_does_not_fit_at_start(stack, tmp_path):
-    from qg_bringup.launcher import ProcessSpec
+    from qg_bringup.stack_file import ProcessSpec
     executor = ProcessSpec("executor", "qg_learning_node", "executor").command()
     tilt = _export(tmp_path, "tilt.npz", 6, "tilt")
     thesis = _export(tmp_path, "thesis.npz", 4, "thesis")

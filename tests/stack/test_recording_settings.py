@@ -6,8 +6,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from qg_bringup.launcher import load_stack, stack_with_recording, with_recording
 from qg_bringup.main import build_parser
+from qg_bringup.stack_file import load_stack, stack_with_recording, with_recording
 from qg_common.params import config_file
 
 

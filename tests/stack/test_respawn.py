@@ -12,13 +12,8 @@ import time
 from pathlib import Path
 
 import pytest
-from qg_bringup.launcher import (
-    Launcher,
-    ProcessSpec,
-    RespawnPolicy,
-    StackConfigError,
-    load_stack,
-)
+from qg_bringup.launcher import Launcher
+from qg_bringup.stack_file import ProcessSpec, RespawnPolicy, StackConfigError, load_stack
 
 
 def _python(name: str, code: str, **respawn) -> ProcessSpec:
