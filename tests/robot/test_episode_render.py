@@ -11,7 +11,7 @@ import pytest
 from qg_common.node_parameters import package_defaults
 from robot_bridge_node.core.hardware_interface import robot_plugin
 from robot_bridge_node.core.robot_frames import RobotFrames, task_scene
-from sim_robot_node.core.episode_render import ARM_COLOUR, SceneRenderer
+from sim_robot_node.core.scene_renderer import ARM_COLOUR, SceneRenderer
 
 ROOT = Path(__file__).resolve().parents[2]
 #: Two configurations of the Panda near the shaft task's start, 0.4 rad apart at two joints.
