@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 import re
 import time
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -64,6 +65,25 @@ def test_the_bridges_fr3_model_is_franky_sims_arm():
     finally:
         host.close()
     assert pin.buildModelFromUrdf(fr3_arm().urdf).nq == 9       # 7 joints and 2 fingers
+
+
+def test_the_fr3s_urdf_is_the_plugins_own_and_franky_sims_model():
+    """The real arm's plugin ships the FR3's URDF (a real arm's computer needs no simulator),
+    and it is franky-sim's: the same joints, limits, masses and inertias."""
+    import importlib.util
+    ours = fr3_arm().urdf
+    assert "franky_sim" not in ours and Path(ours).is_file()
+    spec = importlib.util.find_spec("franky_sim")
+    if spec is None:
+        pytest.skip("franky-sim is not installed")
+    theirs = Path(next(iter(spec.submodule_search_locations))) / "assets" / "fr3.urdf"
+    a, b = pin.buildModelFromUrdf(ours), pin.buildModelFromUrdf(str(theirs))
+    assert list(a.names) == list(b.names) and a.nq == b.nq == 9
+    for field in ("effortLimit", "velocityLimit", "lowerPositionLimit", "upperPositionLimit"):
+        np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+    for x, y in zip(a.inertias, b.inertias):
+        assert x.mass == y.mass and np.array_equal(x.inertia, y.inertia)
+    assert sum(i.mass for i in a.inertias) > 16.0
 
 
 @pytest.fixture(scope="module")

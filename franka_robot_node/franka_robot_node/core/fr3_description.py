@@ -1,20 +1,18 @@
-"""The Franka Research 3 as an ``ArmDescription``: the URDF franky-sim ships, and what it lacks.
+"""The Franka Research 3 as an ``ArmDescription``: its URDF, and what the URDF lacks.
 
-franky-sim (``franky_sim/assets/fr3.urdf``, Franka's ``franka_description`` with the hand) is the
-arm the plugin is rehearsed against, so the bridge's model reads that file: 7 revolute joints
+The URDF (``description/fr3.urdf``, Franka's ``franka_description`` with the hand, as franky-sim
+ships it: the arm the plugin is rehearsed against) is this package's own, so a real arm's
+computer needs no simulator: 7 revolute joints
 ``fr3_joint1..7``, 16.2 kg of links and hand, ``effort`` limits 87 Nm (joints 1-4) and 12 Nm
 (5-7), velocity limits 2.62-5.26 rad/s, as Franka's datasheet gives them. The fingers are locked;
 tools are fixed to the hand's tool centre point ``fr3_hand_tcp`` (0.1034 m beyond the flange
 ``fr3_link8``, turned -45 deg about its z), as the Panda's are to ``panda_hand_tcp``. The URDF
 has no torque rate: libfranka's limit is 1000 Nm/s on every joint (``kMaxTorqueRate``).
-
-The file is found without importing ``franky_sim`` (which loads Pinocchio, MuJoCo's server code
-and more): only its folder is looked up.
 """
 from __future__ import annotations
 
-import importlib.util
 from functools import cache
+from importlib.resources import files
 from pathlib import Path
 
 from qg_common.arm_description import ArmDescription
@@ -37,16 +35,13 @@ FR3_TORQUE_RATE_LIMIT = 1000.0
 
 
 def fr3_urdf_path() -> Path:
-    """franky-sim's FR3 URDF with the hand (``franky_sim/assets/fr3.urdf``).
+    """The FR3's URDF with the hand, shipped with this package.
 
-    :raises FileNotFoundError: if franky-sim is not installed or lacks the file.
+    :raises FileNotFoundError: if the package's copy is missing (a broken install).
     """
-    spec = importlib.util.find_spec("franky_sim")
-    if spec is None or not spec.submodule_search_locations:
-        raise FileNotFoundError("franky-sim is not installed (scripts/requirements.txt pins it)")
-    path = Path(next(iter(spec.submodule_search_locations))) / "assets" / "fr3.urdf"
+    path = Path(str(files("franka_robot_node").joinpath("description", "fr3.urdf")))
     if not path.is_file():
-        raise FileNotFoundError(f"franky-sim's FR3 URDF not found at {path}")
+        raise FileNotFoundError(f"the FR3's URDF is missing from this package: {path}")
     return path
 
 
