@@ -41,7 +41,7 @@ def describe_franka(params: dict[str, Any]) -> RobotDescription:
     held = ToolDescription(offset=np.array(tool.offset), payload_mass=tool.mass,
                            payload_com=np.array(tool.offset) + np.array(tool.com))
     return RobotDescription(joint_names=arm.joint_names, tool=held, dt=FRANKA_DT, urdf=arm.urdf,
-                            tool_frame=arm.flange, torque_limits=arm.torque_limits,
+                            tool_frame=arm.tool_mount, torque_limits=arm.torque_limits,
                             torque_rate_limits=arm.torque_rate_limits)
 
 

@@ -107,14 +107,14 @@ def shaft_arm_plugin(arm: Callable[[], ArmDescription], section: str,
         return ShaftTaskGeometry.from_dict(params.get(SHAFT_TASK_SECTION.prefix, {}))
 
     def describe(params: dict[str, Any]) -> RobotDescription:
-        """The arm holding the shaft at its flange (the grasp point), the shaft's weight a
-        payload; the model is the arm's URDF with its flange as the tool's frame."""
+        """The arm holding the shaft at its tool mount (the grasp point), the shaft's weight a
+        payload; the model is the arm's URDF with its tool mount as the tool's frame."""
         description = arm()
         tool = ToolDescription(offset=np.zeros(3), payload_mass=config(params).shaft_mass,
                                payload_com=geometry(params).shaft_centre)
         return RobotDescription(joint_names=description.joint_names, tool=tool,
                                 dt=config(params).time_step, urdf=description.urdf,
-                                tool_frame=description.flange,
+                                tool_frame=description.tool_mount,
                                 torque_limits=description.torque_limits,
                                 torque_rate_limits=description.torque_rate_limits)
 

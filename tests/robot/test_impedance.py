@@ -115,10 +115,10 @@ def test_measured_lateral_stiffness_is_the_configured_one(loop: RobotLoop, axis:
 def test_the_panda_from_its_plugin_is_the_model_of_its_description_bit_for_bit():
     """The generic model of the sim_panda plugin's description is the Panda with its shaft, as
     the description in qg_common builds it: the same serialised model the kernels load."""
-    from qg_common.panda_description import FLANGE, JOINT_NAMES
+    from qg_common.panda_description import JOINT_NAMES, TOOL_MOUNT
     from robot_bridge_node.core.hardware_interface import load_robot
     description = load_robot("sim_panda", ideal()).description
-    assert description.joint_names == JOINT_NAMES and description.tool_frame == FLANGE
+    assert description.joint_names == JOINT_NAMES and description.tool_frame == TOOL_MOUNT
     tool = description.tool
     assert ArmModel.from_description(description).serialised() == ArmModel.of_arm(
         panda_arm(), tool.offset, tool.payload_mass, tool.payload_com).serialised()

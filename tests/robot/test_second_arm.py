@@ -68,7 +68,7 @@ def test_the_ekf_is_sized_by_the_arms_model(ideal_xarm):
 def test_a_joint_order_other_than_the_urdfs_is_refused():
     arm = xarm7_arm()
     with pytest.raises(ValueError, match="order"):
-        ArmModel(arm.urdf, tuple(reversed(arm.joint_names)), arm.flange)
+        ArmModel(arm.urdf, tuple(reversed(arm.joint_names)), arm.tool_mount)
     with pytest.raises(ValueError, match="no frame"):
         ArmModel(arm.urdf, arm.joint_names, "no_such_flange")
 

@@ -49,5 +49,5 @@ def fr3_urdf_path() -> Path:
 def fr3_arm() -> ArmDescription:
     """The FR3's description (the URDF is looked up once, when first asked for)."""
     return ArmDescription(name="Franka Research 3", urdf=str(fr3_urdf_path()),
-                          joint_names=FR3_JOINT_NAMES, flange=FR3_TOOL_FRAME, ready=FR3_READY,
+                          joint_names=FR3_JOINT_NAMES, tool_mount=FR3_TOOL_FRAME, ready=FR3_READY,
                           torque_rate_limits=(FR3_TORQUE_RATE_LIMIT,) * 7)

@@ -1,7 +1,7 @@
 """Rigid-body model of a torque-controlled arm from its URDF (Pinocchio), shared by the controller,
 the safety filter and the EKF.
 
-The robot plugin's ``RobotDescription`` names the URDF, the driven joints, the flange frame, the
+The robot plugin's ``RobotDescription`` names the URDF, the driven joints, the tool mount frame, the
 tool held there and, where the datasheet overrides the URDF, the limits; everything else (joint
 count, kinematics, inertias, torque and velocity limits) is what Pinocchio reads from the URDF.
 The simulated arms load the same file, so model and "hardware" agree except where a scene chooses
@@ -48,37 +48,37 @@ class JointLimits:
 
 class ArmModel:
     """The driven joints of an arm (every other joint locked at neutral), a tool frame at an
-    offset from the flange, and the held part as a payload.
+    offset from the tool mount, and the held part as a payload.
 
     :param urdf: path of the URDF.
     :param joint_names: the driven joints, in the order of every joint vector; must be the
         URDF's order of those joints.
-    :param flange: the URDF frame the tool is fixed to.
-    :param tool_offset: translation of the tool frame from the flange, in the flange frame [m].
-    :param payload_mass: mass rigidly held at the flange [kg] (e.g. the shaft).
-    :param payload_com: its centre of mass in the flange frame [m]; default the tool origin.
+    :param tool_mount: the URDF frame the tool is fixed to.
+    :param tool_offset: translation of the tool frame from its mount, in the mount's frame [m].
+    :param payload_mass: mass rigidly held at the tool mount [kg] (e.g. the held part).
+    :param payload_com: its centre of mass in the mount's frame [m]; default the tool origin.
     :param torque_limits: (n,) [Nm] overriding the URDF's ``effort`` limits; ``None`` keeps them.
     :param torque_rate_limits: (n,) [Nm/s]; ``None`` leaves the rate unlimited.
-    :raises ValueError: if a joint or the flange is missing, the joints are out of the URDF's
+    :raises ValueError: if a joint or the tool mount is missing, the joints are out of the URDF's
         order, a joint is not a single degree of freedom, or a URDF limit is missing.
     """
 
-    def __init__(self, urdf: str, joint_names: tuple[str, ...], flange: str,
+    def __init__(self, urdf: str, joint_names: tuple[str, ...], tool_mount: str,
                  tool_offset: np.ndarray | None = None, payload_mass: float = 0.0,
                  payload_com: np.ndarray | None = None,
                  torque_limits: tuple[float, ...] | None = None,
                  torque_rate_limits: tuple[float, ...] | None = None) -> None:
         self.model = driven_model(urdf, joint_names)
-        if not self.model.existFrame(flange):
-            raise ValueError(f"{urdf}: no frame {flange!r}")
+        if not self.model.existFrame(tool_mount):
+            raise ValueError(f"{urdf}: no frame {tool_mount!r}")
         self.joint_names = tuple(joint_names)
-        flange_id = self.model.getFrameId(flange)
-        parent = self.model.frames[flange_id].parentJoint
-        placement = self.model.frames[flange_id].placement
+        mount_id = self.model.getFrameId(tool_mount)
+        parent = self.model.frames[mount_id].parentJoint
+        placement = self.model.frames[mount_id].placement
         offset = np.zeros(3) if tool_offset is None else np.asarray(tool_offset, float)
         tool_placement = placement * pin.SE3(np.eye(3), offset)
         self.tool_frame = self.model.addFrame(
-            pin.Frame("tool", parent, flange_id, tool_placement, pin.FrameType.OP_FRAME))
+            pin.Frame("tool", parent, mount_id, tool_placement, pin.FrameType.OP_FRAME))
         if payload_mass > 0.0:
             com = tool_placement.translation if payload_com is None else \
                 (placement * pin.SE3(np.eye(3), np.asarray(payload_com, float))).translation
@@ -99,15 +99,15 @@ class ArmModel:
                payload_mass: float = 0.0, payload_com: np.ndarray | None = None) -> ArmModel:
         """The model of an arm from its description (``qg_common``), e.g. the Panda's
         (``panda_description.panda_arm()``), with an optional tool and payload."""
-        return cls(arm.urdf, arm.joint_names, arm.flange, tool_offset, payload_mass, payload_com,
+        return cls(arm.urdf, arm.joint_names, arm.tool_mount, tool_offset, payload_mass, payload_com,
                    torque_limits=arm.torque_limits, torque_rate_limits=arm.torque_rate_limits)
 
     @classmethod
     def from_description(cls, description: RobotDescription) -> ArmModel:
-        """The model of a torque robot as its plugin describes it (URDF, joints, flange, tool)."""
+        """The model of a torque robot as its plugin describes it (URDF, joints, tool mount, tool)."""
         if not description.urdf or not description.tool_frame:
             raise ValueError("a torque robot's description must name its urdf and tool_frame "
-                             "(the flange the tool is fixed to)")
+                             "(the frame the tool is fixed to)")
         tool = description.tool
         return cls(description.urdf, description.joint_names, description.tool_frame,
                    tool_offset=tool.offset, payload_mass=tool.payload_mass,

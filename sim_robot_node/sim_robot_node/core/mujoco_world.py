@@ -215,7 +215,7 @@ class MujocoShaftWorld:
         self.config = config
         spec = arm_spec(arm)
         set_cell_physics(spec, config)
-        self.cell = add_shaft_cell(spec, spec.body(arm.flange), geometry, config)
+        self.cell = add_shaft_cell(spec, spec.body(arm.tool_mount), geometry, config)
         self.model = spec.compile()
         self.data = mujoco.MjData(self.model)
         m = self.model

@@ -98,7 +98,7 @@ def arm_with_shaft_urdf(arm: ArmDescription, geometry: ShaftTaskGeometry,
       <geometry><cylinder radius="{g.shaft_radius:.9f}" length="{g.shaft_length:.9f}"/></geometry>
     </collision>
   </link>
-  <joint name="{SHAFT_JOINT}" type="fixed"><parent link="{arm.flange}"/><child link="shaft"/>
+  <joint name="{SHAFT_JOINT}" type="fixed"><parent link="{arm.tool_mount}"/><child link="shaft"/>
     </joint>"""
     if imperfections.payload_mass_error > 0.0:
         # The real arm's unmodelled load: on the hand, never in the bridge's model.
@@ -108,7 +108,7 @@ def arm_with_shaft_urdf(arm: ArmDescription, geometry: ShaftTaskGeometry,
       <mass value="{imperfections.payload_mass_error:.9f}"/>
       <inertia ixx="{PAYLOAD_INERTIA:g}" iyy="{PAYLOAD_INERTIA:g}" izz="{PAYLOAD_INERTIA:g}" ixy="0" ixz="0" iyz="0"/></inertial>
   </link>
-  <joint name="payload_error_joint" type="fixed"><parent link="{arm.flange}"/>
+  <joint name="payload_error_joint" type="fixed"><parent link="{arm.tool_mount}"/>
     <child link="payload_error"/></joint>"""
     for element in ElementTree.fromstring(f"<r>{links}</r>"):
         root.append(element)

@@ -3,7 +3,7 @@
 In ROS 2 the robot description is what the hardware and the controllers both read, so it lives in
 the common package and neither side imports the other. An ``ArmDescription`` names the arm's URDF
 and, of that URDF, the joints the arm is driven by (every other joint, a gripper's fingers say, is
-locked) and the flange frame a tool is fixed to. Everything the URDF already says (kinematics,
+locked) and the frame a tool is fixed to (its mount: a flange, or a hand's tool centre point). Everything the URDF already says (kinematics,
 inertias, torque and velocity limits) is read from it through Pinocchio by the bridge and loaded
 into pybullet by the simulator; the description only adds what a URDF cannot carry: the torque
 rate limit of the drives and a comfortable configuration to start inverse kinematics from.
@@ -27,8 +27,9 @@ class ArmDescription:
     :param urdf: the URDF file (kinematics, inertias, torque and velocity limits).
     :param joint_names: the driven joints, in the order of every joint vector; any other movable
         joint of the URDF is locked at its neutral position.
-    :param flange: the URDF frame the tool is fixed to; the tool's offset is relative to it.
-    :param ready: (n,) [rad] a configuration near the task with the flange pointing down, from
+    :param tool_mount: the URDF frame the tool is fixed to (the flange, or a hand's tool centre
+        point); the tool's offset is relative to it.
+    :param ready: (n,) [rad] a configuration near the task with the tool mount pointing down, from
         which inverse kinematics starts.
     :param torque_rate_limits: (n,) [Nm/s] how fast each drive's torque may change (a
         datasheet figure: URDFs have no field for it).
@@ -37,7 +38,7 @@ class ArmDescription:
     name: str
     urdf: str
     joint_names: tuple[str, ...]
-    flange: str
+    tool_mount: str
     ready: tuple[float, ...]
     torque_rate_limits: tuple[float, ...]
     torque_limits: tuple[float, ...] | None = None

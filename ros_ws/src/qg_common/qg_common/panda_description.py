@@ -17,13 +17,13 @@ from qg_common.arm_description import (
     example_robot_data_urdf,
 )
 
-__all__ = ["panda_arm", "panda_urdf_path", "JOINT_NAMES", "FLANGE", "DTAU_MAX", "Q_READY"]
+__all__ = ["panda_arm", "panda_urdf_path", "JOINT_NAMES", "TOOL_MOUNT", "DTAU_MAX", "Q_READY"]
 
 #: The URDF in example-robot-data's ``robots`` folder.
 PANDA_URDF = "panda_description/urdf/panda.urdf"
 JOINT_NAMES = tuple(f"panda_joint{i}" for i in range(1, 8))
 #: The frame tools are fixed to: the hand's tool centre point.
-FLANGE = "panda_hand_tcp"
+TOOL_MOUNT = "panda_hand_tcp"
 #: Joint torque rate limits [Nm/s] (Franka datasheet: 1000 Nm/s on every joint).
 DTAU_MAX = np.full(7, 1000.0)
 #: A comfortable configuration with the hand pointing down.
@@ -42,5 +42,5 @@ def panda_urdf_path() -> Path:
 def panda_arm() -> ArmDescription:
     """The Panda's description (the URDF is looked up once, when first asked for)."""
     return example_robot_data_arm("Franka Panda", PANDA_URDF, joint_names=JOINT_NAMES,
-                                  flange=FLANGE, ready=tuple(Q_READY.tolist()),
+                                  tool_mount=TOOL_MOUNT, ready=tuple(Q_READY.tolist()),
                                   torque_rate_limits=tuple(DTAU_MAX.tolist()))

@@ -28,5 +28,5 @@ XARM7_READY = (0.0, 0.0, 0.0, 0.9, 0.0, 0.9, 0.0)
 def xarm7_arm() -> ArmDescription:
     """The xArm 7's description (the URDF is looked up once, when first asked for)."""
     return example_robot_data_arm("UFACTORY xArm 7", "xarm_description/urdf/xarm7.urdf",
-                                  joint_names=XARM7_JOINT_NAMES, flange=XARM7_FLANGE,
+                                  joint_names=XARM7_JOINT_NAMES, tool_mount=XARM7_FLANGE,
                                   ready=XARM7_READY, torque_rate_limits=(1000.0,) * 7)
