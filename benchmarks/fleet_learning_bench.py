@@ -9,7 +9,7 @@ Usage (in the stack's environment; the full measurement takes about 3 x (4 + 2.5
 For every N in ``--robots`` and every seed in ``--seeds`` it runs ``qgl demo --robots N --seed
 S`` as a subprocess with the same ``--train-episodes`` (default 40, the demo's), dealt to the
 N robots, which train at once into one learner; the test episodes then run on robot0 as with
-one robot. Issue 15's claim: with N robots the test result is at least as good as with one
+one robot. The claim: with N robots the test result is at least as good as with one
 and the wall time drops.
 
 Per run it prints N, seed, the total training RL steps and insertions, the test poses

@@ -1,5 +1,5 @@
-"""Success measured as a real cell measures it against the simulator's truth, every step
-(issue 34): the executor decides success from forward kinematics of the measured joints against
+"""Success measured as a real cell measures it against the simulator's truth, every step:
+the executor decides success from forward kinematics of the measured joints against
 the fixture's pose (``ResidualTask.succeeded``); the simulator's truth rides along for
 evaluation only. Seeded random-residual episodes on each simulated shaft robot, in process
 (the stack's cores and config files); printed per robot: steps, steps where the two disagree,

@@ -9,7 +9,7 @@ at the rest detector's time limit (``rest.max_time``) and simulated seconds per 
 path also splits its wall time, from the arrival times of ``/wrench_setpoint`` and
 ``/ee_at_rest`` at this process: the robot's part of a step (setpoint to its at-rest event) and
 the turnaround (an at-rest event to the next setpoint: executor, actor and two messages).
-Goals (issue 35): <= 10 % of steps at the time limit; >= 30 RL steps/s in process; the stack
+Goals: <= 10 % of steps at the time limit; >= 30 RL steps/s in process; the stack
 >= 80 % of the in-process rate. In process, each ``--robot`` (default: the Panda on pybullet,
 then on MuJoCo) is measured in turn, in one run; its RL steps per CPU second of this process
 are printed beside those per wall second (on a shared machine the CPU time is what a core gives

@@ -1,4 +1,4 @@
-"""What ``ros2 topic hz /joint_states`` counts with the realtime robot up (issue 34, item 6).
+"""What ``ros2 topic hz /joint_states`` counts with the realtime robot up.
 
 There is no ros2cli wheel, so this subscribes as ``ros2 topic hz`` does: its own process, one
 node spun by ``rclpy.spin`` on a single thread, a raw subscription with the sensor-data QoS

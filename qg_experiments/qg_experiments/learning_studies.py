@@ -53,7 +53,7 @@ STARVED_CELL = (1e-4, 10)
 THESIS_TRAIN_CAP = 1000
 #: Merging grid of the ``graph`` study, in scaled state units.
 RESOLUTION = 0.1
-#: [rad] Fixture tilt of the housing in the second generalisation test (issue 12's example).
+#: [rad] Fixture tilt of the housing in the second generalisation test.
 HOUSING_TILT = math.radians(10.0)
 #: The state of the observation, graph, housing, schedule and cap studies.
 STUDY_OBSERVATION = "tilt"

@@ -1,4 +1,4 @@
-"""Episodes as pictures (issue 37, item 3): the renderer draws the arm where it is, a moving arm
+"""Episodes as pictures: the renderer draws the arm where it is, a moving arm
 changes the picture, and ``qgl render`` turns an episode bag into a video, offscreen."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The realtime ticks leave the robot process spread as they were measured (issue 34, item 6):
+"""The realtime ticks leave the robot process spread as they were measured:
 a block of ticks handed over at once goes out one tick at a time, each at its stamp plus the
 delay, never before; a tick already due goes out at once; nothing is dropped or reordered."""
 from __future__ import annotations

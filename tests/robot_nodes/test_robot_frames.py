@@ -1,4 +1,4 @@
-"""Every robot's bag carries the arm in ROS's standard types (issue 37): ``/robot_description``,
+"""Every robot's bag carries the arm in ROS's standard types: ``/robot_description``,
 ``/tf_static`` and ``/tf``, with the tool where forward kinematics of the recorded joints puts
 it, and the task's parts as markers.
 

@@ -102,7 +102,7 @@ def test_the_import_scan_sees_lazy_relative_and_dynamic_imports(tmp_path):
 
 def test_learning_imports_only_common_interfaces_and_recording():
     """The executor and learner run beside any robot: no bridge, simulator, experiment or
-    Pinocchio import anywhere in qg_learning_node (issue 26)."""
+    Pinocchio import anywhere in qg_learning_node."""
     paths = sources("qg_learning_node")
     assert len(paths) >= 25
     offenders = {str(p.relative_to(ROOT)): sorted(top_levels([p]) & LEARNING_MUST_NOT_IMPORT)

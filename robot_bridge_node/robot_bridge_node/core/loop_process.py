@@ -1,8 +1,8 @@
 """The robot's 1 kHz loop in a process of its own, with no ROS in it.
 
 In one Python process every thread shares one interpreter lock: a 1 kHz loop beside rclpy's
-executor threads, the publishers and the recorder waited for them (issue 25 measured 87 % of
-ticks on time with the stack up). Here the loop (robot plugin, estimator, controller, safety
+executor threads, the publishers and the recorder waited for them (87 % of ticks on time
+with the stack up, measured). Here the loop (robot plugin, estimator, controller, safety
 filter, rest detector: a ``LoopRunner``) runs on the main thread of its process. It takes
 commands from a socket (``PipeMailbox``), writes every tick into a shared-memory ring
 (``SampleRing``) and queues its events (at rest, reset done, its timing once a second, log

@@ -4,7 +4,7 @@ The loop process writes a record every millisecond; the robot process's reader t
 them in blocks (it wakes every few milliseconds) and used to publish a block at once: a
 subscriber saw bursts of 5-13 messages and then nothing, and one with the sensor-data QoS of
 ``ros2 topic hz`` (best effort, depth 5) lost what a burst overflowed: it counted 852 Hz while
-the loop kept 1 kHz (issue 34). A ros2_control broadcaster publishes from the control loop,
+the loop kept 1 kHz. A ros2_control broadcaster publishes from the control loop,
 once a tick. Here a thread of its own publishes each tick's messages at the tick's stamp plus a
 fixed ``delay`` (longer than the reader's period), so they go out one tick apart, late by the
 same amount each. A tick whose time has passed when it is handed over (the process fell behind)

@@ -149,7 +149,7 @@ def render_bag(bag: Path, out: Path, fps: float = 25.0, speed: float = 1.0,
     its last. Returns the frames written and the episode's span [s].
 
     :raises ValueError: if the bag has no ``/robot_description`` or no joint states (a bag
-        recorded before issue 37, or not an episode's).
+        recorded by an older stack, or not an episode's).
     """
     from qg_recording.bag_reader import read_bag
     if not fps > 0 or not speed > 0:
@@ -166,7 +166,7 @@ def render_bag(bag: Path, out: Path, fps: float = 25.0, speed: float = 1.0,
             series[topic].add(t_ns, msg)
     if not series["/robot_description"].values:
         raise ValueError(f"{bag} has no /robot_description: it was recorded before the stack "
-                         f"recorded the robot (issue 37), or it is not an episode's bag")
+                         f"recorded the robot, or it is not an episode's bag")
     if not states.values:
         raise ValueError(f"{bag} has no /joint_states")
     statics = series["/tf_static"]
