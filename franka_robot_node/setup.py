@@ -11,7 +11,7 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
-    package_data={package_name: ['description/fr3.urdf']},
+    package_data={package_name: ['description/fr3.urdf', 'description/meshes/*.stl', 'description/meshes/*.dae']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
