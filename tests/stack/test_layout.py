@@ -266,6 +266,17 @@ GYM_IN_PROCESS = ["qg_experiments.gym_envs", "qg_experiments.gym_envs.insertion"
                   "qg_experiments.gym_envs.sparse_mountain_car"]
 
 
+def test_the_design_documents_import_graph_is_the_codes():
+    """docs/design.md's package graph is what the code imports (``scripts/import_graph.py``)."""
+    sys.path.insert(0, str(ROOT / "scripts"))
+    try:
+        from import_graph import block
+    finally:
+        sys.path.remove(str(ROOT / "scripts"))
+    assert block() in (ROOT / "docs" / "design.md").read_text(), (
+        "docs/design.md's import graph is stale: paste `python scripts/import_graph.py`")
+
+
 def test_the_gym_package_imports_no_rclpy_and_no_messages():
     """What the in-process environments import, followed through every module of the project
     they reach (lazily too), never reaches rclpy or a message package: a Gymnasium user needs
