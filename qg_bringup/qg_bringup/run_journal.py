@@ -203,23 +203,32 @@ class RunJournal:
     def reconcile(self, learner: dict[str, Any] | None) -> str:
         """At a resume: settle the slot that was running when the run stopped.
 
-        If the learner checkpointed after that slot's episode ended ``done`` (the run stopped
-        between the learner's checkpoint and its own journal entry), the slot is complete, with
-        the learner's record of it; otherwise it was cut short and runs again. What was done.
+        The learner's checkpoint is what it learned. If it checkpointed after an episode that
+        ended ``done`` and that no completed slot holds, that episode was the next slot's (the
+        run starts no other): the run stopped between the learner's checkpoint and its own
+        journal entry, or even before the executor's reply named the episode, so the slot is
+        complete, with the learner's record of it. Otherwise a slot that was running was cut
+        short and runs again. What was done.
         """
-        if self.running is None:
-            return "nothing was running"
-        slot, episode_id = self.running["slot"], self.running["episode_id"]
-        if learner is not None and learner.get("episode_id") == episode_id \
-                and learner.get("state") == "done":
+        known = {c["episode_id"] for c in self.completed}
+        slot = self.next_slot
+        episode_id = None if learner is None else learner.get("episode_id")
+        if (learner is not None and learner.get("state") == "done" and episode_id
+                and episode_id not in known and slot < len(self.slots)
+                and learner.get("mode") in (None, self.slots[slot].mode)
+                and (self.running is None or self.running["episode_id"] == episode_id)):
             job = self.slots[slot]
+            started = self.running["started"] if self.running is not None else 0.0
             self.complete(EpisodeOutcome(
                 slot, job.mode, episode_id, int(learner.get("initial_pose", job.pose)),
                 int(learner["steps"]), float(learner.get("episode_return", 0.0)),
-                bool(learner.get("success", False)), 0.0, "", self.running["started"],
+                bool(learner.get("success", False)), 0.0, "", started,
                 "done", "completed as the run stopped (from the learner's checkpoint)"),
                 learner)
             return f"slot {slot} ({episode_id}) had completed: taken from the learner's record"
+        if self.running is None:
+            return "nothing was running"
+        slot, episode_id = self.running["slot"], self.running["episode_id"]
         self.cut(slot, episode_id, "the run stopped while it ran")
         return f"slot {slot} ({episode_id}) was cut short: it runs again"
 

@@ -74,3 +74,26 @@ def test_a_slot_the_learner_checkpointed_before_the_run_stopped_is_complete(tmp_
     resumed.started(1, "e1")
     resumed.complete(_outcome(1, "train", 4, "e1"))
     assert resumed.finished and RunJournal.open(tmp_path, plan).steps("train") == 13
+
+
+def test_an_episode_the_journal_never_heard_of_but_the_learner_checkpointed_completes_its_slot(
+        tmp_path) -> None:
+    """Ctrl-C between the start request and the executor's reply: the journal never noted the
+    episode, but it ran to ``done`` and the learner checkpointed it. Running the slot again
+    would leave its transitions in the learner twice: the slot is complete instead."""
+    plan = RunPlan(episodes=3, test_poses=0)
+    journal = RunJournal.open(tmp_path, plan)
+    journal.started(0, "e0")
+    journal.complete(_outcome(0, "train", 4, "e0"), {"transitions": 4})
+    again = RunJournal.open(tmp_path, plan)
+    assert again.running is None
+    assert again.reconcile({"episode_id": "e0", "state": "done", "steps": 4,
+                            "transitions": 4}) == "nothing was running"
+    learner = {"episode_id": "e1", "mode": "train", "state": "done", "steps": 3,
+               "initial_pose": 1, "transitions": 7}
+    assert again.reconcile(learner).startswith("slot 1 (e1) had completed")
+    assert again.next_slot == 2 and again.steps() == 7 and again.cut_short == []
+    # a test episode's record never completes a training slot
+    other = RunJournal.open(tmp_path / "other", plan)
+    assert other.reconcile({**learner, "mode": "test"}) == "nothing was running"
+    assert other.next_slot == 0
