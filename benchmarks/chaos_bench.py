@@ -31,36 +31,20 @@ import threading
 import time
 from pathlib import Path
 
+from qg_common.process_info import child_processes, rss_kib
+
 ROLES = ("robot", "learner", "executor")
-
-
-def rss_kib(pid: int) -> int:
-    """Resident set size of process ``pid`` [KiB] (0 once it has exited)."""
-    try:
-        with open(f"/proc/{pid}/status") as status:
-            return next(int(line.split()[1]) for line in status if line.startswith("VmRSS:"))
-    except (OSError, StopIteration):
-        return 0
 
 
 def stack_processes(parent: int) -> dict[str, int]:
     """The stack's processes (role -> pid) among the children of ``parent`` (``qgl run``):
     ``ros2 run <package> <executable>`` runs the executable, which names the role."""
     found = {}
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            argv = (entry / "cmdline").read_bytes().split(b"\0")
-        except (OSError, IndexError, ValueError):
-            continue
-        if ppid != parent:
-            continue
-        names = {Path(a.decode(errors="replace")).name for a in argv[:3]}
+    for pid, argv in child_processes(parent).items():
+        names = {Path(a).name for a in argv[:3]}
         for role in ROLES:
             if role in names:
-                found[role] = int(entry.name)
+                found[role] = pid
     return found
 
 

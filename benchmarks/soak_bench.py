@@ -24,18 +24,10 @@ from pathlib import Path
 from qg_bringup.episode_schedule import run_episode_by_service
 from qg_bringup.stack_start import DemoSettings, start_stack, wait_for_stack
 from qg_common.params import config_file
+from qg_common.process_info import rss_kib
 from qg_common.ros_client import CliNode
 from qg_recording.bag_reader import bag_info
 from tqdm import tqdm
-
-
-def rss_kib(pid: int) -> int:
-    """Resident set size of process ``pid`` [KiB] (0 once it has exited)."""
-    try:
-        with open(f"/proc/{pid}/status") as status:
-            return next(int(line.split()[1]) for line in status if line.startswith("VmRSS:"))
-    except (FileNotFoundError, StopIteration):
-        return 0
 
 
 def main() -> None:
