@@ -96,7 +96,9 @@ class SlotRunner:
             self._cut(job, outcome.episode_id, "the learner restarted before it checkpointed "
                       "the episode: its transitions are lost", outcome.steps)
             return
-        self._cut(job, outcome.episode_id, "; ".join([outcome.message or "aborted", *deaths]),
+        said = outcome.message or "aborted"     # the guard's stop already names its death
+        self._cut(job, outcome.episode_id,
+                  "; ".join([said, *(death for death in deaths if death not in said)]),
                   outcome.steps)
 
     def _check_processes(self) -> None:
