@@ -128,7 +128,7 @@ def test_qgl_up_policy_runs_the_frozen_actor_without_a_learner(stack, tmp_path):
         assert np.abs(actions).max() > 1e-3            # not the zero residual of a lost learner
     finally:
         up.send_signal(signal.SIGINT)
-        out, _ = up.communicate(timeout=30.0)
+        out, _ = up.communicate(timeout=60.0)   # three processes stopped in turn, loaded
     assert "frozen policy" in out and "no learner" in out, out
     started = next(line for line in out.splitlines() if "[qgl] started" in line)
     assert "learner" not in started and "executor" in started and "robot" in started, started
