@@ -177,6 +177,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    # A shell starts a background job with SIGINT ignored, and its children inherit that: qgl
+    # stops on Ctrl-C (SIGINT) however it was started, and so do the processes it starts.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     if argv == ["env"]:      # what a shell lacks to run the stack's Python (benchmarks, nodes)
         try:
             print(exports())
