@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from functools import cache
 from importlib.metadata import entry_points
 from pathlib import Path
 
@@ -49,13 +50,15 @@ BRIDGE_EXECUTABLES = {("robot_bridge_node", "robot"), ("robot_bridge_node", "bri
                       ("robot_bridge_node", "wrench_estimator")}
 
 
-def robot_executables() -> set[tuple[str, str]]:
+@cache
+def robot_executables() -> frozenset[tuple[str, str]]:
     """The executables that load a robot plugin by their ``robot`` parameter: the bridge's, and
     the ``sim`` node of every package that registers robots (found in the plugin registry)."""
     simulators = {(ep.dist.name, ep.name) for ep in entry_points(group="console_scripts")
                   if ep.name == "sim" and ep.dist is not None}
-    return BRIDGE_EXECUTABLES | {(package, name) for package, name in simulators
-                                 if package in registering_packages(ROBOT_PLUGIN_GROUP)}
+    robots = registering_packages(ROBOT_PLUGIN_GROUP)
+    return frozenset(BRIDGE_EXECUTABLES | {(package, name) for package, name in simulators
+                                           if package in robots})
 
 
 def with_parameters(spec: ProcessSpec, params: dict[str, object]) -> ProcessSpec:
