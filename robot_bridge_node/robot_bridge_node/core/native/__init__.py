@@ -1,16 +1,18 @@
-"""The torque loop's per-tick arithmetic in compiled code (``torque_kernels.cpp``).
+"""The torque loop's per-tick arithmetic in compiled code (``torque_kernels.cpp``,
+``torque_limits.cpp``).
 
 ``scripts/setup.sh`` builds it against the pinned Pinocchio, Eigen and pybind11 wheels; the
 classes that own the configuration, the validation and the documentation of the maths are
-``core/wrench_ekf.py`` and ``core/impedance.py``. docs/design.md ("The 1 kHz tick in compiled
-code") has the measurements that chose this over NumPy and numba.
+``core/wrench_ekf.py``, ``core/impedance.py`` and ``core/safety.py``. docs/design.md ("The 1 kHz
+tick in compiled code") has the measurements that chose this over NumPy and numba.
 """
 from __future__ import annotations
 
 try:
     from ._torque_kernels import ImpedanceKernel, WrenchEkfKernel
+    from ._torque_limits import TorqueLimiter
 except ImportError as error:          # pragma: no cover - a setup that skipped the build
     raise ImportError("the torque loop's compiled kernels are missing or stale: run "
                       "scripts/setup.sh (its step 6 builds them)") from error
 
-__all__ = ["ImpedanceKernel", "WrenchEkfKernel"]
+__all__ = ["ImpedanceKernel", "TorqueLimiter", "WrenchEkfKernel"]
