@@ -143,10 +143,24 @@ if [[ "$(cat "$STAMPS/native_limits" 2>/dev/null)" != "$limits_hash" || ! -f "$l
   mv "$limits_so.tmp" "$limits_so"
   echo "$limits_hash" > "$STAMPS/native_limits"
 fi
+# 6b. The shaft cell's MuJoCo contact filter (sim_robot_node/core/native): plain C against the
+#    MuJoCo wheel's own headers, loaded with ctypes (it calls nothing of MuJoCo's, so it links
+#    to nothing). Seconds; it reruns only when the source or the pins change.
+filter_dir="$ROOT/sim_robot_node/sim_robot_node/core/native"
+filter_so="$filter_dir/_contact_filter.so"
+filter_hash="$(hash_of "$filter_dir/contact_filter.c" "$ROOT/scripts/constraints.txt")"
+if [[ "$(cat "$STAMPS/contact_filter" 2>/dev/null)" != "$filter_hash" || ! -f "$filter_so" ]]; then
+  log "compiling the shaft cell's contact filter"
+  mujoco_include="$("$PY" -c 'import mujoco, os; print(os.path.join(os.path.dirname(mujoco.__file__), "include"))')"
+  gcc -std=c11 -O2 -fPIC -shared -Wall -Wextra -Werror -I"$mujoco_include" \
+    "$filter_dir/contact_filter.c" -o "$filter_so.tmp" -lm
+  mv "$filter_so.tmp" "$filter_so"
+  echo "$filter_hash" > "$STAMPS/contact_filter"
+fi
 # 7. The bytecode of the stack's own modules and of the generated interfaces, compiled here once
 #    (a second when nothing changed): where PYTHONDONTWRITEBYTECODE is set, as on our development
 #    machine, no process caches it, and every node process compiled them again as it started
 #    (0.15 s of CPU for the robot process's imports, 0.25 s for the learner's, measured).
 ( cd "$ROOT" && "$PY" -m compileall -q ros_ws/install "${PY_PACKAGES[@]}" >/dev/null ) \
   || log "compileall reported errors (the modules still run from source)"
-log "ready: .venv, ros_ws/install, qgl, native kernels, bytecode"
+log "ready: .venv, ros_ws/install, qgl, native kernels, contact filter, bytecode"
