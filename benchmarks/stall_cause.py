@@ -93,7 +93,8 @@ def drive(env: InsertionRobot, episode: Episode, actor: Any, on_step: Any = None
 
 def train(seed: int, algorithm: str, clean_fraction: float, self_loop_tol: float,
           episodes: int = 40, critic_lr: float = 1e-2, iterations: int = 50,
-          ddpg: dict[str, Any] | None = None, noise: dict[str, Any] | None = None) -> Trained:
+          ddpg: dict[str, Any] | None = None, noise: dict[str, Any] | None = None,
+          task: dict[str, Any] | None = None) -> Trained:
     """The probe's learning (``stall_probe.trained``) for ``algorithm``, with the remedies'
     settings (``ddpg``, ``noise``: DDPGConfig and NoiseConfig fields to override), keeping the true depth before and after
     every training step."""
@@ -105,7 +106,8 @@ def train(seed: int, algorithm: str, clean_fraction: float, self_loop_tol: float
         noise_config = dataclasses.replace(noise_config, clean_fraction=clean_fraction)
     noise_config = dataclasses.replace(noise_config, **(noise or {}))
     settings = dataclasses.replace(settings, noise=noise_config, task=dataclasses.replace(
-        settings.task, train_max_steps=spec.train_max_steps, test_max_steps=TEST_CAP))
+        settings.task, train_max_steps=spec.train_max_steps, test_max_steps=TEST_CAP,
+        **(task or {})))
     env = InsertionRobot(settings, spec.estimator)
     config = spec.learner_config(settings.learner)
     if self_loop_tol >= 0:
@@ -332,15 +334,18 @@ def main() -> None:
                         help="DDPGConfig fields to override (values read as YAML)")
     parser.add_argument("--noise", nargs="*", default=[], metavar="KEY=VALUE",
                         help="NoiseConfig fields to override (values read as YAML)")
+    parser.add_argument("--task", nargs="*", default=[], metavar="KEY=VALUE",
+                        help="TaskConfig fields to override, e.g. observation=tilt_depth")
     args = parser.parse_args()
-    ddpg, noise = ({key: yaml.safe_load(value) for key, _, value in
-                    (item.partition("=") for item in items)} for items in (args.ddpg, args.noise))
+    ddpg, noise, task = ({key: yaml.safe_load(value) for key, _, value in
+                          (item.partition("=") for item in items)}
+                         for items in (args.ddpg, args.noise, args.task))
     torch.set_num_threads(1)
     rows, per_seed = [], []
     for seed in args.seeds:
         start = time.perf_counter()
         run = train(seed, args.algorithm, args.clean_fraction, args.self_loop_tol,
-                    args.episodes, args.lr, args.iterations, ddpg, noise)
+                    args.episodes, args.lr, args.iterations, ddpg, noise, task)
         moved = np.abs(run.steps["s2"] - run.steps["s"]).max(1)
         loops = (moved <= LOOP_TOL) & (run.steps["term"] == 0)
         seed_rows = []
@@ -364,7 +369,8 @@ def main() -> None:
         print(json.dumps(per_seed[-1]), flush=True)
     print(json.dumps({"algorithm": args.algorithm, "lr": args.lr, "iterations": args.iterations,
                       "clean_fraction": args.clean_fraction,
-                      "self_loop_tol": args.self_loop_tol, "ddpg": ddpg, "noise": noise, "seeds": per_seed,
+                      "self_loop_tol": args.self_loop_tol, "ddpg": ddpg, "noise": noise, "task": task,
+                      "seeds": per_seed,
                       **summary(rows)}))
 
 

@@ -78,8 +78,27 @@ def test_states_without_the_torque_echo(observation, expected) -> None:
     np.testing.assert_allclose(task.state(_obs(wrench, rotation)), expected, atol=1e-12)
 
 
+def test_the_depth_state_is_the_tips_measured_depth_below_the_bearing_face() -> None:
+    """``tilt_depth``: the tilt as ``tilt_only`` reads it, then the depth the goal is measured
+    by, scaled by ``depth_range``: 1 fully inserted, 0.5 halfway, about 0 at the face, negative
+    above it (clipped at -1)."""
+    task = _task(observation="tilt_depth", tilt_range=0.5, depth_range=0.016)
+    assert task.state_dim == state_dim("tilt_depth") == 3
+    target = CELL.target_tool_position()
+    up = CELL.fixture().rotation[:, 2]
+    rotation = (DOWN * Rotation.from_rotvec([0.1, -0.3, 0.0])).as_matrix()
+    for raised, depth_state in ((0.0, CELL.full_depth / 0.016), (0.008, 0.5),
+                                (CELL.full_depth, 0.0), (CELL.full_depth + 0.004, -0.25),
+                                (0.2, -1.0)):
+        state = task.state(_obs(np.zeros(6), position=target + raised * up))
+        np.testing.assert_allclose(state[2], depth_state, atol=1e-12)
+    state = task.state(_obs(np.zeros(6), rotation, target))
+    np.testing.assert_allclose(state[:2], _task(observation="tilt_only").state(
+        _obs(np.zeros(6), rotation, target)), atol=1e-12)
+
+
 @pytest.mark.parametrize("bad", [{"observation": "pose"}, {"tilt_range": 0.0},
-                                 {"sigma_position": 0.0}])
+                                 {"depth_range": -0.01}, {"sigma_position": 0.0}])
 def test_bad_observation_settings_are_refused(bad) -> None:
     with pytest.raises(ValueError):
         TaskConfig(**bad)

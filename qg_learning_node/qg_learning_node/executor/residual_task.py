@@ -12,6 +12,10 @@ One definition for the ROS executor and the fast in-process runner, so both run 
   torques (Tx, Ty), which at rest echo the last action: with them the actor reads its own
   previous output, and without exploration noise that loop can hold it at a fixed point
   (docs/learning.md, section 2).
+  ``tilt_depth``: the tilt and the tip's depth below the bearing face along the bore axis, from
+  the same measured pose against the cell's fixture (what the reward is measured on); scaled by
+  ``depth_range``. A jam and an insertion under way share a tilt; the depth tells how far each
+  got (docs/learning.md, section 20).
 - action: actor output in [-1, 1]^2 scaled to residual torques (tx, ty) of at most 3 Nm, on top
   of the constant base push Fz = -15 N: the feed-forward wrench [0, 0, Fz, tx, ty, 0];
 - reward: sparse (-1 per step, 0 at the goal) or dense (pose error to the inserted pose);
@@ -41,6 +45,7 @@ OBSERVATION_COMPONENTS = {
     "tilt": ("fx", "fy", "tx", "ty", "ex", "ey"),
     "tilt_force": ("fx", "fy", "ex", "ey"),
     "tilt_only": ("ex", "ey"),
+    "tilt_depth": ("ex", "ey", "depth"),
 }
 #: State definitions and their lengths.
 OBSERVATIONS = {name: len(parts) for name, parts in OBSERVATION_COMPONENTS.items()}
@@ -82,6 +87,8 @@ class TaskConfig:
     :param observation: the state, one of :data:`OBSERVATIONS` (``thesis``: 4-D wrench;
         ``tilt_only``: the tilt alone). The executor owns it and tells the learner.
     :param tilt_range: tilt [rad] that maps to state 1.0 (``tilt`` observation).
+    :param depth_range: depth [m] that maps to state 1.0 (``tilt_depth``): the cell's full
+        depth, 12 mm of bore and the inner ring's 4 mm of travel.
     """
     base_force: float = -15.0
     max_residual_torque: float = 3.0
@@ -94,13 +101,14 @@ class TaskConfig:
     reward: str = "dense"
     observation: str = "tilt_only"
     tilt_range: float = 0.5
+    depth_range: float = 0.016
 
     def __post_init__(self) -> None:
         if self.reward not in ("sparse", "dense"):
             raise ValueError(f"reward must be sparse or dense, got {self.reward!r}")
         state_dim(self.observation)
         for name in ("max_residual_torque", "force_range", "torque_range", "sigma_position",
-                     "sigma_orientation", "tilt_range"):
+                     "sigma_orientation", "tilt_range", "depth_range"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.train_max_steps < 1 or self.test_max_steps < 1:
@@ -148,10 +156,12 @@ class ResidualTask:
         self.state_dim = state_dim(c.observation)
         parts = OBSERVATION_COMPONENTS[c.observation]
         scales = {"fx": c.force_range, "fy": c.force_range, "tx": c.torque_range,
-                  "ty": c.torque_range, "ex": c.tilt_range, "ey": c.tilt_range}
+                  "ty": c.torque_range, "ex": c.tilt_range, "ey": c.tilt_range,
+                  "depth": c.depth_range}
         self._state_scale = np.array([scales[part] for part in parts])
         self._wrench_index = [_WRENCH_INDEX[part] for part in parts if part in _WRENCH_INDEX]
         self._uses_tilt = "ex" in parts
+        self._uses_depth = "depth" in parts
         self._push_axis = geometry.bore_axis()
 
     def state(self, obs: Observation) -> np.ndarray:
@@ -161,6 +171,8 @@ class ResidualTask:
         raw = [w[i] for i in self._wrench_index]
         if self._uses_tilt:
             raw.extend(tilt_from_push_axis(obs.tool_rotation, self._push_axis))
+        if self._uses_depth:
+            raw.append(self.measure(obs).insertion_depth)
         return np.clip(np.array(raw) / self._state_scale, -1.0, 1.0)
 
     def wrench(self, action: np.ndarray) -> np.ndarray:
