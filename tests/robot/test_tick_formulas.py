@@ -8,6 +8,7 @@ the tick runs now. Equal means ``array_equal`` and equal sign bits, so a -0.0 fo
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -22,6 +23,7 @@ from robot_bridge_node.core.hardware_interface import load_robot
 from robot_bridge_node.core.robot_loop import RobotLoop, build_loop
 from robot_bridge_node.core.safety import VELOCITY_BRAKE_DAMPING, SafetyFilter
 from robot_bridge_node.core.wrench_ekf import WrenchEKF, WrenchEKFConfig
+from sim_robot_node.core.arm_imperfections import NORMALS_DRAWN, ArmImperfections, ImperfectArm
 
 #: RL steps recorded (each ends at rest or at its time limit; tick count printed on failure).
 STEPS = 3
@@ -36,8 +38,10 @@ class Recording:
     """Every input of the rewritten parts, tick by tick, in the order the loop made them."""
     torques: list[tuple] = field(default_factory=list)      # limit_torques(tau, dt, dq), reset
     tilts: list[tuple] = field(default_factory=list)        # limit_tilt(wrench, rotation)
+    arm: list[tuple] = field(default_factory=list)          # the simulated arm's errors' calls
     ticks: int = 0
     joints: JointLimits | None = None                       # the safety filter's
+    imperfections: ArmImperfections | None = None           # the simulated arm's
 
 
 def _record(loop: RobotLoop) -> Recording:
@@ -58,6 +62,23 @@ def _record(loop: RobotLoop) -> Recording:
         reset(tau)
 
     safety.limit_torques, safety.limit_tilt, safety.reset = torques, tilt, safety_reset
+    errors = loop.simulation.scene.arm_errors
+    apply_friction, measure_state, start_jitter = (errors.apply_friction, errors.measure_state,
+                                                   errors.start_jitter)
+
+    def friction(tau, dq):
+        rec.arm.append(("friction", np.array(tau), np.array(dq)))
+        return apply_friction(tau, dq)
+
+    def measure(state):
+        rec.arm.append(("measure", np.array(state)))
+        return measure_state(state)
+
+    def jitter():
+        rec.arm.append(("jitter",))
+        return start_jitter()
+
+    errors.apply_friction, errors.measure_state, errors.start_jitter = friction, measure, jitter
     return rec
 
 
@@ -76,6 +97,7 @@ def record(steps: int = STEPS, max_time: float = MAX_TIME, seed: int = SEED) -> 
     for _ in range(steps):
         loop.execute(WrenchSetpoint.residual(-15.0, *(3.0 * rng.uniform(-1.0, 1.0, 2))))
     rec.ticks, rec.joints = loop.ticks_run, loop.safety.joints
+    rec.imperfections = loop.simulation.scene.config.imperfections
     loop.simulation.close()
     return rec
 
@@ -220,3 +242,96 @@ def test_tilt_limit_is_the_formula_on_recorded_ticks_and_at_the_cone(
         expected = python_limit_tilt(safety.limits, wrench, rotation)
         assert (got is wrench) == (expected is wrench), f"case {i}"
         assert_bits_equal(got, expected, f"case {i}")
+
+
+# --- the simulated arm's errors ------------------------------------------------------------
+class PythonArmErrors:
+    """``ImperfectArm``'s friction and sensor errors as they were (the formulas replaced):
+    the constants and the noise stream drawn from the seed the same way."""
+
+    def __init__(self, config: ArmImperfections) -> None:
+        n = self.n = config.n_joints
+        self.config = config
+        constants = np.random.default_rng([config.seed, 0])
+        self.torque_bias = constants.normal(0.0, 1.0, n) * config.torque_bias
+        self.encoder_bias = constants.normal(0.0, 1.0, n) * config.encoder_bias
+        self._noise = np.random.default_rng([config.seed, 1])
+        self._coulomb = np.array(config.joint_coulomb_friction, float)
+        self._velocity = np.where(self._coulomb > 0.0,
+                                  np.array(config.joint_friction_velocity, float), 1.0)
+        self._viscous = np.array(config.joint_viscous_friction, float)
+        self._sensor_noise = np.repeat([config.encoder_noise, config.velocity_noise,
+                                        config.torque_noise], n)
+
+    def friction(self, dq):
+        return self._coulomb * np.tanh(dq / self._velocity) + self._viscous * dq
+
+    def measure(self, q, dq, tau):
+        n = self.n
+        noise = self._noise.normal(0.0, 1.0, 3 * n) * self._sensor_noise
+        return (q + self.encoder_bias + noise[:n], dq + noise[n:2 * n],
+                tau + self.torque_bias + noise[2 * n:])
+
+    def start_jitter(self):
+        draw = self._noise.normal(0.0, 1.0, 4)
+        return (draw[:2] * self.config.start_tilt_jitter,
+                draw[2:] * self.config.start_position_jitter)
+
+
+def test_arm_errors_are_the_python_formulas_on_recorded_steps(recording: Recording) -> None:
+    """Every friction, sensor reading and start jitter of the recorded run, in its order (one
+    noise stream for all), through both: the same numbers, the stream in step."""
+    config = recording.imperfections
+    assert config.has_friction and config.has_sensor_errors
+    new, old = ImperfectArm(config), PythonArmErrors(config)
+    n, counts = config.n_joints, {"friction": 0, "measure": 0, "jitter": 0}
+    for call in recording.arm:
+        kind = call[0]
+        what = f"{kind} {counts[kind]}"
+        counts[kind] += 1
+        if kind == "friction":
+            _, tau, dq = call
+            assert_bits_equal(new.apply_friction(tau, dq), tau - old.friction(dq), what)
+        elif kind == "measure":
+            state = call[1]
+            reading = new.measure_state(state.copy())
+            for got, expected in zip((reading.q, reading.dq, reading.tau),
+                                     old.measure(state[:n], state[n:2 * n], state[2 * n:])):
+                assert_bits_equal(got, expected, what)
+        else:
+            for got, expected in zip(new.start_jitter(), old.start_jitter()):
+                assert_bits_equal(got, expected, what)
+    assert counts["friction"] >= 300 and counts["measure"] >= 300 and counts["jitter"] >= 1
+    # and the public reading of three arrays is the same
+    q, dq, tau = (np.linspace(-1.0, 1.0, n) * k for k in (1.0, 2.0, 30.0))
+    for got, expected in zip(vars(new.measure(q, dq, tau)).values(), old.measure(q, dq, tau)):
+        assert_bits_equal(got, expected, "measure")
+
+
+def test_a_noiseless_velocity_keeps_the_sign_of_a_zero() -> None:
+    """Without velocity noise a -0.0 joint velocity reads -0.0, as ``dq + 0 * noise`` did."""
+    config = dataclasses.replace(ArmImperfections(seed=3), velocity_noise=0.0)
+    new, old = ImperfectArm(config), PythonArmErrors(config)
+    q, tau = np.zeros(7), np.ones(7)
+    for _ in range(20):
+        dq = np.array([-0.0, 0.0, -0.0, 1e-3, -0.0, -1e-3, -0.0])
+        reading = new.measure_state(np.concatenate([q, dq, tau]))
+        assert_bits_equal(reading.dq, old.measure(q, dq, tau)[1], "dq")
+
+
+def test_the_noise_stream_is_in_step_across_its_draws_ahead() -> None:
+    """Resets' jitters (4 normals) between steps' readings (3n) at random, over many of the
+    stream's batches (``NORMALS_DRAWN`` steps each): the very numbers ``normal`` drew."""
+    config = ArmImperfections(seed=8)
+    new, old = ImperfectArm(config), PythonArmErrors(config)
+    rng = np.random.default_rng(0)
+    n = config.n_joints
+    for i in range(NORMALS_DRAWN * 5):
+        if rng.random() < 0.05:
+            for got, expected in zip(new.start_jitter(), old.start_jitter()):
+                assert_bits_equal(got, expected, f"jitter at {i}")
+        state = rng.normal(0.0, 1.0, 3 * n)
+        reading = new.measure_state(state.copy())
+        for got, expected in zip(vars(reading).values(),
+                                 old.measure(state[:n], state[n:2 * n], state[2 * n:])):
+            assert_bits_equal(got, expected, f"reading {i}")

@@ -40,6 +40,8 @@ __all__ = ["GAZ_2019_COULOMB", "GAZ_2019_VELOCITY", "RESIDUAL_FRICTION_SHARE", "
 
 #: The Panda's joint count: the length of the per-joint defaults.
 N_ARM_JOINTS = 7
+#: Steps of sensor noise drawn from the noise stream at a time (``ImperfectArm._normals``).
+NORMALS_DRAWN = 64
 
 #: [Nm] Coulomb level of each joint's friction, Gaz et al. (2019), "Dynamic Identification of the
 #: Franka Emika Panda Robot With Retrieval of Feasible Parameters Using Penalty-Based
@@ -204,20 +206,61 @@ class ImperfectArm:
         self._viscous = np.array(config.joint_viscous_friction, float)
         self._sensor_noise = np.repeat([config.encoder_noise, config.velocity_noise,
                                         config.torque_noise], n)
+        # (3n,) the biases of [q, dq, tau]; dq's is -0.0, the sum's identity (x + -0.0 == x,
+        # -0.0 included), so one addition biases all three as ``measure`` always did.
+        self._bias = np.concatenate([self.encoder_bias, np.full(n, -0.0), self.torque_bias])
+        self._draw = np.empty(3 * n)          # this step's noise
+        # The noise stream's next normals, drawn NORMALS_DRAWN steps' worth at a time (a draw
+        # of 3n costs ~1 us, mostly the call): ``_normals`` hands them out in the stream's order.
+        self._normals_drawn = np.empty(NORMALS_DRAWN * 3 * n)
+        self._normals_used = self._normals_drawn.size
+        self._friction = np.empty((3, n))     # ``apply_friction``'s working buffers
 
     def friction(self, dq: np.ndarray) -> np.ndarray:
         """(n,) [Nm] the joints' friction torque at true velocities ``dq`` (opposes motion)."""
         return self._coulomb * np.tanh(dq / self._velocity) + self._viscous * dq
 
+    def apply_friction(self, tau: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """(n,) [Nm] ``tau - friction(dq)``, to the bit, in preallocated buffers (every step):
+        what reaches the links of a command ``tau`` at true velocities ``dq``."""
+        scaled, coulomb, viscous = self._friction    # (outputs passed by position: faster)
+        np.divide(dq, self._velocity, scaled)
+        np.tanh(scaled, coulomb)              # (not in place: NumPy's loop for fresh arrays)
+        np.multiply(self._coulomb, coulomb, coulomb)
+        np.multiply(self._viscous, dq, viscous)
+        np.add(coulomb, viscous, coulomb)
+        return tau - coulomb
+
     def measure(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray) -> JointState:
         """The driver's reading of the true ``q``, ``dq`` and the realised torque ``tau``."""
+        return self.measure_state(np.concatenate([q, dq, tau]))
+
+    def measure_state(self, state: np.ndarray) -> JointState:
+        """The driver's reading of the true ``state`` ``[q, dq, tau]`` (3n,): ``q`` plus its
+        bias and noise, ``dq`` plus its noise, ``tau`` plus its bias and noise (one standard
+        normal draw of 3n, in that order, per call). ``state`` becomes the reading."""
         n = self.n_joints
-        noise = self._noise.normal(0.0, 1.0, 3 * n) * self._sensor_noise
-        return JointState(q=q + self.encoder_bias + noise[:n], dq=dq + noise[n:2 * n],
-                          tau=tau + self.torque_bias + noise[2 * n:])
+        noise = np.multiply(self._normals(3 * n), self._sensor_noise, self._draw)
+        state += self._bias
+        state += noise
+        return JointState(q=state[:n], dq=state[n:2 * n], tau=state[2 * n:])
 
     def start_jitter(self) -> tuple[np.ndarray, np.ndarray]:
         """One reset's ``(tilt vector change [rad] (2,), tip offset [m] (2,))``, housing frame."""
-        draw = self._noise.normal(0.0, 1.0, 4)
+        draw = self._normals(4)
         return (draw[:2] * self.config.start_tilt_jitter,
                 draw[2:] * self.config.start_position_jitter)
+
+    def _normals(self, k: int) -> np.ndarray:
+        """(k,) the noise stream's next ``k`` standard normals, a view valid until the next
+        call. The numbers and their order are those of ``normal(0, 1, k)`` drawn each time
+        (``standard_normal`` fills an array one normal after the other, as ``normal`` draws
+        them, and ``0 + 1 z`` is ``z``); only the generator runs ahead of what was used."""
+        drawn, used = self._normals_drawn, self._normals_used
+        if used + k > drawn.size:
+            left = drawn.size - used
+            drawn[:left] = drawn[used:]
+            self._noise.standard_normal(out=drawn[left:])
+            used = 0
+        self._normals_used = used + k
+        return drawn[used:used + k]

@@ -65,6 +65,7 @@ class ShaftScene:
         self.geometry = geometry
         self.arm_description = arm
         self.n_joints = arm.n_joints
+        self._shape = (arm.n_joints,)
         imperfections = config.imperfections
         self.arm_errors = ImperfectArm(imperfections, self.n_joints)
         self._friction = imperfections.has_friction
@@ -77,7 +78,7 @@ class ShaftScene:
         self.world.place_housing(self.fixture)
         self._tau = np.zeros(self.n_joints)
         self._steps = 0
-        self._true = JointState(np.zeros(self.n_joints), np.zeros(self.n_joints), self._tau)
+        self._q, self._dq = np.zeros(self.n_joints), np.zeros(self.n_joints)   # true, this step
         self._measured: JointState | None = None
         parked = geometry.start_pose(0)
         self.teleport(StartPose(parked.position - parked.approach, parked.rotation))
@@ -132,7 +133,7 @@ class ShaftScene:
 
     def true_joint_state(self) -> JointState:
         """The joints as they are (evaluation only), with the last torque command."""
-        return JointState(self._true.q, self._true.dq, self._tau.copy())
+        return JointState(self._q, self._dq, self._tau.copy())
 
     def joint_state(self) -> JointState:
         """What the driver reports: joint positions, velocities and measured torques (the last
@@ -143,11 +144,12 @@ class ShaftScene:
         """Joint torques for the next step [Nm]; the caller enforces limits. With joint
         friction, the links get the command minus the friction at their true velocities."""
         tau = np.array(tau, float)                    # the scene's own copy
-        if tau.shape != (self.n_joints,) or not _all_finite(tau):
+        if tau.shape != self._shape or not (math.isfinite(sum(tau.tolist()))
+                                            or _all_finite(tau)):
             raise ValueError(f"tau must be {self.n_joints} finite torques, got {tau}")
         self._tau = tau
         if self._friction:
-            tau = tau - self.arm_errors.friction(self._true.dq)
+            tau = self.arm_errors.apply_friction(tau, self._dq)
         self.world.set_arm_torques(tau)
 
     def step(self) -> None:
@@ -161,10 +163,9 @@ class ShaftScene:
     def _after_step(self) -> None:
         """Take this step's true state and the driver's reading of it (once per step, so every
         ``joint_state`` of the step agrees)."""
-        q, dq = self.world.arm_state()
-        self._true = JointState(q=q, dq=dq, tau=self._tau)
+        self._q, self._dq = q, dq = self.world.arm_state()
         if self._sensor_errors:
-            self._measured = self.arm_errors.measure(q, dq, self._tau)
+            self._measured = self.arm_errors.measure_state(np.concatenate((q, dq, self._tau)))
 
     def _tip_depth(self) -> float:
         """The tip's insertion depth (``ShaftTaskGeometry.measure``'s, against the true
