@@ -8,14 +8,14 @@ are the same, bit for bit. ``scripts/setup.sh`` compiles it against the MuJoCo w
 from __future__ import annotations
 
 import ctypes
-from pathlib import Path
+from importlib.resources import files
 
 import mujoco
 
 __all__ = ["CONTACT_FILTER_LIBRARY", "contact_filter", "install_contact_filter"]
 
 #: The compiled filter (``scripts/setup.sh``, the step "the shaft cell's contact filter").
-CONTACT_FILTER_LIBRARY = Path(__file__).with_name("_contact_filter.so")
+CONTACT_FILTER_LIBRARY = files(__name__) / "_contact_filter.so"
 
 _filter: ctypes._CFuncPtr | None = None
 
