@@ -39,6 +39,7 @@ class Recording:
     torques: list[tuple] = field(default_factory=list)      # limit_torques(tau, dt, dq), reset
     tilts: list[tuple] = field(default_factory=list)        # limit_tilt(wrench, rotation)
     arm: list[tuple] = field(default_factory=list)          # the simulated arm's errors' calls
+    tools: list = field(default_factory=list)               # the controller's tool states
     ticks: int = 0
     joints: JointLimits | None = None                       # the safety filter's
     imperfections: ArmImperfections | None = None           # the simulated arm's
@@ -79,6 +80,15 @@ def _record(loop: RobotLoop) -> Recording:
         return start_jitter()
 
     errors.apply_friction, errors.measure_state, errors.start_jitter = friction, measure, jitter
+    controller = loop.controller
+    control = controller.step
+
+    def step(q, dq, setpoint, dt):
+        tau = control(q, dq, setpoint, dt)
+        rec.tools.append(controller.tool)
+        return tau
+
+    controller.step = step
     return rec
 
 
@@ -242,6 +252,16 @@ def test_tilt_limit_is_the_formula_on_recorded_ticks_and_at_the_cone(
         expected = python_limit_tilt(safety.limits, wrench, rotation)
         assert (got is wrench) == (expected is wrench), f"case {i}"
         assert_bits_equal(got, expected, f"case {i}")
+
+
+# --- the loop ------------------------------------------------------------------------------
+def test_the_rest_detectors_speeds_are_the_tool_states_on_recorded_ticks(
+        recording: Recording) -> None:
+    """``ToolState.speeds`` (one read of the twist, every tick) against the two properties
+    (the formulas the tick used), on every recorded tool state."""
+    assert len(recording.tools) >= 300
+    for i, tool in enumerate(recording.tools):
+        assert tool.speeds() == (tool.linear_speed, tool.angular_speed), i
 
 
 # --- the simulated arm's errors ------------------------------------------------------------

@@ -110,6 +110,12 @@ class ToolState:
     def angular_speed(self) -> float:
         return math.hypot(*self.twist[3:].tolist())
 
+    def speeds(self) -> tuple[float, float]:
+        """``(linear_speed, angular_speed)``, the same numbers from one read of the twist (the
+        rest detector's inputs, every tick)."""
+        vx, vy, vz, wx, wy, wz = self.twist.tolist()
+        return math.hypot(vx, vy, vz), math.hypot(wx, wy, wz)
+
 
 class HybridImpedanceController:
     """Joint torques from a wrench setpoint, once per millisecond.
