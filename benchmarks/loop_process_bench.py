@@ -26,7 +26,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from qg_common.types import N_START_POSES, WrenchSetpoint
+from qg_common.params import config_file, load_ros_params
+from qg_common.types import N_START_POSES, StartPose, WrenchSetpoint
+from qg_learning_node.executor.parameters import load_geometry
 from qg_recording.bag_reader import bag_info
 from qg_recording.episode_recorder import EpisodeRecorder
 from robot_bridge_node.core.hardware_interface import robot_plugin
@@ -41,11 +43,14 @@ from robot_bridge_node.core.tick_messages import TickNames, record_ticks
 from robot_bridge_node.robot_process import shipped_loop_spec
 
 
-def setpoints(steps: int, seed: int = 0) -> list[tuple[int, WrenchSetpoint]]:
-    """(start pose, setpoint) of every step: uniform random residuals, a new pose every 5."""
+def setpoints(steps: int, seed: int = 0) -> list[tuple[StartPose, WrenchSetpoint]]:
+    """(start pose, setpoint) of every step: uniform random residuals, a new pose of the
+    shipped cell (``config/shaft_task.yaml``) every 5."""
     rng = np.random.default_rng(seed)
-    return [(k // 5 % N_START_POSES, WrenchSetpoint.residual(-15.0, *rng.uniform(-3.0, 3.0, 2)))
-            for k in range(steps)]
+    geometry = load_geometry(load_ros_params(config_file("shaft_task.yaml")))
+    starts = [geometry.start_pose(i) for i in range(N_START_POSES)]
+    return [(starts[k // 5 % N_START_POSES],
+             WrenchSetpoint.residual(-15.0, *rng.uniform(-3.0, 3.0, 2))) for k in range(steps)]
 
 
 class _NoSocket:
@@ -77,7 +82,7 @@ def in_process(steps: int, rounds: int) -> dict:
         for name, outlet in outlets.items():
             ticks, ticking, output, pose = 0, 0.0, 0.0, None
             for start, setpoint in plan:
-                if start != pose:
+                if start is not pose:
                     loop.reset(start)
                     pose = start
                 loop.command(setpoint)
@@ -155,7 +160,7 @@ def through_process(steps: int, record: bool) -> dict:
     pose, seq = None, 0
     cpu0, t0 = _cpu_seconds(link.process.pid), time.perf_counter()
     for start, setpoint in setpoints(steps):
-        if start != pose:
+        if start is not pose:
             link.reset(start)
             pose = start
         seq += 1

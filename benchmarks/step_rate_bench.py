@@ -5,7 +5,9 @@ Both paths run QG-DDPG training episodes with the demo's settings (the default s
 first in this process (``RunSpec.run``: sim + bridge + EKF + learner on one core), then through
 the real stack (robot, executor and learner processes, episodes started by service call).
 Printed per path: RL steps, wall time, RL steps per wall second, the fraction of steps that end
-at the rest detector's time limit (``rest.max_time``) and simulated seconds per step. The ROS
+at the rest detector's time limit (``rest.max_time``) and simulated seconds per step; on the ROS
+path also each process's CPU time per wall second, its own and with its children's (the robot
+process's forked 1 kHz loop). The ROS
 path also splits its wall time, from the arrival times of ``/wrench_setpoint`` and
 ``/ee_at_rest`` at this process: the robot's part of a step (setpoint to its at-rest event) and
 the turnaround (an at-rest event to the next setpoint: executor, actor and two messages).
@@ -35,6 +37,7 @@ from pathlib import Path
 import torch
 import yaml
 from qg_common.params import load_ros_params
+from qg_common.process_info import cpu_seconds
 from qg_experiments.runner import RunSpec
 
 CRITIC_LR, ITERATIONS, CAP = 1e-4, 50, 50
@@ -134,10 +137,15 @@ def through_ros(episodes: int) -> dict:
             cli.node.create_subscription(AtRest, "/ee_at_rest", on_at_rest, 100)
             cli.node.create_subscription(WrenchSetpoint, "/wrench_setpoint",
                                          lambda m: setpoints.append((time.monotonic(), m.seq)), 100)
+            pids = launcher.pids()
+            cpu_before = {name: (cpu_seconds(pid, children=False), cpu_seconds(pid))
+                          for name, pid in pids.items()}
             start = time.monotonic()
             outcomes = [run_episode_by_service(cli, i, "train", -1, seed=i, timeout=600.0)
                         for i in range(episodes)]
             wall = time.monotonic() - start
+            cpu = {name: (cpu_seconds(pid, children=False) - cpu_before[name][0],
+                          cpu_seconds(pid) - cpu_before[name][1]) for name, pid in pids.items()}
     finally:
         launcher.stop()
     steps = sum(o.steps for o in outcomes)
@@ -145,6 +153,9 @@ def through_ros(episodes: int) -> dict:
     return {"rl_steps": steps, "wall_time": wall, "steps_per_second": steps / wall,
             "timeout_fraction": sum(e.timed_out for e in step_events) / max(1, len(step_events)),
             "sim_seconds_per_step": sum(e.duration for e in step_events) / max(1, len(step_events)),
+            "cpu_share_per_process": {name: {"own": round(own / wall, 3),
+                                             "with_children": round(total / wall, 3)}
+                                      for name, (own, total) in sorted(cpu.items())},
             **step_time_split(setpoints, rests)}
 
 
