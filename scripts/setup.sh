@@ -129,19 +129,21 @@ if [[ "$(cat "$STAMPS/native" 2>/dev/null)" != "$native_hash" || ! -f "$native_s
   mv "$native_so.tmp" "$native_so"
   echo "$native_hash" > "$STAMPS/native"
 fi
-#    The safety filter's torque limits: pybind11 alone, seconds to build (no -ffast-math, no
-#    -march: their result must stay NumPy's to the bit).
-limits_so="$native_dir/_torque_limits$("$PY" -c 'import sysconfig; print(sysconfig.get_config_var("EXT_SUFFIX"))')"
-limits_hash="$(hash_of "$native_dir/torque_limits.cpp" "$ROOT/scripts/constraints.txt")"
-if [[ "$(cat "$STAMPS/native_limits" 2>/dev/null)" != "$limits_hash" || ! -f "$limits_so" ]]; then
-  log "compiling the safety filter's torque limits"
+#    The tick's elementwise arithmetic (the safety filter's torque limits, the simulated arm's
+#    friction and readings): pybind11 alone, seconds to build. -ffp-contract=off, no -ffast-math,
+#    no -march: its results must stay NumPy's to the bit.
+arith_so="$native_dir/_tick_arithmetic$("$PY" -c 'import sysconfig; print(sysconfig.get_config_var("EXT_SUFFIX"))')"
+arith_hash="$(hash_of "$native_dir/tick_arithmetic.cpp" "$ROOT/scripts/constraints.txt")"
+if [[ "$(cat "$STAMPS/tick_arithmetic" 2>/dev/null)" != "$arith_hash" || ! -f "$arith_so" ]]; then
+  log "compiling the tick's elementwise arithmetic"
   mkdir -p "$ROOT/ros_ws/log"
-  g++ -std=c++17 -O3 -DNDEBUG -fPIC -shared -fvisibility=hidden -fvisibility-inlines-hidden \
-    $("$PY" -m pybind11 --includes) "$native_dir/torque_limits.cpp" -o "$limits_so.tmp" \
-    >"$ROOT/ros_ws/log/native_limits_build.txt" 2>&1 \
-    || { grep -E 'error' -A3 "$ROOT/ros_ws/log/native_limits_build.txt" | head -40 >&2; exit 1; }
-  mv "$limits_so.tmp" "$limits_so"
-  echo "$limits_hash" > "$STAMPS/native_limits"
+  g++ -std=c++17 -O3 -DNDEBUG -ffp-contract=off -fPIC -shared -fvisibility=hidden \
+    -fvisibility-inlines-hidden $("$PY" -m pybind11 --includes) \
+    "$native_dir/tick_arithmetic.cpp" -o "$arith_so.tmp" \
+    >"$ROOT/ros_ws/log/tick_arithmetic_build.txt" 2>&1 \
+    || { grep -E 'error' -A3 "$ROOT/ros_ws/log/tick_arithmetic_build.txt" | head -40 >&2; exit 1; }
+  mv "$arith_so.tmp" "$arith_so"
+  echo "$arith_hash" > "$STAMPS/tick_arithmetic"
 fi
 # 6b. The shaft cell's MuJoCo contact filter (sim_robot_node/core/native): plain C against the
 #    MuJoCo wheel's own headers, loaded with ctypes (it calls nothing of MuJoCo's, so it links

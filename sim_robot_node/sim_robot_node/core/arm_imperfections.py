@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 from qg_common.params import config_from_dict
 from qg_common.types import JointState
+from robot_bridge_node.core.native import friction_applied, noisy_reading
 
 __all__ = ["GAZ_2019_COULOMB", "GAZ_2019_VELOCITY", "RESIDUAL_FRICTION_SHARE", "RESIDUAL_COULOMB",
            "ArmImperfections", "ImperfectArm"]
@@ -209,12 +210,11 @@ class ImperfectArm:
         # (3n,) the biases of [q, dq, tau]; dq's is -0.0, the sum's identity (x + -0.0 == x,
         # -0.0 included), so one addition biases all three as ``measure`` always did.
         self._bias = np.concatenate([self.encoder_bias, np.full(n, -0.0), self.torque_bias])
-        self._draw = np.empty(3 * n)          # this step's noise
         # The noise stream's next normals, drawn NORMALS_DRAWN steps' worth at a time (a draw
         # of 3n costs ~1 us, mostly the call): ``_normals`` hands them out in the stream's order.
         self._normals_drawn = np.empty(NORMALS_DRAWN * 3 * n)
         self._normals_used = self._normals_drawn.size
-        self._friction = np.empty((3, n))     # ``apply_friction``'s working buffers
+        self._friction = np.empty((2, n))     # ``apply_friction``'s working buffers
 
     def friction(self, dq: np.ndarray) -> np.ndarray:
         """(n,) [Nm] the joints' friction torque at true velocities ``dq`` (opposes motion)."""
@@ -223,27 +223,18 @@ class ImperfectArm:
     def apply_friction(self, tau: np.ndarray, dq: np.ndarray) -> np.ndarray:
         """(n,) [Nm] ``tau - friction(dq)``, to the bit, in preallocated buffers (every step):
         what reaches the links of a command ``tau`` at true velocities ``dq``."""
-        scaled, coulomb, viscous = self._friction    # (outputs passed by position: faster)
+        scaled, smooth = self._friction       # (outputs passed by position: faster)
         np.divide(dq, self._velocity, scaled)
-        np.tanh(scaled, coulomb)              # (not in place: NumPy's loop for fresh arrays)
-        np.multiply(self._coulomb, coulomb, coulomb)
-        np.multiply(self._viscous, dq, viscous)
-        np.add(coulomb, viscous, coulomb)
-        return tau - coulomb
+        np.tanh(scaled, smooth)               # NumPy's tanh (its SIMD loop's rounding)
+        return friction_applied(tau, dq, smooth, self._coulomb, self._viscous)
 
     def measure(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray) -> JointState:
-        """The driver's reading of the true ``q``, ``dq`` and the realised torque ``tau``."""
-        return self.measure_state(np.concatenate([q, dq, tau]))
-
-    def measure_state(self, state: np.ndarray) -> JointState:
-        """The driver's reading of the true ``state`` ``[q, dq, tau]`` (3n,): ``q`` plus its
-        bias and noise, ``dq`` plus its noise, ``tau`` plus its bias and noise (one standard
-        normal draw of 3n, in that order, per call). ``state`` becomes the reading."""
+        """The driver's reading of the true ``q``, ``dq`` and the realised torque ``tau``:
+        ``q`` plus its bias and noise, ``dq`` plus its noise, ``tau`` plus its bias and noise
+        (one standard normal draw of 3n, in that order, per call)."""
         n = self.n_joints
-        noise = np.multiply(self._normals(3 * n), self._sensor_noise, self._draw)
-        state += self._bias
-        state += noise
-        return JointState(q=state[:n], dq=state[n:2 * n], tau=state[2 * n:])
+        reading = noisy_reading(q, dq, tau, self._normals(3 * n), self._sensor_noise, self._bias)
+        return JointState(q=reading[:n], dq=reading[n:2 * n], tau=reading[2 * n:])
 
     def start_jitter(self) -> tuple[np.ndarray, np.ndarray]:
         """One reset's ``(tilt vector change [rad] (2,), tip offset [m] (2,))``, housing frame."""

@@ -165,7 +165,7 @@ class ShaftScene:
         ``joint_state`` of the step agrees)."""
         self._q, self._dq = q, dq = self.world.arm_state()
         if self._sensor_errors:
-            self._measured = self.arm_errors.measure_state(np.concatenate((q, dq, self._tau)))
+            self._measured = self.arm_errors.measure(q, dq, self._tau)
 
     def _tip_depth(self) -> float:
         """The tip's insertion depth (``ShaftTaskGeometry.measure``'s, against the true

@@ -1,12 +1,17 @@
-// The safety filter's joint-torque limits in compiled code: one call from Python per 1 kHz tick.
+// The 1 kHz tick's elementwise arithmetic in compiled code, each part one call from Python:
+// the safety filter's joint-torque limits, and the simulated arm's friction and sensor readings.
 //
-// Why: on Python floats the limits cost ~5 us a tick (a NumPy version ~15 us), one of the
-// largest parts of the tick outside the physics; here ~0.5 us. The formulas and their
-// documentation stay in ``safety.py`` (``SafetyFilter.limit_torques``), which owns the limits and
-// the errors' wording. Every bound is NumPy's ``maximum`` / ``minimum`` written out (``a`` if
-// ``a >= b`` or ``a`` is NaN, else ``b``: a NaN wins), and each sum and product is the one
-// ``safety.py`` wrote, in its order, so the result is NumPy's to the bit, NaN and -0.0 included.
-// Built without -ffast-math and without FMA (no -march), so no operation is fused or reordered.
+// Why: on Python floats the torque limits cost ~5 us a tick (in NumPy ~15 us), and the simulated
+// arm's friction and readings took ~10 NumPy calls a step, each ~0.5 us in the tick (its caches
+// cold after the physics step); here each is one call of well under a microsecond. The formulas
+// and their documentation stay in ``safety.py`` (``SafetyFilter.limit_torques``) and
+// ``sim_robot_node/core/arm_imperfections.py`` (``ImperfectArm``), which own the parameters and
+// the errors' wording. Only exactly rounded operations run here (+, -, *, comparisons), each in
+// the order NumPy did them; a bound is NumPy's ``maximum`` / ``minimum`` written out (``a`` if
+// ``a >= b`` or ``a`` is NaN, else ``b``: a NaN wins). So every result is NumPy's to the bit,
+// NaN and -0.0 included. Built with -ffp-contract=off and without -ffast-math or -march: no
+// operation is fused or reordered. (A transcendental such as ``tanh`` stays NumPy's: its SIMD
+// loops round differently from libm's.)
 #include <cstddef>
 #include <sstream>
 #include <stdexcept>
@@ -122,8 +127,60 @@ class TorqueLimiter {
   bool has_last_ = false;
 };
 
-PYBIND11_MODULE(_torque_limits, m) {
-  m.doc() = "Compiled joint-torque limits of the safety filter (safety.SafetyFilter).";
+// ``tau - (coulomb * tanh_scaled + viscous * dq)``, entry by entry in NumPy's order: the torque
+// reaching the links of a command ``tau`` (ImperfectArm.apply_friction; ``tanh_scaled`` is
+// NumPy's ``tanh(dq / velocity)``).
+Array friction_applied(const Array& tau, const Array& dq, const Array& tanh_scaled,
+                       const Array& coulomb, const Array& viscous) {
+  const py::ssize_t n = tau.size();
+  for (const Array* a : {&dq, &tanh_scaled, &coulomb, &viscous})
+    if (a->ndim() != 1 || a->size() != n)
+      throw py::value_error("friction_applied: every array needs tau's " + std::to_string(n) +
+                            " entries");
+  Array out(n);
+  double* o = out.mutable_data();
+  const double *t = tau.data(), *v = dq.data(), *h = tanh_scaled.data(), *c = coulomb.data(),
+               *d = viscous.data();
+  for (py::ssize_t i = 0; i < n; ++i) {
+    const double coulomb_part = c[i] * h[i];
+    const double viscous_part = d[i] * v[i];
+    const double friction = coulomb_part + viscous_part;
+    o[i] = t[i] - friction;
+  }
+  return out;
+}
+
+// ``[q, dq, tau] + bias + normals * scale`` (3n,), entry by entry in NumPy's order (the sum
+// first, then the noise): a driver's reading of the true state (ImperfectArm.measure_state).
+Array noisy_reading(const Array& q, const Array& dq, const Array& tau, const Array& normals,
+                    const Array& scale, const Array& bias) {
+  const py::ssize_t n = q.size();
+  if (q.ndim() != 1 || dq.ndim() != 1 || tau.ndim() != 1 || dq.size() != n || tau.size() != n)
+    throw py::value_error("noisy_reading: q, dq and tau need one entry per joint each");
+  for (const Array* a : {&normals, &scale, &bias})
+    if (a->ndim() != 1 || a->size() != 3 * n)
+      throw py::value_error("noisy_reading: normals, scale and bias need 3n = " +
+                            std::to_string(3 * n) + " entries");
+  Array out(3 * n);
+  double* o = out.mutable_data();
+  const double* parts[3] = {q.data(), dq.data(), tau.data()};
+  const double *z = normals.data(), *s = scale.data(), *b = bias.data();
+  for (py::ssize_t k = 0; k < 3; ++k)
+    for (py::ssize_t i = 0; i < n; ++i) {
+      const py::ssize_t j = k * n + i;
+      const double noise = z[j] * s[j];
+      const double biased = parts[k][i] + b[j];
+      o[j] = biased + noise;
+    }
+  return out;
+}
+
+PYBIND11_MODULE(_tick_arithmetic, m) {
+  m.doc() = "The 1 kHz tick's elementwise arithmetic: torque limits, a simulated arm's errors.";
+  m.def("friction_applied", &friction_applied, py::arg("tau"), py::arg("dq"),
+        py::arg("tanh_scaled"), py::arg("coulomb"), py::arg("viscous"));
+  m.def("noisy_reading", &noisy_reading, py::arg("q"), py::arg("dq"), py::arg("tau"),
+        py::arg("normals"), py::arg("scale"), py::arg("bias"));
   py::class_<TorqueLimiter>(m, "TorqueLimiter")
       .def(py::init<std::vector<double>, std::vector<double>, std::vector<double>, double>(),
            py::arg("torque"), py::arg("rate"), py::arg("velocity"), py::arg("brake_damping"))
