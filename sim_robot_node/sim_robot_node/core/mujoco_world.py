@@ -74,6 +74,14 @@ def _index(addresses: list[int]) -> slice | np.ndarray:
     return np.array(addresses)
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross(a, b)`` of two 3-vectors, to the bit (its products and differences, in its
+    order), without its ~15 us of argument handling."""
+    a0, a1, a2 = a.tolist()
+    b0, b1, b2 = b.tolist()
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
 def _quat_from_yaw(yaw: float) -> np.ndarray:
     return np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
 
@@ -311,19 +319,17 @@ class MujocoShaftWorld:
         position, rotation = self.tool_pose()
         force, torque = np.zeros(3), np.zeros(3)
         f6 = self._force
-        for i in range(d.ncon):
-            contact = d.contact[i]
-            if contact.geom1 == self._shaft_geom:
-                sign = -1.0                 # the force acts on geom2 along the normal
-            elif contact.geom2 == self._shaft_geom:
-                sign = 1.0
-            else:
-                continue
-            mujoco.mj_contactForce(m, d, i, f6)
-            frame = contact.frame.reshape(3, 3)
+        # The contacts' fields as arrays over all contacts: ``d.contact[i]`` builds a Python
+        # object a contact (~30 us of the ~35 a contact cost); the arithmetic is unchanged.
+        contacts = d.contact
+        geoms, frames, points = contacts.geom, contacts.frame, contacts.pos
+        for i in np.flatnonzero((geoms == self._shaft_geom).any(axis=1)):
+            sign = -1.0 if geoms[i, 0] == self._shaft_geom else 1.0  # acts on geom2 along the normal
+            mujoco.mj_contactForce(m, d, int(i), f6)
+            frame = frames[i].reshape(3, 3)
             f = sign * (frame.T @ f6[:3])
             force += f
-            torque += np.cross(contact.pos - position, f) + sign * (frame.T @ f6[3:])
+            torque += _cross(points[i] - position, f) + sign * (frame.T @ f6[3:])
         return np.concatenate([rotation.T @ force, rotation.T @ torque])
 
     def close(self) -> None:
