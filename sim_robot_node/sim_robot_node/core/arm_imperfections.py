@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 from qg_common.params import config_from_dict
 from qg_common.types import JointState
-from robot_bridge_node.core.native import friction_applied, noisy_reading
+from robot_bridge_node.core.native import ArmErrors
 
 __all__ = ["GAZ_2019_COULOMB", "GAZ_2019_VELOCITY", "RESIDUAL_FRICTION_SHARE", "RESIDUAL_COULOMB",
            "ArmImperfections", "ImperfectArm"]
@@ -214,7 +214,11 @@ class ImperfectArm:
         # of 3n costs ~1 us, mostly the call): ``_normals`` hands them out in the stream's order.
         self._normals_drawn = np.empty(NORMALS_DRAWN * 3 * n)
         self._normals_used = self._normals_drawn.size
-        self._friction = np.empty((2, n))     # ``apply_friction``'s working buffers
+        self._scaled, self._smooth = np.empty(n), np.empty(n)   # ``apply_friction``'s buffers
+        # The exactly rounded arithmetic of both, compiled, with the constants and the buffers
+        # NumPy writes (``tanh``, the normals) held from here on.
+        self._arithmetic = ArmErrors(self._coulomb, self._viscous, self._smooth,
+                                     self._sensor_noise, self._bias, self._normals_drawn)
 
     def friction(self, dq: np.ndarray) -> np.ndarray:
         """(n,) [Nm] the joints' friction torque at true velocities ``dq`` (opposes motion)."""
@@ -223,30 +227,30 @@ class ImperfectArm:
     def apply_friction(self, tau: np.ndarray, dq: np.ndarray) -> np.ndarray:
         """(n,) [Nm] ``tau - friction(dq)``, to the bit, in preallocated buffers (every step):
         what reaches the links of a command ``tau`` at true velocities ``dq``."""
-        scaled, smooth = self._friction       # (outputs passed by position: faster)
-        np.divide(dq, self._velocity, scaled)
-        np.tanh(scaled, smooth)               # NumPy's tanh (its SIMD loop's rounding)
-        return friction_applied(tau, dq, smooth, self._coulomb, self._viscous)
+        np.divide(dq, self._velocity, self._scaled)       # (outputs passed by position:
+        np.tanh(self._scaled, self._smooth)               # faster; NumPy's tanh, its rounding)
+        return self._arithmetic.friction_applied(tau, dq)
 
     def measure(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray) -> JointState:
         """The driver's reading of the true ``q``, ``dq`` and the realised torque ``tau``:
         ``q`` plus its bias and noise, ``dq`` plus its noise, ``tau`` plus its bias and noise
         (one standard normal draw of 3n, in that order, per call)."""
         n = self.n_joints
-        reading = noisy_reading(q, dq, tau, self._normals(3 * n), self._sensor_noise, self._bias)
+        reading = self._arithmetic.reading(q, dq, tau, self._next_normals(3 * n))
         return JointState(q=reading[:n], dq=reading[n:2 * n], tau=reading[2 * n:])
 
     def start_jitter(self) -> tuple[np.ndarray, np.ndarray]:
         """One reset's ``(tilt vector change [rad] (2,), tip offset [m] (2,))``, housing frame."""
-        draw = self._normals(4)
+        first = self._next_normals(4)
+        draw = self._normals_drawn[first:first + 4]
         return (draw[:2] * self.config.start_tilt_jitter,
                 draw[2:] * self.config.start_position_jitter)
 
-    def _normals(self, k: int) -> np.ndarray:
-        """(k,) the noise stream's next ``k`` standard normals, a view valid until the next
-        call. The numbers and their order are those of ``normal(0, 1, k)`` drawn each time
-        (``standard_normal`` fills an array one normal after the other, as ``normal`` draws
-        them, and ``0 + 1 z`` is ``z``); only the generator runs ahead of what was used."""
+    def _next_normals(self, k: int) -> int:
+        """Where the noise stream's next ``k`` standard normals start in ``_normals_drawn`` (valid
+        until the next call). The numbers and their order are those of ``normal(0, 1, k)`` drawn
+        each time (``standard_normal`` fills an array one normal after the other, as ``normal``
+        draws them, and ``0 + 1 z`` is ``z``); only the generator runs ahead of what was used."""
         drawn, used = self._normals_drawn, self._normals_used
         if used + k > drawn.size:
             left = drawn.size - used
@@ -254,4 +258,4 @@ class ImperfectArm:
             self._noise.standard_normal(out=drawn[left:])
             used = 0
         self._normals_used = used + k
-        return drawn[used:used + k]
+        return used

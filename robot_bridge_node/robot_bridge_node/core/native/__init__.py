@@ -10,11 +10,10 @@ tick in compiled code") has the measurements that chose this over NumPy and numb
 from __future__ import annotations
 
 try:
-    from ._tick_arithmetic import TorqueLimiter, friction_applied, noisy_reading
+    from ._tick_arithmetic import ArmErrors, TorqueLimiter
     from ._torque_kernels import ImpedanceKernel, WrenchEkfKernel
 except ImportError as error:          # pragma: no cover - a setup that skipped the build
     raise ImportError("the torque loop's compiled kernels are missing or stale: run "
                       "scripts/setup.sh (its step 6 builds them)") from error
 
-__all__ = ["ImpedanceKernel", "TorqueLimiter", "WrenchEkfKernel", "friction_applied",
-           "noisy_reading"]
+__all__ = ["ArmErrors", "ImpedanceKernel", "TorqueLimiter", "WrenchEkfKernel"]

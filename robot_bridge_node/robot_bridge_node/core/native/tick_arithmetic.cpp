@@ -24,6 +24,9 @@
 
 namespace py = pybind11;
 using Array = py::array_t<double, py::array::c_style | py::array::forcecast>;
+// An array NumPy writes into and compiled code reads: float64 and C-contiguous as given, never a
+// converted copy (its arguments are ``noconvert``).
+using Buffer = py::array_t<double, py::array::c_style>;
 
 namespace {
 
@@ -127,60 +130,87 @@ class TorqueLimiter {
   bool has_last_ = false;
 };
 
-// ``tau - (coulomb * tanh_scaled + viscous * dq)``, entry by entry in NumPy's order: the torque
-// reaching the links of a command ``tau`` (ImperfectArm.apply_friction; ``tanh_scaled`` is
-// NumPy's ``tanh(dq / velocity)``).
-Array friction_applied(const Array& tau, const Array& dq, const Array& tanh_scaled,
-                       const Array& coulomb, const Array& viscous) {
-  const py::ssize_t n = tau.size();
-  for (const Array* a : {&dq, &tanh_scaled, &coulomb, &viscous})
-    if (a->ndim() != 1 || a->size() != n)
-      throw py::value_error("friction_applied: every array needs tau's " + std::to_string(n) +
-                            " entries");
-  Array out(n);
-  double* o = out.mutable_data();
-  const double *t = tau.data(), *v = dq.data(), *h = tanh_scaled.data(), *c = coulomb.data(),
-               *d = viscous.data();
-  for (py::ssize_t i = 0; i < n; ++i) {
-    const double coulomb_part = c[i] * h[i];
-    const double viscous_part = d[i] * v[i];
-    const double friction = coulomb_part + viscous_part;
-    o[i] = t[i] - friction;
+// A simulated arm's friction and sensor readings (ImperfectArm), with its constants and the
+// buffers NumPy writes into (``tanh(dq / velocity)`` before each ``friction_applied``, the noise
+// stream's normals whenever they run out) held from the start: each call converts only the
+// state it is given (~0.1 us an array).
+class ArmErrors {
+ public:
+  ArmErrors(Array coulomb, Array viscous, Buffer tanh_scaled, Array scale, Array bias,
+            Buffer normals)
+      : n_(coulomb.size()), coulomb_(std::move(coulomb)), viscous_(std::move(viscous)),
+        tanh_scaled_(std::move(tanh_scaled)), scale_(std::move(scale)), bias_(std::move(bias)),
+        normals_(std::move(normals)) {
+    if (viscous_.size() != n_ || tanh_scaled_.size() != n_ || scale_.size() != 3 * n_ ||
+        bias_.size() != 3 * n_ || normals_.size() < 4 * n_)
+      throw py::value_error("ArmErrors: coulomb, viscous and tanh_scaled need n entries, scale "
+                            "and bias 3n, normals at least 4n");
   }
-  return out;
-}
 
-// ``[q, dq, tau] + bias + normals * scale`` (3n,), entry by entry in NumPy's order (the sum
-// first, then the noise): a driver's reading of the true state (ImperfectArm.measure_state).
-Array noisy_reading(const Array& q, const Array& dq, const Array& tau, const Array& normals,
-                    const Array& scale, const Array& bias) {
-  const py::ssize_t n = q.size();
-  if (q.ndim() != 1 || dq.ndim() != 1 || tau.ndim() != 1 || dq.size() != n || tau.size() != n)
-    throw py::value_error("noisy_reading: q, dq and tau need one entry per joint each");
-  for (const Array* a : {&normals, &scale, &bias})
-    if (a->ndim() != 1 || a->size() != 3 * n)
-      throw py::value_error("noisy_reading: normals, scale and bias need 3n = " +
-                            std::to_string(3 * n) + " entries");
-  Array out(3 * n);
-  double* o = out.mutable_data();
-  const double* parts[3] = {q.data(), dq.data(), tau.data()};
-  const double *z = normals.data(), *s = scale.data(), *b = bias.data();
-  for (py::ssize_t k = 0; k < 3; ++k)
-    for (py::ssize_t i = 0; i < n; ++i) {
-      const py::ssize_t j = k * n + i;
-      const double noise = z[j] * s[j];
-      const double biased = parts[k][i] + b[j];
-      o[j] = biased + noise;
+  // ``tau - (coulomb * tanh_scaled + viscous * dq)``, entry by entry in NumPy's order: the
+  // torque reaching the links of a command ``tau`` (``tanh_scaled``: NumPy's tanh(dq / v)).
+  Array friction_applied(const Array& tau, const Array& dq) const {
+    check_joints("tau", tau);
+    check_joints("dq", dq);
+    Array out(n_);
+    double* o = out.mutable_data();
+    const double *t = tau.data(), *v = dq.data(), *h = tanh_scaled_.data(),
+                 *c = coulomb_.data(), *d = viscous_.data();
+    for (py::ssize_t i = 0; i < n_; ++i) {
+      const double coulomb_part = c[i] * h[i];
+      const double viscous_part = d[i] * v[i];
+      const double friction = coulomb_part + viscous_part;
+      o[i] = t[i] - friction;
     }
-  return out;
-}
+    return out;
+  }
+
+  // ``[q, dq, tau] + bias + normals[first:first + 3n] * scale`` (3n,), entry by entry in
+  // NumPy's order (the sum first, then the noise): a driver's reading of the true state.
+  Array reading(const Array& q, const Array& dq, const Array& tau, py::ssize_t first) const {
+    check_joints("q", q);
+    check_joints("dq", dq);
+    check_joints("tau", tau);
+    if (first < 0 || first + 3 * n_ > normals_.size())
+      throw py::value_error("reading: the normals from " + std::to_string(first) +
+                            " run past the buffer's end");
+    Array out(3 * n_);
+    double* o = out.mutable_data();
+    const double* parts[3] = {q.data(), dq.data(), tau.data()};
+    const double *z = normals_.data() + first, *s = scale_.data(), *b = bias_.data();
+    for (py::ssize_t k = 0; k < 3; ++k)
+      for (py::ssize_t i = 0; i < n_; ++i) {
+        const py::ssize_t j = k * n_ + i;
+        const double noise = z[j] * s[j];
+        const double biased = parts[k][i] + b[j];
+        o[j] = biased + noise;
+      }
+    return out;
+  }
+
+ private:
+  void check_joints(const char* name, const Array& value) const {
+    if (value.ndim() != 1 || value.size() != n_)
+      throw py::value_error(std::string(name) + " must have one entry per joint (" +
+                            std::to_string(n_) + ")");
+  }
+
+  py::ssize_t n_;
+  Array coulomb_, viscous_;
+  Buffer tanh_scaled_;
+  Array scale_, bias_;
+  Buffer normals_;
+};
 
 PYBIND11_MODULE(_tick_arithmetic, m) {
   m.doc() = "The 1 kHz tick's elementwise arithmetic: torque limits, a simulated arm's errors.";
-  m.def("friction_applied", &friction_applied, py::arg("tau"), py::arg("dq"),
-        py::arg("tanh_scaled"), py::arg("coulomb"), py::arg("viscous"));
-  m.def("noisy_reading", &noisy_reading, py::arg("q"), py::arg("dq"), py::arg("tau"),
-        py::arg("normals"), py::arg("scale"), py::arg("bias"));
+  py::class_<ArmErrors>(m, "ArmErrors")
+      .def(py::init<Array, Array, Buffer, Array, Array, Buffer>(), py::arg("coulomb"),
+           py::arg("viscous"), py::arg("tanh_scaled").noconvert(), py::arg("scale"),
+           py::arg("bias"), py::arg("normals").noconvert())
+      .def("friction_applied", &ArmErrors::friction_applied, py::arg("tau"), py::arg("dq"))
+      .def("reading", &ArmErrors::reading, py::arg("q"), py::arg("dq"), py::arg("tau"),
+           py::arg("first"));
   py::class_<TorqueLimiter>(m, "TorqueLimiter")
       .def(py::init<std::vector<double>, std::vector<double>, std::vector<double>, double>(),
            py::arg("torque"), py::arg("rate"), py::arg("velocity"), py::arg("brake_damping"))
