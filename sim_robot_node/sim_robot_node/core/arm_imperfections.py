@@ -41,7 +41,7 @@ __all__ = ["GAZ_2019_COULOMB", "GAZ_2019_VELOCITY", "RESIDUAL_FRICTION_SHARE", "
 
 #: The Panda's joint count: the length of the per-joint defaults.
 N_ARM_JOINTS = 7
-#: Steps of sensor noise drawn from the noise stream at a time (``ImperfectArm._normals``).
+#: Steps of sensor noise drawn from the noise stream at a time (``ImperfectArm._next_normals``).
 NORMALS_DRAWN = 64
 
 #: [Nm] Coulomb level of each joint's friction, Gaz et al. (2019), "Dynamic Identification of the
@@ -211,7 +211,7 @@ class ImperfectArm:
         # -0.0 included), so one addition biases all three as ``measure`` always did.
         self._bias = np.concatenate([self.encoder_bias, np.full(n, -0.0), self.torque_bias])
         # The noise stream's next normals, drawn NORMALS_DRAWN steps' worth at a time (a draw
-        # of 3n costs ~1 us, mostly the call): ``_normals`` hands them out in the stream's order.
+        # of 3n costs ~1 us, mostly the call): ``_next_normals`` hands them out in order.
         self._normals_drawn = np.empty(NORMALS_DRAWN * 3 * n)
         self._normals_used = self._normals_drawn.size
         self._scaled, self._smooth = np.empty(n), np.empty(n)   # ``apply_friction``'s buffers
@@ -225,8 +225,9 @@ class ImperfectArm:
         return self._coulomb * np.tanh(dq / self._velocity) + self._viscous * dq
 
     def apply_friction(self, tau: np.ndarray, dq: np.ndarray) -> np.ndarray:
-        """(n,) [Nm] ``tau - friction(dq)``, to the bit, in preallocated buffers (every step):
-        what reaches the links of a command ``tau`` at true velocities ``dq``."""
+        """(n,) [Nm] ``tau - friction(dq)``, to the bit (NumPy's tanh into preallocated buffers,
+        the rest compiled: ``native.ArmErrors``): what reaches the links of a command ``tau`` at
+        true velocities ``dq``, every step."""
         np.divide(dq, self._velocity, self._scaled)       # (outputs passed by position:
         np.tanh(self._scaled, self._smooth)               # faster; NumPy's tanh, its rounding)
         return self._arithmetic.friction_applied(tau, dq)
