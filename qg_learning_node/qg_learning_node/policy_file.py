@@ -59,7 +59,7 @@ ACTIVATIONS = {"tanh": np.tanh, "relu": lambda x: np.maximum(x, np.float32(0.0))
 #: The residual task's scale of each state component (``executor/residual_task.py``).
 _COMPONENT_SCALE = {"fx": "force_range", "fy": "force_range", "tx": "torque_range",
                     "ty": "torque_range", "ex": "tilt_range", "ey": "tilt_range",
-                    "depth": "depth_range"}
+                    "depth": "depth_range", "motion": "motion_range"}
 
 
 class PolicyFileError(ValueError):

@@ -97,8 +97,40 @@ def test_the_depth_state_is_the_tips_measured_depth_below_the_bearing_face() -> 
         _obs(np.zeros(6), rotation, target)), atol=1e-12)
 
 
+def test_the_motion_state_is_how_far_the_last_step_moved_the_tip_in() -> None:
+    """``tilt_motion``: the tilt, then the change of the measured depth since the observation
+    the step began from, scaled by ``motion_range``; 0 without one (an episode's start); a
+    step that went up reads negative."""
+    task = _task(observation="tilt_motion", motion_range=0.002)
+    assert task.state_dim == state_dim("tilt_motion") == 3
+    target = CELL.target_tool_position()
+    up = CELL.fixture().rotation[:, 2]
+    deeper, shallower = (_obs(np.zeros(6), position=target + raised * up)
+                         for raised in (0.005, 0.006))
+    assert task.state(deeper)[2] == 0.0
+    np.testing.assert_allclose(task.state(deeper, shallower)[2], 0.5, atol=1e-9)
+    np.testing.assert_allclose(task.state(shallower, deeper)[2], -0.5, atol=1e-9)
+    assert task.state(deeper, deeper)[2] == 0.0
+
+
+def test_an_episode_hands_the_task_the_observation_its_step_began_from() -> None:
+    """The executor's episode gives ``tilt_motion`` each step's start: the start's state has no
+    motion, a step 1 mm in reads +0.5, the next one that stays reads 0."""
+    from qg_learning_node.executor.episode import Episode
+    task = _task(observation="tilt_motion", motion_range=0.002)
+    target = CELL.target_tool_position()
+    up = CELL.fixture().rotation[:, 2]
+    at = [_obs(np.zeros(6), position=target + raised * up) for raised in (0.006, 0.005, 0.005)]
+    episode = Episode("e", "test", 0, "dense", task, None)
+    assert episode.begin(at[0])[2] == 0.0
+    first = episode.observe(np.zeros(2), at[1])
+    np.testing.assert_allclose(first.next_state[2], 0.5, atol=1e-9)
+    assert episode.observe(np.zeros(2), at[2]).next_state[2] == 0.0
+
+
 @pytest.mark.parametrize("bad", [{"observation": "pose"}, {"tilt_range": 0.0},
-                                 {"depth_range": -0.01}, {"sigma_position": 0.0}])
+                                 {"depth_range": -0.01}, {"motion_range": 0.0},
+                                 {"sigma_position": 0.0}])
 def test_bad_observation_settings_are_refused(bad) -> None:
     with pytest.raises(ValueError):
         TaskConfig(**bad)

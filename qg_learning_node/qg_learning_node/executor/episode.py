@@ -64,6 +64,7 @@ class Episode:
         self.success = False
         self.end_reason = ""
         self.state: np.ndarray | None = None
+        self._obs: Observation | None = None       # where the step under way began
         #: A simulation's truth of the last observation, for evaluation only (``None`` on a
         #: real arm): whether the shaft was really inserted there.
         self.truly_inserted: bool | None = None
@@ -75,6 +76,7 @@ class Episode:
     def begin(self, obs: Observation) -> np.ndarray:
         """The settled start: the first state."""
         self.state = self.task.state(obs)
+        self._obs = obs
         self._evaluate(obs)
         if self.task.succeeded(obs):   # already inserted: nothing to learn from this start
             self.success, self.end_reason = True, "goal"
@@ -101,7 +103,8 @@ class Episode:
     def observe(self, action: np.ndarray, obs: Observation) -> TransitionRecord:
         """Close the step that executed ``action`` and ended at rest in ``obs``."""
         assert self.state is not None and not self.done, "episode not running"
-        next_state = self.task.state(obs)
+        next_state = self.task.state(obs, self._obs)
+        self._obs = obs
         reward = float(self.task.reward(obs, self.reward_kind))
         terminal = bool(self.task.succeeded(obs))
         self._evaluate(obs)

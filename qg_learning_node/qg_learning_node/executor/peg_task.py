@@ -95,8 +95,10 @@ class PegTask:
         """The goal: the measured tip within ``goal_tolerance`` of the hole bottom."""
         return self.distance(obs) < self.cell.geometry.goal_tolerance
 
-    def state(self, obs: Observation) -> np.ndarray:
-        """The tip scaled from the workspace cube to [-1, 1]^3 (clipped)."""
+    def state(self, obs: Observation, previous: Observation | None = None) -> np.ndarray:
+        """The tip scaled from the workspace cube to [-1, 1]^3 (clipped); ``previous`` (the
+        step's start) is not needed."""
+        del previous
         centre, half = (self._low + self._high) / 2, (self._high - self._low) / 2
         return np.clip((self.tip(obs) - centre) / half, -1.0, 1.0)
 

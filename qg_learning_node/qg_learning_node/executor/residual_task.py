@@ -16,6 +16,9 @@ One definition for the ROS executor and the fast in-process runner, so both run 
   the same measured pose against the cell's fixture (what the reward is measured on); scaled by
   ``depth_range``. A jam and an insertion under way share a tilt; the depth tells how far each
   got (docs/learning.md, section 20).
+  ``tilt_motion``: the tilt and how far the last step moved the tip along the bore axis (the
+  change of that measured depth since the previous observation; 0 at an episode's start),
+  scaled by ``motion_range``: a jam is a step that did not move (section 20).
 - action: actor output in [-1, 1]^2 scaled to residual torques (tx, ty) of at most 3 Nm, on top
   of the constant base push Fz = -15 N: the feed-forward wrench [0, 0, Fz, tx, ty, 0];
 - reward: sparse (-1 per step, 0 at the goal) or dense (pose error to the inserted pose);
@@ -46,6 +49,7 @@ OBSERVATION_COMPONENTS = {
     "tilt_force": ("fx", "fy", "ex", "ey"),
     "tilt_only": ("ex", "ey"),
     "tilt_depth": ("ex", "ey", "depth"),
+    "tilt_motion": ("ex", "ey", "motion"),
 }
 #: State definitions and their lengths.
 OBSERVATIONS = {name: len(parts) for name, parts in OBSERVATION_COMPONENTS.items()}
@@ -89,6 +93,8 @@ class TaskConfig:
     :param tilt_range: tilt [rad] that maps to state 1.0 (``tilt`` observation).
     :param depth_range: depth [m] that maps to state 1.0 (``tilt_depth``): the cell's full
         depth, 12 mm of bore and the inner ring's 4 mm of travel.
+    :param motion_range: a step's motion along the bore axis [m] that maps to state 1.0
+        (``tilt_motion``); 2 mm: a step that slides freely moves 1-5 mm, a jammed one < 0.1.
     """
     base_force: float = -15.0
     max_residual_torque: float = 3.0
@@ -102,13 +108,14 @@ class TaskConfig:
     observation: str = "tilt_only"
     tilt_range: float = 0.5
     depth_range: float = 0.016
+    motion_range: float = 0.002
 
     def __post_init__(self) -> None:
         if self.reward not in ("sparse", "dense"):
             raise ValueError(f"reward must be sparse or dense, got {self.reward!r}")
         state_dim(self.observation)
         for name in ("max_residual_torque", "force_range", "torque_range", "sigma_position",
-                     "sigma_orientation", "tilt_range", "depth_range"):
+                     "sigma_orientation", "tilt_range", "depth_range", "motion_range"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.train_max_steps < 1 or self.test_max_steps < 1:
@@ -157,22 +164,30 @@ class ResidualTask:
         parts = OBSERVATION_COMPONENTS[c.observation]
         scales = {"fx": c.force_range, "fy": c.force_range, "tx": c.torque_range,
                   "ty": c.torque_range, "ex": c.tilt_range, "ey": c.tilt_range,
-                  "depth": c.depth_range}
+                  "depth": c.depth_range, "motion": c.motion_range}
         self._state_scale = np.array([scales[part] for part in parts])
         self._wrench_index = [_WRENCH_INDEX[part] for part in parts if part in _WRENCH_INDEX]
         self._uses_tilt = "ex" in parts
         self._uses_depth = "depth" in parts
+        self._uses_motion = "motion" in parts
         self._push_axis = geometry.bore_axis()
 
-    def state(self, obs: Observation) -> np.ndarray:
+    def state(self, obs: Observation, previous: Observation | None = None) -> np.ndarray:
         """The observation's components (:data:`OBSERVATION_COMPONENTS`) scaled to [-1, 1]
-        (clipped); the tilt is measured from the bore axis of the cell's fixture."""
+        (clipped); the tilt is measured from the bore axis of the cell's fixture.
+
+        :param previous: the observation the step to ``obs`` began from (``tilt_motion`` reads
+            the step's motion from it); ``None`` at an episode's start: no motion.
+        """
         w = np.asarray(obs.wrench, dtype=np.float64)
         raw = [w[i] for i in self._wrench_index]
         if self._uses_tilt:
             raw.extend(tilt_from_push_axis(obs.tool_rotation, self._push_axis))
         if self._uses_depth:
             raw.append(self.measure(obs).insertion_depth)
+        if self._uses_motion:
+            raw.append(0.0 if previous is None else self.measure(obs).insertion_depth
+                       - self.measure(previous).insertion_depth)
         return np.clip(np.array(raw) / self._state_scale, -1.0, 1.0)
 
     def wrench(self, action: np.ndarray) -> np.ndarray:
