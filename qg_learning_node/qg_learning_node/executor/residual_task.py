@@ -89,7 +89,8 @@ class TaskConfig:
     :param train_max_steps: step cap of training episodes; :param test_max_steps: of test ones.
     :param reward: default reward type, sparse | dense.
     :param observation: the state, one of :data:`OBSERVATIONS` (``thesis``: 4-D wrench;
-        ``tilt_only``: the tilt alone). The executor owns it and tells the learner.
+        ``tilt_motion``, the default: the tilt and the last step's motion). The executor owns
+        it and tells the learner.
     :param tilt_range: tilt [rad] that maps to state 1.0 (``tilt`` observation).
     :param depth_range: depth [m] that maps to state 1.0 (``tilt_depth``): the cell's full
         depth, 12 mm of bore and the inner ring's 4 mm of travel.
@@ -105,7 +106,7 @@ class TaskConfig:
     train_max_steps: int = 1000
     test_max_steps: int = 200
     reward: str = "dense"
-    observation: str = "tilt_only"
+    observation: str = "tilt_motion"
     tilt_range: float = 0.5
     depth_range: float = 0.016
     motion_range: float = 0.002
