@@ -38,7 +38,7 @@ def test_every_setting_is_listed_once_with_one_home() -> None:
     assert len(names) == len(set(names)) and len(rows) > 150
     by_name = {r.name: r for r in rows}
     assert by_name["task.observation"].home == "config/executor.yaml"
-    assert by_name["task.observation"].value == "tilt_only"
+    assert by_name["task.observation"].value == "tilt_motion"
     assert by_name["learner.ddpg.gamma"].home == "config/learner.yaml"
     assert by_name["learner.ddpg.gamma"].value == 0.9
     assert "observation" not in by_name           # the learner's copy is gone

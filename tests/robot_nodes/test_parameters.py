@@ -53,7 +53,7 @@ def test_one_params_file_overrides_only_what_it_names_and_run_time_changes_apply
         assert not any(n.startswith(("learner.", "impedance.")) for n in names)
         # The file's one value, and the package YAML's (not the dataclass's) for the rest.
         assert get(cli, "/executor", "noise.sigma", "task.base_force", "task.observation",
-                   "noise.kind") == [0.5, -15.0, "tilt_only", "gaussian"]
+                   "noise.kind") == [0.5, -15.0, "tilt_motion", "gaussian"]
         sigma = describe(cli, "/executor", "noise.sigma")
         assert not sigma.read_only and sigma.description
         assert sigma.floating_point_range[0].to_value == 10.0

@@ -143,7 +143,7 @@ def test_train_episode_is_recorded_and_replays_into_the_same_graph(stack, tmp_pa
             counts[channel.topic] = counts.get(channel.topic, 0) + 1
             if channel.topic == "/transitions":
                 steps.append(msg.step)
-                assert len(msg.state) == 2 and np.all(np.abs(msg.state) <= 1.0)   # tilt_only
+                assert len(msg.state) == 3 and np.all(np.abs(msg.state) <= 1.0)   # tilt_motion
             if channel.topic == "/ee_at_rest" and msg.seq > 0:
                 step_ticks.append(round(msg.duration / 1e-3))
     assert counts["/transitions"] == final.step, counts

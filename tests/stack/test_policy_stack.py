@@ -141,22 +141,22 @@ def test_export_policy_writes_a_checkpoints_actor(stack, tmp_path):
     from qg_learning_node.learner.actor_mlp import ActorMLP
     from qg_learning_node.learner.learner_core import LearnerConfig, LearnerCore
     from qg_learning_node.policy_file import load_policy
-    core = LearnerCore(LearnerConfig.from_dict({"ddpg": {"actor_hidden": [8], "seed": 2}}), 2, 2)
+    core = LearnerCore(LearnerConfig.from_dict({"ddpg": {"actor_hidden": [8], "seed": 2}}), 3, 2)
     (tmp_path / "run" / "checkpoints").mkdir(parents=True)
     core.save(tmp_path / "run" / "checkpoints" / "learner.pt")
     done = _qgl(stack.env, "export-policy", "--run", str(tmp_path / "run"), "-o",
                 str(tmp_path / "out.npz"), "--robot", "sim_panda_mujoco")
     assert done.returncode == 0, done.stderr
     policy = load_policy(tmp_path / "out.npz")
-    assert (policy.spec.robot, policy.spec.observation) == ("sim_panda_mujoco", "tilt_only")
-    states = np.random.default_rng(1).uniform(-1, 1, (500, 2))
+    assert (policy.spec.robot, policy.spec.observation) == ("sim_panda_mujoco", "tilt_motion")
+    states = np.random.default_rng(1).uniform(-1, 1, (500, 3))
     actor = ActorMLP.from_tensors(core.agent.actor_tensors())
     assert np.array_equal([policy(s) for s in states], [actor(s) for s in states])
     wrong = _qgl(stack.env, "export-policy", "--checkpoint",
                  str(tmp_path / "run" / "checkpoints" / "learner.pt"), "-o",
                  str(tmp_path / "tilt.npz"), "--set", "task.observation=tilt")
     assert wrong.returncode == 2
-    assert "the learner's actor maps 2-D states to 2-D actions; the residual task with " \
+    assert "the learner's actor maps 3-D states to 2-D actions; the residual task with " \
            "observation 'tilt' has 6-D states" in wrong.stderr, wrong.stderr
     assert not (tmp_path / "tilt.npz").exists()
     # A run whose executor logged another state: its checkpoint is exported for that state.

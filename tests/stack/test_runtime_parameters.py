@@ -79,7 +79,7 @@ def test_learner_takes_iterations_batch_size_and_learning_rates_from_the_next_cy
     assert "parameter learner.iterations_per_cycle: 2 -> 7, applies from the next training " \
            "cycle" in log, log
     assert "parameter learner.ddpg.critic_lr: 0.001 -> 0.0001" in log, log
-    assert "task of the executor: residual, observation tilt_only, 2-D states, 2-D actions; " \
+    assert "task of the executor: residual, observation tilt_motion, 3-D states, 2-D actions; " \
            "networks built for it" in log, log
 
 
@@ -124,7 +124,7 @@ def test_executor_noise_set_between_episodes_applies_to_the_next_one(stack, tmp_
         frozen = set_value(cli, "/executor", "task.observation", string("thesis"))
         assert not frozen.successful and "read-only" in frozen.reason
         why = describe(cli, "/executor", "task.observation").description
-        assert "Default 'tilt_only' (config/executor.yaml)" in why, why
+        assert "Default 'tilt_motion' (config/executor.yaml)" in why, why
         assert "the learner's networks" in why, why
     log = (stack.log_dir / "executor.log").read_text()
     assert "parameter noise.kind: 'gaussian' -> 'none', applies from the next episode" in log, log
