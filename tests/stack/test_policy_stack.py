@@ -42,15 +42,15 @@ def test_an_executor_refuses_a_file_that_does_not_fit_at_start(stack, tmp_path):
     tilt = _export(tmp_path, "tilt.npz", 6, "tilt")
     thesis = _export(tmp_path, "thesis.npz", 4, "thesis")
     peg = _export(tmp_path, "peg.npz", 3, "peg", kind="peg", robot="sim_nextage")
-    tilt_only = _export(tmp_path, "tilt_only.npz", 2, "tilt_only")
+    fitting = _export(tmp_path, "tilt_motion.npz", 3, "tilt_motion")   # the default state
     cases = [
-        (tilt, (), "state size: the file's actor takes 6-D states, this executor's are 2-D"),
+        (tilt, (), "state size: the file's actor takes 6-D states, this executor's are 3-D"),
         (peg, (), "action size: the file's actor gives 3-D actions, this executor's task "
                   "takes 2-D"),
         (thesis, ("-p", "task.observation:=tilt_force"),
          "observation kind: the file's is 'thesis', this executor's task.observation is "
          "'tilt_force'"),
-        (tilt_only, ("-p", "policy.robot:=sim_xarm7"),
+        (fitting, ("-p", "policy.robot:=sim_xarm7"),
          "robot: the file was trained on 'sim_panda' (family 'franka'), this stack drives "
          "'sim_xarm7'"),
         (tmp_path / "missing.npz", (), "policy file not found"),
@@ -73,7 +73,7 @@ def test_an_executor_refuses_a_file_that_does_not_fit_at_start(stack, tmp_path):
     assert "[qgl] started executor" in up.stdout and "learner" not in up.stdout.split(
         "[qgl] started")[1].splitlines()[0], up.stdout
     # The file that fits: the same executor starts (and stops on SIGINT with code 0).
-    fits = subprocess.Popen([*executor, "--ros-args", "-p", f"policy.file:={tilt_only}"],
+    fits = subprocess.Popen([*executor, "--ros-args", "-p", f"policy.file:={fitting}"],
                             env=stack.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             text=True)
     try:
@@ -81,7 +81,7 @@ def test_an_executor_refuses_a_file_that_does_not_fit_at_start(stack, tmp_path):
         while "frozen policy" not in line:
             assert line, "the executor ended before loading the policy"
             line = fits.stdout.readline()
-        assert "observation tilt_only (2-D states, 2-D actions), trained on sim_panda" in line
+        assert "observation tilt_motion (3-D states, 2-D actions), trained on sim_panda" in line
     finally:
         fits.send_signal(signal.SIGINT)
         assert fits.wait(timeout=20.0) == 0
@@ -92,7 +92,7 @@ def test_qgl_up_policy_runs_the_frozen_actor_without_a_learner(stack, tmp_path):
     from qg_interfaces.msg import Transition
     from qg_learning_node.policy_file import load_policy
     from test_episodes import Episodes
-    path = _export(tmp_path, "policy.npz", 2, "tilt_only")
+    path = _export(tmp_path, "policy.npz", 3, "tilt_motion")
     policy = load_policy(path)
     config = tmp_path / "stack.yaml"       # the shipped stack, with a short test episode
     config.write_text(

@@ -34,6 +34,7 @@ def test_the_executor_recovers_a_stalled_test_episode_and_says_so(stack, capsys)
                  ("--ros-args", "-p", "sim.clock_mode:=lockstep")),
                 ("executor", "qg_learning_node", "executor",
                  ("--ros-args", "-p", "stall_recovery.enabled:=true",
+                  "-p", "task.observation:=tilt_only",            # the recorded actor's state
                   "-p", f"task.test_max_steps:={CAP}", "-p", "learner_timeout:=3600.0",
                   "-p", "learner_grace:=0.0")))
     with stack.client() as cli:
