@@ -154,7 +154,9 @@ filter_hash="$(hash_of "$filter_dir/contact_filter.c" "$ROOT/scripts/constraints
 if [[ "$(cat "$STAMPS/contact_filter" 2>/dev/null)" != "$filter_hash" || ! -f "$filter_so" ]]; then
   log "compiling the shaft cell's contact filter"
   mujoco_include="$("$PY" -c 'import mujoco, os; print(os.path.join(os.path.dirname(mujoco.__file__), "include"))')"
-  gcc -std=c11 -O2 -fPIC -shared -Wall -Wextra -Werror -I"$mujoco_include" \
+  c_compiler=(gcc)                   # a machine with g++ alone: its driver compiles C too
+  command -v gcc >/dev/null || c_compiler=(g++ -x c)
+  "${c_compiler[@]}" -std=c11 -O2 -fPIC -shared -Wall -Wextra -Werror -I"$mujoco_include" \
     "$filter_dir/contact_filter.c" -o "$filter_so.tmp" -lm
   mv "$filter_so.tmp" "$filter_so"
   echo "$filter_hash" > "$STAMPS/contact_filter"
