@@ -28,6 +28,16 @@ from qg_experiments.tensorboard_log import export_runs
 __all__ = ["write_report"]
 
 
+def _state_note(observation: str) -> str:
+    """What a state other than the thesis's changes: the MDP's state, not its actions or rewards,
+    and so not the random bar (a random policy reads no state)."""
+    if observation == "thesis":
+        return ""
+    return (f"The `{observation}` state changes the thesis's MDP in its state only (actions and "
+            "rewards are the thesis's); a random policy reads no state, so the random bar is the "
+            "same process in either MDP. ")
+
+
 def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None = None,
                  planned: dict[str, int] | None = None,
                  current: dict[str, set[str]] | None = None) -> Path:
@@ -157,7 +167,8 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
               "section 17). The random baselines add noise on every step. State: "
               f"the `{pg.observation or settings.task.observation}` observation "
               f"(`residual_task.OBSERVATIONS`), discount {gamma:g}, both chosen on the tuning "
-              "seeds ([learning.md](learning.md)); the thesis's 4-D state in section 2b. Runs are "
+              "seeds ([learning.md](learning.md)); the thesis's 4-D state in section 2b. "
+              f"{_state_note(pg.observation or settings.task.observation)}Runs are "
               "deterministic per seed (tested in `tests/experiments/test_runner.py`).", ""]
     lines += random_section(random_rows, random_results, test_cap, bar, figures)
     lines += grid_section("## 2. The grid: mean test steps per cell", grid_rows, grid_results,
