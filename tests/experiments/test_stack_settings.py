@@ -29,7 +29,7 @@ def edited_config(tmp_path: Path, name: str, path: tuple[str, ...], value) -> Pa
 
 def test_the_shipped_files_load() -> None:
     settings = StackSettings.load()
-    assert settings.task.observation == "tilt_only" and settings.learner.ddpg.gamma == 0.9
+    assert settings.task.observation == "tilt_motion" and settings.learner.ddpg.gamma == 0.9
 
 
 @pytest.mark.parametrize("name, path, value, message", [

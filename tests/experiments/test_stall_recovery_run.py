@@ -44,8 +44,8 @@ def _stalling_actor() -> ActorMLP:
 
 def test_recovery_turns_a_stalled_test_pose_into_an_inserted_one_counted() -> None:
     settings = StackSettings.load().with_arm_seed(0)
-    settings = dataclasses.replace(settings, task=dataclasses.replace(settings.task,
-                                                                      test_max_steps=60))
+    settings = dataclasses.replace(settings, task=dataclasses.replace(
+        settings.task, test_max_steps=60, observation="tilt_only"))   # the recorded actor's state
     env = InsertionRobot(settings)
     actor = _stalling_actor()
     records: list = []

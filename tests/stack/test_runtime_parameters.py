@@ -79,7 +79,7 @@ def test_learner_takes_iterations_batch_size_and_learning_rates_from_the_next_cy
     assert "parameter learner.iterations_per_cycle: 2 -> 7, applies from the next training " \
            "cycle" in log, log
     assert "parameter learner.ddpg.critic_lr: 0.001 -> 0.0001" in log, log
-    assert "task of the executor: residual, observation tilt_motion, 3-D states, 2-D actions; " \
+    assert "task of the executor: residual, observation tilt_only, 2-D states, 2-D actions; " \
            "networks built for it" in log, log
 
 
