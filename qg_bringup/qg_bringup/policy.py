@@ -181,7 +181,10 @@ def stack_robot(specs: list[ProcessSpec]) -> str:
 
 
 def frozen_stack(specs: list[ProcessSpec], policy: Path) -> list[ProcessSpec]:
-    """``specs`` without the learner, each executor running the policy file ``policy`` frozen.
+    """``specs`` without the learner, each executor running the policy file ``policy`` frozen,
+    in the file's state definition (a residual actor's ``task.observation``: a file trained
+    before the default changed still runs) unless the stack file's own arguments set one, which
+    then come later and win (a mismatch is refused by the executor, with its reason).
 
     :raises StackConfigError: if the file cannot be read (before any process starts), or the
         stack has no executor to run it.
@@ -198,7 +201,9 @@ def frozen_stack(specs: list[ProcessSpec], policy: Path) -> list[ProcessSpec]:
           flush=True)
     params = ("--ros-args", "-p", f"policy.file:={Path(policy).resolve()}",
               "-p", f"policy.robot:={robot}")
-    return [replace(s, args=(*s.args, *params)) if s in executors else s for s in specs
+    state = (("--ros-args", "-p", f"task.observation:={spec.observation}", "--")
+             if spec.task == "residual" else ())
+    return [replace(s, args=(*state, *s.args, *params)) if s in executors else s for s in specs
             if (s.package, s.executable) != ("qg_learning_node", "learner")]
 
 

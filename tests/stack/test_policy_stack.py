@@ -67,9 +67,9 @@ def test_an_executor_refuses_a_file_that_does_not_fit_at_start(stack, tmp_path):
                       "  - {name: executor, package: qg_learning_node, executable: executor,\n"
                       "     respawn: true}\n"
                       "  - {name: learner, package: qg_learning_node, executable: learner}\n")
-    up = _qgl(stack.env, "up", "--config", str(config), "--policy", str(tilt))
+    up = _qgl(stack.env, "up", "--config", str(config), "--policy", str(peg))
     assert up.returncode == 2, up.stdout + up.stderr
-    assert "state size: the file's actor takes 6-D states" in up.stdout, up.stdout
+    assert "action size: the file's actor gives 3-D actions" in up.stdout, up.stdout
     assert "[qgl] started executor" in up.stdout and "learner" not in up.stdout.split(
         "[qgl] started")[1].splitlines()[0], up.stdout
     # The file that fits: the same executor starts (and stops on SIGINT with code 0).
@@ -92,7 +92,8 @@ def test_qgl_up_policy_runs_the_frozen_actor_without_a_learner(stack, tmp_path):
     from qg_interfaces.msg import Transition
     from qg_learning_node.policy_file import load_policy
     from test_episodes import Episodes
-    path = _export(tmp_path, "policy.npz", 3, "tilt_motion")
+    # A file of another state than the shipped default: qgl up runs its executor in the file's.
+    path = _export(tmp_path, "policy.npz", 2, "tilt_only")
     policy = load_policy(path)
     config = tmp_path / "stack.yaml"       # the shipped stack, with a short test episode
     config.write_text(
@@ -121,6 +122,7 @@ def test_qgl_up_policy_runs_the_frozen_actor_without_a_learner(stack, tmp_path):
             assert cli.spin_until(lambda: len(transitions) == final.step, 10.0), transitions
             assert "/learner" not in cli.node_names() and "/executor" in cli.node_names()
         states = np.array([t.state for t in transitions])
+        assert states.shape == (final.step, 2)                 # tilt_only's, not the default's
         actions = np.array([t.action for t in transitions])
         assert [t.step for t in transitions] == list(range(final.step))
         # Every action is the file's actor of the state it saw, bit for bit (no noise in test).
