@@ -185,7 +185,10 @@ def test_a_frozen_stack_has_no_learner_and_its_executor_gets_the_file(tmp_path: 
     assert stack_robot(specs) == "franka" and stack_robot(specs[2:]) == "sim_panda"
     frozen = frozen_stack(specs, path)
     assert [s.name for s in frozen] == ["franka_sim", "robot", "executor"]
-    assert frozen[-1].args == ("--ros-args", "-p", f"policy.file:={path.resolve()}",
+    # The file's state definition first (the stack file's own arguments, after it, would win),
+    # then the file and the robot.
+    assert frozen[-1].args == ("--ros-args", "-p", "task.observation:=tilt_only", "--",
+                               "--ros-args", "-p", f"policy.file:={path.resolve()}",
                                "-p", "policy.robot:=franka")
     with pytest.raises(StackConfigError, match="policy file not found"):
         frozen_stack(specs, tmp_path / "none.npz")
