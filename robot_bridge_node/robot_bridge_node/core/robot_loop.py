@@ -112,10 +112,7 @@ class RobotLoop(LoopCore):
     def tick(self) -> bool:
         """One control period. True when the current step has come to rest or timed out."""
         state = self.hardware.read()
-        clock = self.clock
-        dt = clock.period()                # ``_sense`` and ``_count`` written out: every tick
-        if self.estimator is not None and dt > 0.0:   # (0: the same state read again)
-            self.wrench_estimate = self.estimator.update(state.q, state.dq, state.tau, dt)
+        dt = self._sense(state)
         if (self.config.realtime and not self.holding and not self.stepping
                 and self.safety.watchdog_expired(self.time)):
             # No step followed the last one in time: the commander is late or gone. Hold the
@@ -135,9 +132,7 @@ class RobotLoop(LoopCore):
                                         state.dq)
         self.hardware.write(tau)
         self.commanded = tau
-        self.ticks += 1
-        self.ticks_run += 1
-        clock.advance(dt)
+        self._count(dt)
         done = self.rest.update(*self.controller.tool.speeds(), dt)
         if done and self.stepping:
             # The step is over: the watchdog's window for the next setpoint opens now. During a
