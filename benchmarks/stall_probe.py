@@ -65,9 +65,12 @@ def learn_in_process(spec: RunSpec, test_cap: int = TEST_CAP
     return env, learner, policy, settings, inserted
 
 
-def trained(seed: int) -> tuple[InsertionRobot, LearnerCore, LivePolicy, Any]:
-    """The demo's learning on ``seed`` in process: the robot, learner, actor and settings."""
-    return learn_in_process(RunSpec("qgddpg", 1e-2, 50, seed, train_max_steps=50))[:4]
+def trained(seed: int, critic_lr: float = 1e-2, iterations: int = 50
+            ) -> tuple[InsertionRobot, LearnerCore, LivePolicy, Any]:
+    """The demo's learning on ``seed`` in process (or another grid cell's learning rate and
+    iterations): the robot, learner, actor and settings."""
+    return learn_in_process(RunSpec("qgddpg", critic_lr, iterations, seed,
+                                    train_max_steps=50))[:4]
 
 
 def probe_pose(env: InsertionRobot, learner: LearnerCore, policy: LivePolicy, settings: Any,

@@ -138,7 +138,7 @@ def run_training(spec: TrainingSpec) -> dict[str, Any]:
     if recovery is not None:        # apart from the test episodes: mode ``recovery``
         for index in range(spec.test_episodes):
             watch = StallRecovery(recovery, ACTION_DIM, recovery_seed(spec.seed, index),
-                                  settings.noise)
+                                  settings.noise, test_env.residual.progress_dims)
             result = run_episode(test_env, Episode(f"recovery{index:03d}", "test",
                                                    index % N_START_POSES, spec.reward,
                                                    test_env.residual), policy, recovery=watch)

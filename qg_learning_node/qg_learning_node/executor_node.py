@@ -273,7 +273,7 @@ class ExecutorNode(Node):
         episode_id = make_episode_id(self.get_namespace(), index, req.mode, pose)
         seed = req.seed if req.seed != 0 else 1000 + index
         self.recovery = (StallRecovery(self.recovery_config, self.task.action_dim, seed,
-                                       self.noise_config)
+                                       self.noise_config, self.task.progress_dims)
                          if req.mode == "test" and self.recovery_config.enabled else None)
         self.episode = Episode(episode_id, req.mode, pose, reward, self.task,
                                ActionNoise(self.noise_config, self.task.action_dim, seed))

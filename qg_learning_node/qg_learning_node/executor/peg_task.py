@@ -72,6 +72,8 @@ class PegTask:
 
     state_dim = PEG_STATE_DIM
     action_dim = PEG_ACTION_DIM
+    #: The state is a place (the tip), no component measures a step's progress (stall recovery).
+    progress_dims: tuple[int, ...] = ()
 
     def __init__(self, config: PegTaskConfig, cell: PegCell) -> None:
         self.config = config

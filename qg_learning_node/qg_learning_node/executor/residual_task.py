@@ -39,7 +39,7 @@ from qg_common.shaft_task import ShaftTaskGeometry, TaskMeasure
 from qg_common.types import GroundTruth, StartPose, WrenchSetpoint
 
 __all__ = ["TaskConfig", "Observation", "ResidualTask", "OBSERVATIONS", "OBSERVATION_COMPONENTS",
-           "ACTION_DIM", "state_dim", "tilt_from_push_axis"]
+           "PROGRESS_COMPONENTS", "ACTION_DIM", "state_dim", "tilt_from_push_axis"]
 
 #: The components of each state definition (see the module docstring), in order: wrench
 #: components (tool frame) and the tilt (ex, ey) away from the push axis.
@@ -51,6 +51,9 @@ OBSERVATION_COMPONENTS = {
     "tilt_depth": ("ex", "ey", "depth"),
     "tilt_motion": ("ex", "ey", "motion"),
 }
+#: Components that measure what the last step achieved rather than where the tool is: at a
+#: stall they read about 0 (plus the measurement's noise) instead of repeating a value.
+PROGRESS_COMPONENTS = ("motion",)
 #: State definitions and their lengths.
 OBSERVATIONS = {name: len(parts) for name, parts in OBSERVATION_COMPONENTS.items()}
 _WRENCH_INDEX = {"fx": 0, "fy": 1, "tx": 3, "ty": 4}
@@ -172,6 +175,9 @@ class ResidualTask:
         self._uses_depth = "depth" in parts
         self._uses_motion = "motion" in parts
         self._push_axis = geometry.bore_axis()
+        #: Indices of the state's :data:`PROGRESS_COMPONENTS` (the stall detector's input).
+        self.progress_dims = tuple(i for i, part in enumerate(parts)
+                                   if part in PROGRESS_COMPONENTS)
 
     def state(self, obs: Observation, previous: Observation | None = None) -> np.ndarray:
         """The observation's components (:data:`OBSERVATION_COMPONENTS`) scaled to [-1, 1]
