@@ -437,7 +437,8 @@ class ExecutorNode(Node):
         action = recovery.act(episode.state, action)
         if recovery.recoveries > before:
             text = (f"stall recovery {recovery.recoveries} at step {episode.step}: "
-                    f"{recovery.config.steps} {recovery.config.perturbation} steps")
+                    f"{recovery.recovery_steps(recovery.recoveries)} "
+                    f"{recovery.config.perturbation} steps")
             self.get_logger().info(f"episode {episode.episode_id}: {text}")
             self._set_state("running", text)
         return action

@@ -1,9 +1,11 @@
 """Stall recovery through the ROS stack: the executor node recovers a stalled test episode, and
 each recovery is in the episode's status and in its bag.
 
-The actor is the recorded stalling one (``tests/fixtures/stalled_test_episodes_seed0.npz``, the
-stall probe's learning on seed 0: on pose 1 it holds the shaft at a fixed point), published on
-``/actor_parameters`` as a learner would; the robot process runs the default step on robot 0.
+The actor is the recorded stalling one (``tests/fixtures/stalled_tilt_motion_seed0.npz``, the
+stall probe's learning on seed 0 at critic lr 1e-4 in the default ``tilt_motion`` state: on
+pose 1 it jams the shaft), published on ``/actor_parameters`` as a learner would; the robot
+process runs the default step on robot 0, and the executor reads no progress from the state's
+motion (``ResidualTask.progress_dims``).
 """
 from __future__ import annotations
 
@@ -15,8 +17,8 @@ from test_episodes import Episodes, wait_for_bag
 
 pytestmark = pytest.mark.ros
 
-FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "stalled_test_episodes_seed0.npz"
-CAP = 100
+FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "stalled_tilt_motion_seed0.npz"
+CAP = 200          # the report's test cap
 
 
 def test_the_executor_recovers_a_stalled_test_episode_and_says_so(stack, capsys):
@@ -34,7 +36,6 @@ def test_the_executor_recovers_a_stalled_test_episode_and_says_so(stack, capsys)
                  ("--ros-args", "-p", "sim.clock_mode:=lockstep")),
                 ("executor", "qg_learning_node", "executor",
                  ("--ros-args", "-p", "stall_recovery.enabled:=true",
-                  "-p", "task.observation:=tilt_only",            # the recorded actor's state
                   "-p", f"task.test_max_steps:={CAP}", "-p", "learner_timeout:=3600.0",
                   "-p", "learner_grace:=0.0")))
     with stack.client() as cli:
@@ -60,6 +61,11 @@ def test_the_executor_recovers_a_stalled_test_episode_and_says_so(stack, capsys)
     announced = {s.message for s in mine if s.message.startswith("stall recovery")}
     assert any(m.startswith(f"stall recovery {final.recoveries} at step") for m in announced), \
         announced
+    # Each recovery perturbs twice as many steps as the one before (stall_recovery.growth 2).
+    assert any(m.startswith("stall recovery 1 at step") and m.endswith(": 5 noise steps")
+               for m in announced), announced
+    assert final.recoveries < 2 or any(m.startswith("stall recovery 2 at step") and m.endswith(
+        ": 10 noise steps") for m in announced), announced
     assert [s.recoveries for s in mine] == sorted(s.recoveries for s in mine)   # it only counts up
     assert f"recoveries={final.recoveries} " in printed, printed
 
