@@ -2,7 +2,7 @@
 
 The first half of the MuJoCo -> franky-sim transfer (docs/deployment.md): QG-DDPG learns the
 shaft insertion in process on the default robot (``sim_panda``: MuJoCo, steps that end at
-rest, the realistic arm, the ``tilt_only`` state), with the grid's training budget (40 episodes
+rest, the realistic arm, the default ``tilt_motion`` state), with the grid's training budget (40 episodes
 of at most 50 steps); its deterministic actor is tested on the 8 start poses in process, and the
 first seed whose actor inserts from all of them is exported (``qgl export-policy``'s
 ``export_core``). The second half runs the file on franky-sim through libfranka:

@@ -247,6 +247,7 @@ def probe(run: Trained, pose: int, mc: int) -> dict[str, Any]:
     # (the realistic arm's noise makes a replay of the same actions end elsewhere)
     returns, escape_steps, restall = [], [], []
     for k in range(mc):
+        previous = obs          # the observation the continuation's first step begins from
         if k > 0:
             again = Episode(f"again{pose}", "test", pose, "dense", env.residual)
             again.begin(env.reset(pose))
@@ -255,7 +256,8 @@ def probe(run: Trained, pose: int, mc: int) -> dict[str, Any]:
                     len(history) > TAIL and np.abs(np.diff(history[-5:], axis=0)).max()
                     <= STALL_MOTION):
                 action = again.choose_action(run.policy)
-                again.observe(action, env.step(action))
+                previous = env.step(action)
+                again.observe(action, previous)
                 history.append(again.state)
             if again.success:
                 restall.append(None)
@@ -269,7 +271,8 @@ def probe(run: Trained, pose: int, mc: int) -> dict[str, Any]:
             action = noise.perturb(run.policy(state))
             obs_t = env.step(action)
             rewards.append(float(env.residual.reward(obs_t, "dense")))
-            state = env.residual.state(obs_t)
+            state = env.residual.state(obs_t, previous)   # the step's motion, as the executor
+            previous = obs_t
             if env.residual.succeeded(obs_t):
                 escaped = t + 1
                 break
