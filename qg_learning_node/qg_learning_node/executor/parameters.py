@@ -115,8 +115,9 @@ POLICY_SECTION = ParameterSection("policy", PolicyChoice, fixed=(
 #: Stall recovery in test episodes (off: the thesis protocol); an episode keeps the recovery it
 #: began with.
 STALL_RECOVERY_SECTION = ParameterSection("stall_recovery", StallRecoveryConfig, ranges={
-    "window": (2, 100000), "max_period": (1, 100), "state_tolerance": (0.0, 10.0), "action_tolerance": (0.0, 10.0),
-    "progress_tolerance": (0.0, 10.0), "steps": (1, 100000), "growth": (1.0, 100.0), "dither": (0.0, 2.0), "max_recoveries": (0, 100000)},
+    "window": (2, 100000), "max_period": (1, 100), "state_tolerance": (0.0, 10.0),
+    "action_tolerance": (0.0, 10.0), "progress_tolerance": (0.0, 10.0), "steps": (1, 100000),
+    "growth": (1.0, 100.0), "dither": (0.0, 2.0), "max_recoveries": (0, 100000)},
     runtime=frozenset(f.name for f in fields(StallRecoveryConfig)),
     applies="from the next episode")
 
