@@ -14,7 +14,9 @@ seeds, and at every stalled test pose, at its last (s, a):
 - whether ``a`` is a local maximum of ``Q(s, .)``: the gradient there, a 41 x 41 grid over the
   whole action box and random actions around ``a``;
 - what the Q-Graph makes of the stalled step: its lower bound for ``(s, a)`` once the step is
-  added as measured (``s'`` a hair from ``s``) and as an exact self-loop (``s' == s``).
+  added as measured (``s'`` a hair from ``s``) and as an exact self-loop (``s' == s``);
+- at every failed pose, the tail's size per state component: how much each changed and spread,
+  the true depth's change and the action's size (what stall recovery's criterion is set from).
 
 One JSON line a stalled pose, one a seed, the last line the summary over the seeds.
 
@@ -239,6 +241,15 @@ def probe(run: Trained, pose: int, mc: int) -> dict[str, Any]:
                tilt_deg=round(float(np.degrees(truth.tilt)), 2),
                depth_mm=round(truth.insertion_depth * 1e3, 2), r=r,
                loop_value=r / (1.0 - gamma))
+    # Per state component over the tail (learning.md section 21): its largest change from step
+    # to step, its spread and its largest size (a progress component, the step's motion, reads
+    # about 0 at a jam); the true depth's change over the tail and the action's largest size.
+    depths = [o.truth.insertion_depth for _, o in steps[-TAIL:]]
+    row.update(tail_change_per_dim=np.abs(np.diff(states, axis=0)).max(0).round(4).tolist(),
+               tail_spread_per_dim=np.ptp(states, axis=0).round(4).tolist(),
+               tail_size_per_dim=np.abs(states).max(0).round(4).tolist(),
+               tail_depth_moved_mm=round((depths[-1] - depths[0]) * 1e3, 3),
+               tail_action_size=round(float(np.abs(actions).max()), 3))
     row["critic"] = critic_over_actions(run, s, a)
     row["replay"] = replay_near(run, s, a)
     row["graph"] = graph_view(run, s, a, r, s2)
