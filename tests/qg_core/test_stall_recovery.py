@@ -13,7 +13,7 @@ about 0.01 a cycle (still moving). It also holds the actor (its tensors).
 ``benchmarks/stall_recovery_probe.py 0 --lr 1e-4 --iterations 10 --cap 60 --fixture ...``, a
 learning rate at which the actor stays near the zero residual, which jams. The poses that did
 not insert end jammed, the motion jittering around 0 and the actor's action with it, so the
-repeat test misses them and the motion test finds them. Pose 5 inserts after 11 steps without
+repeat test misses them and the motion test finds them. Pose 5 inserts after 10 steps without
 axial motion in which the actor turned the shaft upright (the tilt fell from 0.52 to 0.08).
 """
 from __future__ import annotations
