@@ -92,7 +92,7 @@ def test_a_jam_is_found_by_its_motion_where_the_state_measures_it() -> None:
         tail = states[-config.window:]
         assert np.abs(np.diff(tail[:, 2])).max() > config.state_tolerance
         assert np.abs(tail[:, 2]).max() <= config.progress_tolerance
-    still = np.load(MOTION_FIXTURE)["states_5"][:11].astype(np.float64)
+    still = data["states_5"][:11].astype(np.float64)
     assert np.abs(still[2:, 2]).max() <= config.progress_tolerance      # no axial motion...
     assert np.ptp(still[2:, :2], axis=0).max() > 0.3                   # ... but turning
     # A tolerance below the measured jitter finds none of them.
