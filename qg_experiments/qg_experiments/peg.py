@@ -89,11 +89,14 @@ class PegRunSpec:
 
 def peg_specs(budget: PegBudget, config_dir: str | None = None,
               robot: str = "free") -> list[PegRunSpec]:
+    """The budget's runs, learning rate by learning rate and seed by seed, both algorithms of
+    a seed side by side: a budget that runs for hours and is stopped part way has complete
+    pairs of the first learning rates, not one algorithm's runs of all of them."""
     return [PegRunSpec(algorithm=a, lr=float(lr), seed=s, episodes=budget.episodes,
                        train_iterations=budget.train_iterations,
                        episode_steps=budget.episode_steps, config_dir=config_dir, robot=robot,
                        gamma=budget.gamma)
-            for lr in budget.lrs for a in budget.algorithms for s in budget.seeds]
+            for lr in budget.lrs for s in budget.seeds for a in budget.algorithms]
 
 
 def run_peg(spec: PegRunSpec) -> dict[str, Any]:
