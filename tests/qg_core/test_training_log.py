@@ -41,3 +41,19 @@ def test_scalars_are_readable_by_tensorboard_with_sb3_tags(tmp_path) -> None:
         rows = list(csv.DictReader(f))
     critic = [float(r["value"]) for r in rows if r["tag"] == "train/critic_loss"]
     assert len(critic) == len(lengths) and critic[0] == 0.5
+
+
+def test_logging_scalars_loads_no_pytorch(tmp_path) -> None:
+    """``qgl run``/``qgl demo`` log in their own process, which trains nothing: loading PyTorch
+    there (1.1 s) delayed the stack it had just launched."""
+    import subprocess
+    import sys
+    code = ("import sys\n"
+            "from qg_learning_node.learner.training_log import TrainingLog\n"
+            f"log = TrainingLog({str(tmp_path)!r})\n"
+            "log.episode('train', 5, True, -0.5, 5, 10.0)\n"
+            "log.close()\n"
+            "print('torch' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False", out.stdout + out.stderr
+    assert list(tmp_path.glob("events.out.tfevents.*"))

@@ -8,6 +8,7 @@ without TensorBoard. Everything is indexed by the number of RL steps taken so fa
 from __future__ import annotations
 
 import csv
+import time
 from collections import deque
 from pathlib import Path
 from typing import Any
@@ -25,10 +26,13 @@ class TrainingLog:
     """
 
     def __init__(self, folder: Path) -> None:
-        from torch.utils.tensorboard import SummaryWriter
+        # TensorBoard's own event writer, not PyTorch's ``SummaryWriter`` (which writes the same
+        # records through it): ``qgl run`` and ``qgl demo`` log here and need no PyTorch, which
+        # took 1.1 s to load while the stack it had just launched was starting.
+        from tensorboard.summary.writer.event_file_writer import EventFileWriter
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
-        self.writer = SummaryWriter(str(self.folder))
+        self.writer = EventFileWriter(str(self.folder))
         self._csv = (self.folder / "progress.csv").open("w", newline="")
         self._rows = csv.writer(self._csv)
         self._rows.writerow(["step", "tag", "value"])
@@ -37,7 +41,10 @@ class TrainingLog:
         self._returns: deque[float] = deque(maxlen=EPISODE_WINDOW)
 
     def scalar(self, tag: str, value: float, step: int) -> None:
-        self.writer.add_scalar(tag, float(value), int(step))
+        from tensorboard.compat.proto.event_pb2 import Event
+        from tensorboard.compat.proto.summary_pb2 import Summary
+        summary = Summary(value=[Summary.Value(tag=tag, simple_value=float(value))])
+        self.writer.add_event(Event(wall_time=time.time(), step=int(step), summary=summary))
         self._rows.writerow([int(step), tag, float(value)])
 
     def episode(self, mode: str, length: int, success: bool, episode_return: float,
