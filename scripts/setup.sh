@@ -145,20 +145,31 @@ if [[ "$(cat "$STAMPS/tick_arithmetic" 2>/dev/null)" != "$arith_hash" || ! -f "$
   mv "$arith_so.tmp" "$arith_so"
   echo "$arith_hash" > "$STAMPS/tick_arithmetic"
 fi
-# 6b. The shaft cell's MuJoCo contact filter (sim_robot_node/core/native): plain C against the
-#    MuJoCo wheel's own headers, loaded with ctypes (it calls nothing of MuJoCo's, so it links
-#    to nothing). Seconds; it reruns only when the source or the pins change.
+# 6b. The shaft cell's MuJoCo contact filter and contact wrench sum (sim_robot_node/core/native):
+#    plain C against the MuJoCo wheel's own headers, loaded with ctypes. The filter calls nothing
+#    of MuJoCo's and links to nothing; the wrench sum calls mj_contactForce and links to the
+#    wheel's library (the one `import mujoco` has loaded already). No contraction into fused
+#    multiply-adds: the wrench sum writes its own. Seconds; it reruns only when the sources or
+#    the pins change.
 filter_dir="$ROOT/sim_robot_node/sim_robot_node/core/native"
 filter_so="$filter_dir/_contact_filter.so"
-filter_hash="$(hash_of "$filter_dir/contact_filter.c" "$ROOT/scripts/constraints.txt")"
-if [[ "$(cat "$STAMPS/contact_filter" 2>/dev/null)" != "$filter_hash" || ! -f "$filter_so" ]]; then
-  log "compiling the shaft cell's contact filter"
-  mujoco_include="$("$PY" -c 'import mujoco, os; print(os.path.join(os.path.dirname(mujoco.__file__), "include"))')"
+wrench_so="$filter_dir/_contact_wrench.so"
+filter_hash="$(hash_of "$filter_dir/contact_filter.c" "$filter_dir/contact_wrench.c" \
+  "$ROOT/scripts/constraints.txt")"
+if [[ "$(cat "$STAMPS/contact_filter" 2>/dev/null)" != "$filter_hash" || ! -f "$filter_so" \
+      || ! -f "$wrench_so" ]]; then
+  log "compiling the shaft cell's contact filter and contact wrench sum"
+  mujoco_dir="$("$PY" -c 'import mujoco, os; print(os.path.dirname(mujoco.__file__))')"
+  mujoco_lib="$(cd "$mujoco_dir" && ls libmujoco.so.* | head -1)"
   c_compiler=(gcc)                   # a machine with g++ alone: its driver compiles C too
   command -v gcc >/dev/null || c_compiler=(g++ -x c)
-  "${c_compiler[@]}" -std=c11 -O2 -fPIC -shared -Wall -Wextra -Werror -I"$mujoco_include" \
-    "$filter_dir/contact_filter.c" -o "$filter_so.tmp" -lm
+  c_flags=(-std=c11 -O2 -ffp-contract=off -fPIC -shared -Wall -Wextra -Werror
+           -I"$mujoco_dir/include")
+  "${c_compiler[@]}" "${c_flags[@]}" "$filter_dir/contact_filter.c" -o "$filter_so.tmp" -lm
+  "${c_compiler[@]}" "${c_flags[@]}" "$filter_dir/contact_wrench.c" -o "$wrench_so.tmp" \
+    -L"$mujoco_dir" -l:"$mujoco_lib" -Wl,-rpath,"$mujoco_dir" -lm
   mv "$filter_so.tmp" "$filter_so"
+  mv "$wrench_so.tmp" "$wrench_so"
   echo "$filter_hash" > "$STAMPS/contact_filter"
 fi
 # 7. The bytecode of the stack's own modules and of the generated interfaces, compiled here once
@@ -167,4 +178,4 @@ fi
 #    (0.15 s of CPU for the robot process's imports, 0.25 s for the learner's, measured).
 ( cd "$ROOT" && "$PY" -m compileall -q ros_ws/install "${PY_PACKAGES[@]}" >/dev/null ) \
   || log "compileall reported errors (the modules still run from source)"
-log "ready: .venv, ros_ws/install, qgl, native kernels, contact filter, bytecode"
+log "ready: .venv, ros_ws/install, qgl, native kernels, contact filter and wrench sum, bytecode"

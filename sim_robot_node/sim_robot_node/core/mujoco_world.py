@@ -21,6 +21,7 @@ the narrow phase (the same contacts, in fewer microseconds).
 """
 from __future__ import annotations
 
+import ctypes
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 from xml.etree import ElementTree
@@ -30,7 +31,7 @@ import numpy as np
 from qg_common.arm_description import ArmDescription
 from qg_common.shaft_task import Fixture, ShaftTaskGeometry
 
-from sim_robot_node.core.native import install_contact_filter
+from sim_robot_node.core.native import contact_wrench_sum, install_contact_filter
 from sim_robot_node.core.shaft_urdfs import (
     PAYLOAD_INERTIA,
     PLUNGER_INERTIA,
@@ -72,14 +73,6 @@ def _index(addresses: list[int]) -> slice | np.ndarray:
     if addresses == list(range(addresses[0], addresses[0] + len(addresses))):
         return slice(addresses[0], addresses[0] + len(addresses))
     return np.array(addresses)
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``np.cross(a, b)`` of two 3-vectors, to the bit (its products and differences, in its
-    order), without its ~15 us of argument handling."""
-    a0, a1, a2 = a.tolist()
-    b0, b1, b2 = b.tolist()
-    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
 
 
 def _quat_from_yaw(yaw: float) -> np.ndarray:
@@ -241,7 +234,12 @@ class MujocoShaftWorld:
         self._shaft_geom = m.geom(self.cell.shaft_geom).id
         self._mocap = int(m.body_mocapid[m.body(self.cell.housing_body).id])
         self._current = False             # kinematics of the current qpos computed
-        self._force = np.zeros(6)
+        # The compiled contact wrench sum's arguments, made once: it writes into ``_wrench``.
+        self._wrench = np.zeros(6)
+        self._wrench_sum = contact_wrench_sum()
+        self._wrench_args = (ctypes.c_void_p(m._address), ctypes.c_void_p(self.data._address),
+                             self._shaft_geom, self._shaft,
+                             self._wrench.ctypes.data_as(ctypes.c_void_p))
         # Views of the arm's entries in the data (its buffers never move), where its joints'
         # entries run in order: read and written every step, ~0.5 us less a step than indexing
         # ``data`` each time. ``None``: indexed each time.
@@ -314,23 +312,12 @@ class MujocoShaftWorld:
         tool frame: at rest what a wrist sensor between hand and shaft reads, the shaft's weight
         taken out. ``tests/robot/test_mujoco_world.py`` checks it against the arm's balance
         over a step (pybullet's summed contact points failed that check; its world reads the
-        shaft joint's reaction instead)."""
-        m, d = self.model, self.data
-        position, rotation = self.tool_pose()
-        force, torque = np.zeros(3), np.zeros(3)
-        f6 = self._force
-        # The contacts' fields as arrays over all contacts: ``d.contact[i]`` builds a Python
-        # object a contact (~30 us of the ~35 a contact cost); the arithmetic is unchanged.
-        contacts = d.contact
-        geoms, frames, points = contacts.geom, contacts.frame, contacts.pos
-        for i in np.flatnonzero((geoms == self._shaft_geom).any(axis=1)):
-            sign = -1.0 if geoms[i, 0] == self._shaft_geom else 1.0  # acts on geom2 along the normal
-            mujoco.mj_contactForce(m, d, int(i), f6)
-            frame = frames[i].reshape(3, 3)
-            f = sign * (frame.T @ f6[:3])
-            force += f
-            torque += _cross(points[i] - position, f) + sign * (frame.T @ f6[3:])
-        return np.concatenate([rotation.T @ force, rotation.T @ torque])
+        shaft joint's reaction instead). Summed in compiled code (``native/contact_wrench.c``):
+        the ground truth and the ground-truth estimator read it, every 10th tick and every
+        tick."""
+        self._refresh()
+        self._wrench_sum(*self._wrench_args)
+        return self._wrench.copy()
 
     def close(self) -> None:
         """Nothing to release: the model and data are freed with the world."""
