@@ -3,11 +3,12 @@
 // Why: the simulation's ground truth (every 10th tick in the robot process's loop, for its topics
 // and bags) and the ground-truth wrench estimator (every tick) read it. In Python each contact
 // cost ~6 us of array handling around MuJoCo's mj_contactForce, 20-36 us a call in contact; here
-// the whole sum takes about a microsecond. The arithmetic is the Python version's, term by term
-// and in its order; its matrix products were NumPy's, which on this machine's OpenBLAS are a
-// chain of fused multiply-adds, written out here (the file is compiled with no other fusing): the
-// numbers are the Python version's to the bit on 23,864 recorded contact states, and the same on
-// any machine, where NumPy's depended on its BLAS kernel (tests/robot/test_mujoco_world.py).
+// the whole sum takes 1.3 us, its ctypes call included. The arithmetic is the Python version's,
+// term by term and in its order; its matrix products were NumPy's, which on this machine's
+// OpenBLAS are a chain of fused multiply-adds, written out here (the file is compiled with no
+// other fusing): the numbers are the Python version's to the bit on 23,864 recorded contact
+// states, and the same on any machine, where NumPy's depended on its BLAS kernel
+// (tests/robot/test_mujoco_world.py).
 #include <math.h>
 
 #include <mujoco/mujoco.h>
