@@ -188,7 +188,7 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
         section, data = peg_section(results, figures, experiment)
         lines += section
         if data:
-            lines += [peg_paired(results, data["tail"]), ""]
+            lines += [*peg_paired(results, data["tail"]), ""]
         peg_data.append(data)
     grids = {f"grid (`{pg.observation or settings.task.observation}`, the default)": grid_results,
              "grid with the thesis's 4-D state": state_results}

@@ -1,0 +1,48 @@
+"""The peg's paired comparison in results.md: per learning rate, paired by seed, Holm over the
+learning rates, and the Q spread across the seeds both algorithms ran."""
+from __future__ import annotations
+
+import numpy as np
+from qg_experiments.report.peg_sections import peg_paired
+
+
+def _run(algorithm: str, lr: float, seed: int, returns: list[float], q: float) -> dict:
+    return {"spec": {"algorithm": algorithm, "lr": lr, "seed": seed},
+            "episodes": [{"return": r} for r in returns],
+            "q_given": np.full((27, 11), q).tolist()}
+
+
+def _row(lines: list[str], lr: str) -> list[str]:
+    (row,) = [line for line in lines if line.startswith(f"| {lr} |")]
+    return [cell.strip() for cell in row.strip("|").split("|")]
+
+
+def test_each_learning_rate_is_paired_by_seed_and_corrected_over_the_rates() -> None:
+    rng = np.random.default_rng(0)
+    results = []
+    for seed in range(10):
+        # lr 1e-3: QG-DDPG better on every seed, late and overall; lr 1e-2: a coin flip.
+        base = rng.normal(-50.0, 5.0)
+        results += [_run("ddpg", 1e-3, seed, [base - 10.0] * 8, q=seed),
+                    _run("qgddpg", 1e-3, seed, [base] * 8, q=0.5 * seed)]
+        noise = rng.normal(0.0, 1.0)
+        results += [_run("ddpg", 1e-2, seed, [base] * 8, q=1.0),
+                    _run("qgddpg", 1e-2, seed, [base + noise] * 8, q=1.0)]
+    results.append(_run("ddpg", 1e-4, 0, [-80.0] * 8, q=0.0))   # no partner: not paired
+    lines = peg_paired(results, tail=2)
+    assert not any(line.startswith("| 0.0001 |") for line in lines)
+    good = _row(lines, "0.001")
+    assert good[1].startswith("10 (0, 1, 2")
+    assert good[2] == "10 / 0 / 0" and good[5] == "10 / 0 / 0"
+    assert good[3].startswith("10.00 [10.00, 10.00]")
+    # exact two-sided Wilcoxon with 10 of 10 one way: 2 / 2^10; Holm over 2 rates doubles it
+    assert float(good[4]) == float(good[7]) == np.float64(2 * 2 / 2 ** 10).round(5)
+    assert good[8] == "1.44 / 2.87"            # the std over seeds 0..9, halved by QG's q
+    assert good[9] == "297 of 297"
+    coin = _row(lines, "0.01")
+    assert float(coin[4]) > 0.05
+    assert coin[9] == "0 of 297"               # equal spreads: QG's is not smaller anywhere
+
+
+def test_no_pairs_no_table() -> None:
+    assert peg_paired([_run("ddpg", 1e-3, 0, [-1.0], q=0.0)], tail=1) == []
