@@ -146,7 +146,7 @@ class Stack:
     def __init__(self, tmp_path: Path) -> None:
         if _current_test is not None and "ros" not in _current_test.keywords:
             pytest.fail(f"{_current_test.nodeid} starts ROS processes: mark it `ros` (the fast "
-                        "tier, -m 'not ros', must not start any)", pytrace=False)
+                        "tier, scripts/test.sh --fast, must not start any)", pytrace=False)
         from qg_bringup.launcher import Launcher
         from qg_bringup.ros_env import stack_env
         self.domain_id, self._domain_lock = _take_domain()

@@ -74,6 +74,7 @@ def test_a_ray_worker_that_reads_other_config_files_saves_nothing(tmp_path: Path
     assert not list(tmp_path.glob("runs/*/*.json"))
 
 
+@pytest.mark.slow
 def test_qgl_and_the_pool_never_import_ray(tmp_path: Path) -> None:
     """Ray is optional: the CLI, the suite and a pool run work without loading it."""
     code = ("import sys\n"

@@ -50,6 +50,7 @@ def test_every_environment_is_registered_and_named_by_module() -> None:
 
 
 @pytest.mark.parametrize("env_id", sorted(gym_envs.IN_PROCESS_ENV_IDS))
+@pytest.mark.slow
 def test_in_process_environments_pass_gymnasiums_checker(env_id: str) -> None:
     env = gymnasium.make(env_id).unwrapped
     with _no_warnings():
@@ -57,6 +58,7 @@ def test_in_process_environments_pass_gymnasiums_checker(env_id: str) -> None:
     env.close()
 
 
+@pytest.mark.slow
 def test_a_seeded_insertion_episode_is_identical_twice() -> None:
     env = InsertionEnv(max_steps=3)
     first = _rollout(env, 7, ACTIONS)
@@ -135,6 +137,7 @@ def test_the_ideal_arm_and_the_arm_seed_are_options() -> None:
     assert not np.array_equal(start(), ideal)
 
 
+@pytest.mark.slow
 def test_stable_baselines3_trains_on_the_environment_in_three_lines(monkeypatch, tmp_path) -> None:
     from stable_baselines3 import SAC
     monkeypatch.setenv("SB3_LOGDIR", str(tmp_path))   # SB3's empty log folder, else in /tmp
@@ -147,6 +150,7 @@ def test_stable_baselines3_trains_on_the_environment_in_three_lines(monkeypatch,
     env.close()
 
 
+@pytest.mark.slow
 def test_record_video_writes_a_playable_video_of_qginsertion(tmp_path) -> None:
     """``render_mode="rgb_array"``: gymnasium's own ``RecordVideo`` records an episode
     unchanged, one frame at the reset and one per step, and the arm moves between them."""

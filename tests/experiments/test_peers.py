@@ -14,6 +14,7 @@ TINY = {"train_episodes": 2, "train_max_steps": 2, "test_episodes": 2, "test_max
 
 
 @pytest.mark.parametrize("algorithm", ["sb3_ddpg", "ddpg"])
+@pytest.mark.slow
 def test_a_peer_run_trains_its_episodes_then_tests_the_poses(algorithm: str, tmp_path) -> None:
     spec = PeerSpec(algorithm, "defaults", 100, tensorboard_dir=str(tmp_path), **TINY)
     result = spec.run()

@@ -43,6 +43,7 @@ def _stalling_actor() -> ActorMLP:
                                   for i, name in enumerate(data["actor_names"])])
 
 
+@pytest.mark.slow
 def test_recovery_turns_a_stalled_test_pose_into_an_inserted_one_counted() -> None:
     settings = StackSettings.load().with_arm_seed(0)
     settings = dataclasses.replace(settings, task=dataclasses.replace(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 from qg_experiments import toys
 
@@ -18,6 +19,7 @@ def test_baird_star_bounded_converges_plain_diverges():
     assert norms[-1] < norms[0] and abs(norms[-1] - norms[-100]) < 1e-6
 
 
+@pytest.mark.slow
 def test_ch7_three_state_subsets_std_ordered_by_kind(tmp_path):
     pooled = toys.transition_type_std(seeds=10)
     counts = {k: len(v) for k, v in pooled.items()}
@@ -29,6 +31,7 @@ def test_ch7_three_state_subsets_std_ordered_by_kind(tmp_path):
     assert (tmp_path / 'types.png').stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_ch7_chain_std_grows_with_distance(tmp_path):
     dist, std = toys.chain_std(length=100, seeds=10, steps=1500)  # the figure uses 4000
     np.testing.assert_array_equal(np.sort(dist), np.arange(100))

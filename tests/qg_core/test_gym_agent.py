@@ -73,6 +73,7 @@ def test_without_terminals_or_loops_qgddpg_trains_exactly_like_ddpg() -> None:
     assert census["directly_connected"] == census["connected"] == 0
 
 
+@pytest.mark.slow
 def test_a_seed_gives_the_same_learning_and_another_seed_another() -> None:
     def run(seed: int) -> list[np.ndarray]:
         return _weights(QGDDPG(gymnasium.make("Pendulum-v1"), seed=seed, train_freq=5,
@@ -142,6 +143,7 @@ def test_an_episode_spanning_two_learn_calls_is_reported_whole() -> None:
     assert [e["steps"] for e in seen] == [200, 200]
     assert [e["timesteps"] for e in seen] == [200, 400]
     assert all(-16.3 * 200 <= e["return"] < -1.0 for e in seen)   # every step costs
+@pytest.mark.slow
 def test_qgl_train_runs_on_pendulum(tmp_path) -> None:
     env = {**os.environ, "QG_RUNS_DIR": str(tmp_path)}
     out = subprocess.run([os.path.join(os.path.dirname(sys.executable), "qgl"), "train",
@@ -212,6 +214,7 @@ def test_a_negative_or_infinite_actor_penalty_is_refused() -> None:
         QGDDPG(gymnasium.make("Pendulum-v1"), actor_preact_penalty=-1.0)
 
 
+@pytest.mark.slow
 def test_our_ddpg_train_step_is_sb3_ddpgs() -> None:
     """From the same weights on the same minibatch, our DDPG at SB3 DDPG's settings updates as
     SB3's DDPG does (float32 rounding through Adam apart): what differs between the two on

@@ -94,6 +94,7 @@ def fill(transitions, gamma, zero_action, capacity=None, check_each=False):
 
 @settings(max_examples=150, deadline=None)
 @given(random_graphs(), st.sampled_from([0.5, 0.9, 0.99]), st.booleans())
+@pytest.mark.slow
 def test_bounds_equal_exact_solution_after_every_insertion(transitions, gamma, zero_action):
     fill(transitions, gamma, zero_action, check_each=True)
 

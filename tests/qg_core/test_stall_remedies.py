@@ -33,6 +33,7 @@ def fitted_q(tol: float, motion: float, steps: int = 400) -> np.ndarray:
     return agent.q_values(batch.states, batch.actions)
 
 
+@pytest.mark.slow
 def test_a_self_loop_takes_the_value_of_repeating_its_action_forever():
     # r / (1 - gamma) = -2.5: with the setting the critic fits it (within 0.1 on average) ...
     q = fitted_q(tol=1e-3, motion=1e-4)
@@ -42,6 +43,7 @@ def test_a_self_loop_takes_the_value_of_repeating_its_action_forever():
     assert np.abs(q_thesis + 2.5).min() > 0.5, q_thesis
 
 
+@pytest.mark.slow
 def test_a_step_that_moved_more_than_the_tolerance_is_no_self_loop():
     assert np.allclose(fitted_q(tol=1e-3, motion=0.05), fitted_q(tol=0.0, motion=0.05))
 

@@ -105,6 +105,7 @@ def test_every_k_keeps_1khz_in_every_kth_and_the_last_episodes(tmp_path: Path) -
 
 
 @pytest.mark.parametrize("budget_mb", [4.0, 9.0])
+@pytest.mark.slow
 def test_the_folder_never_exceeds_its_budget_and_keeps_every_transition(
         tmp_path: Path, budget_mb: float) -> None:
     folder = tmp_path / "episodes"

@@ -64,6 +64,7 @@ def test_sigkill_loses_at_most_the_last_chunk(tmp_path: Path) -> None:
     assert len(got) - PER_CHUNK <= meta["message_count"] <= len(got)  # rewritten after every chunk
 
 
+@pytest.mark.slow
 def test_sigkill_loses_at_most_the_chunk_in_progress_of_every_topic(tmp_path: Path) -> None:
     """Chunks close every 0.2 s with everything produced by then, the 100 Hz ground truth too,
     whose row buffer alone holds 2 s: a SIGKILL costs about the last 0.2 s of each topic."""
@@ -75,6 +76,7 @@ def test_sigkill_loses_at_most_the_chunk_in_progress_of_every_topic(tmp_path: Pa
     assert produced // 10 - lost_ms // 10 <= len(truth) <= produced // 10 + 6, (produced, len(truth))
 
 
+@pytest.mark.slow
 def test_reindex_makes_a_killed_bag_readable_by_stock_readers(tmp_path: Path) -> None:
     bag, _ = killed_bag(tmp_path, 1500)
     ours = indices(bag)

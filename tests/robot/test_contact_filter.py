@@ -115,6 +115,7 @@ def _contacts(m: mujoco.MjModel, d: mujoco.MjData, state: np.ndarray) -> list[tu
     return [(c.geom1, c.geom2, c.dist, *c.pos, *c.frame) for c in d.contact[:d.ncon]]
 
 
+@pytest.mark.slow
 def test_the_cells_contacts_are_the_same_with_the_filter(contact_states) -> None:
     """On every recorded state, MuJoCo finds the very same contacts (geoms, depth, point, frame,
     bit for bit) with the filter as with its own bitmask test alone; and most recorded states

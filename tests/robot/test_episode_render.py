@@ -67,6 +67,7 @@ def test_a_frame_shows_the_arm_inside_its_projected_box_and_a_moving_arm_changes
     assert changed > 0.02, changed
 
 
+@pytest.mark.slow
 def test_qgl_render_writes_a_video_of_an_episode_bag(tmp_path: Path) -> None:
     """A bag as the robot process records it (description, static frames, markers, joint
     states, setpoints; the arm swinging from Q0 to Q1 in 1 s) becomes a video whose frames

@@ -64,6 +64,7 @@ class Listener:
         return next(e for e in self.events if e.seq == seq)
 
 
+@pytest.mark.slow
 def test_every_tick_arrives_in_order_and_the_loop_computes_what_it_does_in_process() -> None:
     listener = Listener()
     link = LoopLink(shipped_loop_spec(ROBOT), 7, listener)
@@ -128,6 +129,7 @@ def test_a_killed_loop_process_is_reported_and_stop_raises() -> None:
 
 
 @pytest.mark.parametrize("forked", [False, True])
+@pytest.mark.slow
 def test_the_loop_process_ends_with_the_process_that_started_it(forked: bool) -> None:
     parent = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
         import sys, time

@@ -129,6 +129,7 @@ def _trajectory(params: dict, steps: int) -> np.ndarray:
         loop.simulation.close()
 
 
+@pytest.mark.slow
 def test_a_seeded_episode_is_identical_twice() -> None:
     """Lockstep and deterministic: the realistic arm's noise, biases and jitter of one seed, the
     same steps, bit for bit the same motion; another arm seed, another motion."""
@@ -269,6 +270,7 @@ def _numpy_contact_wrench(world) -> np.ndarray:
     return np.concatenate([rotation.T @ force, rotation.T @ torque])
 
 
+@pytest.mark.slow
 def test_the_compiled_contact_wrench_is_numpys_sum() -> None:
     """At every tick of random-residual steps into the bore, the compiled sum gives NumPy's
     contact-by-contact sum (on the development machine to the bit, in all 23,864 ticks of a

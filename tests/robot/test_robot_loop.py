@@ -61,6 +61,7 @@ def run_episode(loop: RobotLoop, pose: int, max_steps: int,
 
 
 @pytest.mark.parametrize("arm", ["realistic", "ideal"])
+@pytest.mark.slow
 def test_zero_residual_jams_from_most_starts(loop: RobotLoop, ideal_loop: RobotLoop,
                                             arm: str) -> None:
     """The base push alone jams on either arm. On the ideal arm a jammed step ends by the rest

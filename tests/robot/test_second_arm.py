@@ -83,6 +83,7 @@ def _episode(loop: RobotLoop, pose: int, rng: np.random.Generator | None,
     return False, max_steps
 
 
+@pytest.mark.slow
 def test_the_realistic_xarm_completes_shaft_episodes_through_the_bridge_and_the_base_push_jams():
     """The Panda's loop, controller and EKF on the xArm (its default, realistic arm): random
     residuals insert (8/8 starts, 12-66 steps, mean 34 measured on seed 0), the zero residual

@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from qg_recording.episode_recorder import EpisodeRecorder
 from robot_bridge_node.core.sample_ring import HAS_TOOL, HAS_TRUTH, HAS_WRENCH, record_dtype
 from robot_bridge_node.core.tick_messages import TickNames, record_ticks, serialized_ticks
@@ -76,6 +77,7 @@ def measure(folder: Path) -> tuple[int, int, int]:
     return published, len(list(folder.glob("*/metadata.yaml"))), rss_kib() - before
 
 
+@pytest.mark.slow
 def test_recording_and_publishing_ticks_do_not_grow_the_process(tmp_path: Path) -> None:
     # A fresh interpreter: the test worker's RSS also moves with what its earlier tests left.
     out = subprocess.run([sys.executable, __file__, str(tmp_path)], capture_output=True,

@@ -329,6 +329,7 @@ print("made", *[m for m in HEAVY if m in sys.modules])
 """
 
 
+@pytest.mark.slow
 def test_the_gym_environments_work_in_a_plain_python_without_ros():
     """``gymnasium.make("qg_experiments:QGInsertion-v0")``, Gymnasium's checker and an
     ``rgb_array`` frame in the venv's Python with a bare environment (no ROS environment
@@ -557,6 +558,7 @@ print(due.index(True), core.train_cycle()["actor_version"], core.graph.num_real,
 """
 
 
+@pytest.mark.slow
 def test_executor_and_learner_cores_work_in_a_plain_python_session():
     """QG-DDPG without ROS: in an interpreter with no ROS environment, where rclpy, messages,
     bridge, simulator, experiments and Pinocchio cannot be imported, every module of the two
