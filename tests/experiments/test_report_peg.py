@@ -6,9 +6,10 @@ import numpy as np
 from qg_experiments.report.peg_sections import peg_paired
 
 
-def _run(algorithm: str, lr: float, seed: int, returns: list[float], q: float) -> dict:
-    return {"spec": {"algorithm": algorithm, "lr": lr, "seed": seed},
-            "episodes": [{"return": r} for r in returns],
+def _run(algorithm: str, lr: float, seed: int, returns: list[float], q: float,
+         mean_q: float = -50.0) -> dict:
+    return {"spec": {"algorithm": algorithm, "lr": lr, "seed": seed, "gamma": 0.99},
+            "episodes": [{"return": r, "mean_q": mean_q} for r in returns],
             "q_given": np.full((27, 11), q).tolist()}
 
 
@@ -23,7 +24,8 @@ def test_each_learning_rate_is_paired_by_seed_and_corrected_over_the_rates() -> 
     for seed in range(10):
         # lr 1e-3: QG-DDPG better on every seed, late and overall; lr 1e-2: a coin flip.
         base = rng.normal(-50.0, 5.0)
-        results += [_run("ddpg", 1e-3, seed, [base - 10.0] * 8, q=seed),
+        results += [_run("ddpg", 1e-3, seed, [base - 10.0] * 8, q=seed,
+                         mean_q=5e12 if seed < 3 else -111.0 if seed == 3 else -109.0),
                     _run("qgddpg", 1e-3, seed, [base] * 8, q=0.5 * seed)]
         noise = rng.normal(0.0, 1.0)
         results += [_run("ddpg", 1e-2, seed, [base] * 8, q=1.0),
@@ -39,6 +41,8 @@ def test_each_learning_rate_is_paired_by_seed_and_corrected_over_the_rates() -> 
     assert float(good[4]) == float(good[7]) == np.float64(2 * 2 / 2 ** 10).round(5)
     assert good[8] == "1.44 / 2.87"            # the std over seeds 0..9, halved by QG's q
     assert good[9] == "297 of 297"
+    # 3 far outside [-100, 0]; -111 beyond its tenth (10), -109 within it: 4 diverged
+    assert good[10] == "0 / 4"
     coin = _row(lines, "0.01")
     assert float(coin[4]) > 0.05
     assert coin[9] == "0 of 297"               # equal spreads: QG's is not smaller anywhere

@@ -11,9 +11,10 @@ from qg_learning_node.learner.algorithms import label
 from qg_experiments import peg, stats
 from qg_experiments.profile import PegBudget
 from qg_experiments.report import plots
+from qg_experiments.report.divergence import split_by_excess
 from qg_experiments.report.markdown import fmt, speed, table
 
-__all__ = ["peg_section", "peg_paired", "peg_budget"]
+__all__ = ["peg_section", "peg_paired", "peg_diverged", "peg_budget"]
 
 #: Per peg experiment: section heading, figure-name prefix, what moved the peg.
 _PEG_PAGES = {
@@ -78,6 +79,16 @@ def _mean_return(episodes: slice) -> Any:
     return lambda run: float(np.mean([e["return"] for e in run["episodes"][episodes]]))
 
 
+def peg_diverged(run: dict[str, Any]) -> bool:
+    """Whether the run's critic diverged: its mean Q after some episode's updates left the
+    realisable range of the peg's rewards ([-1, 0] a step, so [-1 / (1 - gamma), 0]) by more
+    than the grid's margin (``report.divergence``)."""
+    g = run["spec"]["gamma"]
+    low, high = -1.0 / (1.0 - g), 0.0
+    excess = max(max(e["mean_q"] - high, low - e["mean_q"]) for e in run["episodes"])
+    return bool(split_by_excess({"run": excess}, (low, high))[0])
+
+
 def peg_paired(results: list[dict[str, Any]], tail: int) -> list[str]:
     """QG-DDPG against DDPG on the same seeds, learning rate by learning rate (the thesis's
     claim is per learning rate: faster at every one, most at the poor ones).
@@ -100,6 +111,7 @@ def peg_paired(results: list[dict[str, Any]], tail: int) -> list[str]:
     holm = {name: dict(zip(lrs, stats.holm([c[lr].wilcoxon_p for lr in lrs]), strict=True))
             for name, c in compared.items()}
     spread = _per_pair(results, lambda run: run["q_given"])
+    diverged = _per_pair(results, peg_diverged)
     rows = []
     for lr in lrs:
         a, b = compared["all"][lr], compared["late"][lr]
@@ -114,7 +126,9 @@ def peg_paired(results: list[dict[str, Any]], tail: int) -> list[str]:
                      "n/a" if q is None else
                      f"{np.median(q['qgddpg']):.3g} / {np.median(q['ddpg']):.3g}",
                      "n/a" if q is None else
-                     f"{int(np.sum(q['qgddpg'] < q['ddpg']))} of {q['ddpg'].size}"])
+                     f"{int(np.sum(q['qgddpg'] < q['ddpg']))} of {q['ddpg'].size}",
+                     " / ".join(str(sum(runs[alg] for runs in diverged[lr].values()))
+                                for alg in ("qgddpg", "ddpg"))])
     return [f"QG-DDPG against DDPG per learning rate, paired by seed (the seeds both ran). "
             f"*All*: each run's mean return over all its episodes (the area under its learning "
             f"curve: how fast it learned); *late*: over its last {tail}. QG-DDPG higher / DDPG "
@@ -122,11 +136,13 @@ def peg_paired(results: list[dict[str, Any]], tail: int) -> list[str]:
             f"signed-rank p, Holm-corrected over the {len(lrs)} learning rates (with n pairs "
             f"the smallest p is 2 / 2^n: 0.0625 for 5, 0.002 for 10). Q spread: the standard "
             f"deviation across those seeds of each of the 27 x 11 final Q predictions (thesis "
-            f"Fig. 8.3), its median QG-DDPG / DDPG, and the points where QG-DDPG's is smaller.",
+            f"Fig. 8.3), its median QG-DDPG / DDPG, and the points where QG-DDPG's is smaller. "
+            f"Diverged: the runs whose mean Q after an episode's updates left [-1 / (1 - gamma), "
+            f"0] by more than a tenth of its width (as the grid's).",
             "", *table(["lr", "pairs (seeds)", "all: QG / DDPG / ties", "all: QG - DDPG [95 % CI]",
                         "all: p (Holm)", "late: QG / DDPG / ties", "late: QG - DDPG [95 % CI]",
                         "late: p (Holm)", "median Q spread QG / DDPG",
-                        "QG spread smaller"], rows)]
+                        "QG spread smaller", "diverged QG / DDPG"], rows)]
 
 
 def peg_budget(budget: PegBudget) -> str:
