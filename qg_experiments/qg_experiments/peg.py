@@ -4,7 +4,8 @@ Experiment 5 moves a free peg; experiment 6 runs the same task on the simulated 
 the stack's cores (``nextage_peg.NextagePeg``: the robot plugin, the bridge's position loop and
 the executor's ``PegTask``), with the same starts, budget and learners.
 
-Thesis ch. 8.3.2 settings: actor and critic of 3 hidden layers x 200, no target networks, a block
+Thesis ch. 8.3.2 settings: actor and critic of 3 hidden layers x 200 (ch. 8.3.2.1: the actor's
+weights He-uniform, the critic's from N(0, 0.001)), no target networks, a block
 of minibatch updates after every episode (thesis: 50 epochs of up to 15 minibatches; here
 ``train_iterations`` updates of ``learner.yaml``'s batch size), the same learning rate for actor
 and critic. Exploration is ``executor.yaml``'s noise. At the end each network's Q is evaluated on
@@ -24,6 +25,7 @@ import torch
 from qg_common.params import config_file, load_ros_params
 from qg_learning_node.executor.noise import ActionNoise
 from qg_learning_node.executor.parameters import load_noise
+from qg_learning_node.learner.learner_config import LearnerConfig
 from qg_learning_node.learner.learner_core import LearnerCore
 from qg_learning_node.learner.learner_params import learner_config_from_params
 
@@ -32,7 +34,7 @@ from qg_experiments.nextage_peg import NextagePeg
 from qg_experiments.profile import PegBudget
 from qg_experiments.runner import ALGORITHMS, algorithm_config, config_digest, episode_noise_seed
 
-__all__ = ["PegRunSpec", "peg_specs", "run_peg", "GRID_STATES", "GRID_ACTIONS",
+__all__ = ["PegRunSpec", "peg_specs", "peg_learner_config", "run_peg", "GRID_STATES", "GRID_ACTIONS",
            "learning_curves", "q_spread", "PEG_ROBOTS"]
 
 #: The robots that move the peg, and the experiment each one's runs are saved under.
@@ -99,6 +101,24 @@ def peg_specs(budget: PegBudget, config_dir: str | None = None,
             for lr in budget.lrs for s in budget.seeds for a in budget.algorithms]
 
 
+def peg_learner_config(spec: PegRunSpec, action_dim: int) -> LearnerConfig:
+    """``learner.yaml``'s learner with the algorithm of ``spec`` and the thesis's peg networks
+    (ch. 8.3.2.1): 3 x 200 both, the actor's weights He-uniform, the critic's from N(0, 0.001),
+    no target networks, one learning rate for both, ``spec.train_iterations`` updates after
+    every episode."""
+    params = load_ros_params(config_file("learner.yaml", spec.config_dir))
+    base = learner_config_from_params(params["learner"], "learner.yaml")
+    config = algorithm_config(base, spec.algorithm, action_dim)
+    return dataclasses.replace(
+        config, seed=spec.seed, iterations_per_cycle=spec.train_iterations,
+        cycle_steps=spec.episode_steps,
+        ddpg=dataclasses.replace(config.ddpg, actor_hidden=(200, 200, 200),
+                                 critic_hidden=(200, 200, 200), actor_init="he_uniform",
+                                 critic_init="normal_1e-3", target_networks=False,
+                                 critic_lr=spec.lr, actor_lr=spec.lr, seed=spec.seed,
+                                 gamma=spec.gamma))
+
+
 def run_peg(spec: PegRunSpec) -> dict[str, Any]:
     """Train for ``spec.episodes`` episodes; per-episode records and the final Q on the grid."""
     torch.set_num_threads(1)
@@ -109,16 +129,9 @@ def run_peg(spec: PegRunSpec) -> dict[str, Any]:
 
     env = (make_environment("peg", params("peg_env.yaml"), episode_steps=spec.episode_steps)
            if spec.robot == "free" else NextagePeg(spec.config_dir, spec.episode_steps))
-    base = learner_config_from_params(params("learner.yaml")["learner"], "learner.yaml")
-    config = algorithm_config(base, spec.algorithm, env.action_dim)
-    config = dataclasses.replace(
-        config, seed=spec.seed, iterations_per_cycle=spec.train_iterations,
-        cycle_steps=spec.episode_steps,
-        ddpg=dataclasses.replace(config.ddpg, actor_hidden=(200, 200, 200),
-                                 critic_hidden=(200, 200, 200), critic_lr=spec.lr,
-                                 actor_lr=spec.lr, seed=spec.seed, gamma=spec.gamma))
     noise_config = load_noise(params("executor.yaml"), "executor.yaml")
-    learner = LearnerCore(config, env.state_dim, env.action_dim)
+    learner = LearnerCore(peg_learner_config(spec, env.action_dim), env.state_dim,
+                          env.action_dim)
     episodes = []
     try:
         for index in range(spec.episodes):

@@ -13,3 +13,30 @@ def test_peg_runs_take_the_budgets_discount_not_the_panda_learners():
     assert thesis.peg.gamma == thesis.nextage.gamma == 0.99 != panda_gamma
     specs = peg_specs(PegBudget(lrs=(1e-3, 1e-4), seeds=(0, 1), gamma=0.95))
     assert len(specs) == 8 and {s.gamma for s in specs} == {0.95}
+
+
+def test_peg_networks_are_the_thesis_ch_8_3_2_ones():
+    """3 x 200 both; the actor's weights He-uniform, the critic's from N(0, 0.001), biases 0;
+    no target networks; one learning rate for actor and critic."""
+    import numpy as np
+    import torch
+    from qg_experiments.peg import PegRunSpec, peg_learner_config
+    from qg_learning_node.learner.ddpg import DDPG
+
+    config = peg_learner_config(PegRunSpec(algorithm="qgddpg", lr=1e-4, seed=3), action_dim=3)
+    d = config.ddpg
+    assert d.actor_hidden == d.critic_hidden == (200, 200, 200)
+    assert (d.actor_init, d.critic_init, d.target_networks) == ("he_uniform", "normal_1e-3",
+                                                                False)
+    assert d.actor_lr == d.critic_lr == 1e-4 and config.seed == d.seed == 3
+    agent = DDPG(d, state_dim=3, action_dim=3)
+    critic = [m for m in agent.critic.net if isinstance(m, torch.nn.Linear)]
+    weights = torch.cat([m.weight.detach().flatten() for m in critic]).numpy()
+    assert abs(weights.std() - 1e-3) < 2e-5 and abs(weights.mean()) < 2e-5
+    assert all(not m.bias.any() for m in critic)
+    # He-uniform: U(-b, b), b = sqrt(6 / fan_in); the 200-wide layers' weights reach b
+    hidden = [m for m in agent.actor if isinstance(m, torch.nn.Linear)][1]
+    bound = np.sqrt(6 / 200)
+    assert bound * 0.99 < hidden.weight.abs().max().item() <= bound
+    q = agent.q_values(np.zeros((4, 3)), np.zeros((4, 3)))
+    assert np.all(np.abs(q) < 1e-6)           # Q starts at ~0, the top of [-100, 0]

@@ -74,6 +74,9 @@ def build_mlp(sizes: list[int], hidden_act: type[nn.Module], out_act: type[nn.Mo
             elif init == 'he_uniform':
                 nn.init.kaiming_uniform_(linear.weight, nonlinearity='relu', generator=generator)
                 linear.bias.zero_()
+            elif init == 'normal_1e-3':
+                nn.init.normal_(linear.weight, 0.0, 1e-3, generator=generator)
+                linear.bias.zero_()
             else:
                 nn.init.kaiming_uniform_(linear.weight, a=math.sqrt(5), generator=generator)
                 nn.init.uniform_(linear.bias, -1.0 / math.sqrt(n_in), 1.0 / math.sqrt(n_in),

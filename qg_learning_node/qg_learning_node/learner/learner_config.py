@@ -25,8 +25,9 @@ BOUND_MODES = ('none', 'apriori', 'empirical', 'qgraph', 'qgraph+apriori', 'he20
 GRAPH_BOUNDS = ('qgraph', 'qgraph+apriori')
 #: The modes that take the a-priori range of the known rewards ``[r_min, r_max]``.
 APRIORI_BOUNDS = ('apriori', 'qgraph+apriori')
-#: Weight inits: the thesis's two, and PyTorch's own ``nn.Linear`` init (SB3's networks).
-INITS = ('glorot_uniform', 'he_uniform', 'torch_default')
+#: Weight inits: the thesis's two of the Panda, the normal one of its peg's critic (ch. 8.3.2.1:
+#: weights from N(0, 0.001), so Q starts near 0), and PyTorch's own ``nn.Linear`` init (SB3's).
+INITS = ('glorot_uniform', 'he_uniform', 'normal_1e-3', 'torch_default')
 #: Hidden activations of the actor: the thesis's tanh, or SB3's ReLU.
 ACTOR_ACTIVATION_NAMES = ('tanh', 'relu')
 
