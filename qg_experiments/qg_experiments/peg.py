@@ -8,9 +8,10 @@ Thesis ch. 8.3.2 settings: actor and critic of 3 hidden layers x 200 (ch. 8.3.2.
 weights He-uniform, the critic's from N(0, 0.001)), no target networks, a block
 of minibatch updates after every episode (thesis: 50 epochs of up to 15 minibatches; here
 ``train_iterations`` updates of ``learner.yaml``'s batch size), the same learning rate for actor
-and critic. Exploration is ``executor.yaml``'s noise. At the end each network's Q is evaluated on
-a regular grid of 27 states with 11 fixed actions and with the actor's action; the spread of
-those predictions across seeds measures soft divergence (thesis Fig. 8.3).
+and critic. Exploration is ``executor.yaml``'s noise on every step (no clean steps: the
+thesis's). At the end each network's Q is evaluated on a regular grid of 27 states with 11 fixed
+actions and with the actor's action; the spread of those predictions across seeds measures soft
+divergence (thesis Fig. 8.3).
 """
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ from typing import Any
 import numpy as np
 import torch
 from qg_common.params import config_file, load_ros_params
-from qg_learning_node.executor.noise import ActionNoise
+from qg_learning_node.executor.noise import ActionNoise, NoiseConfig
 from qg_learning_node.executor.parameters import load_noise
 from qg_learning_node.learner.learner_config import LearnerConfig
 from qg_learning_node.learner.learner_core import LearnerCore
@@ -34,7 +35,7 @@ from qg_experiments.nextage_peg import NextagePeg
 from qg_experiments.profile import PegBudget
 from qg_experiments.runner import ALGORITHMS, algorithm_config, config_digest, episode_noise_seed
 
-__all__ = ["PegRunSpec", "peg_specs", "peg_learner_config", "run_peg", "GRID_STATES", "GRID_ACTIONS",
+__all__ = ["PegRunSpec", "peg_specs", "peg_learner_config", "peg_noise_config", "run_peg", "GRID_STATES", "GRID_ACTIONS",
            "learning_curves", "q_spread", "PEG_ROBOTS"]
 
 #: The robots that move the peg, and the experiment each one's runs are saved under.
@@ -119,17 +120,24 @@ def peg_learner_config(spec: PegRunSpec, action_dim: int) -> LearnerConfig:
                                  gamma=spec.gamma))
 
 
+def peg_noise_config(config_dir: str | None = None) -> NoiseConfig:
+    """``executor.yaml``'s exploration noise with noise on every training step, as the thesis
+    explores: its clean steps and episodes are the Panda's remedy for stalls of the test actor
+    (docs/learning.md section 17), which the peg's experiments do not test."""
+    noise = load_noise(load_ros_params(config_file("executor.yaml", config_dir)),
+                       "executor.yaml")
+    return dataclasses.replace(noise, clean_fraction=0.0, clean_episode_fraction=0.0)
+
+
 def run_peg(spec: PegRunSpec) -> dict[str, Any]:
     """Train for ``spec.episodes`` episodes; per-episode records and the final Q on the grid."""
     torch.set_num_threads(1)
     start = time.perf_counter()
 
-    def params(name: str) -> dict[str, Any]:
-        return load_ros_params(config_file(name, spec.config_dir))
-
-    env = (make_environment("peg", params("peg_env.yaml"), episode_steps=spec.episode_steps)
+    env = (make_environment("peg", load_ros_params(config_file("peg_env.yaml", spec.config_dir)),
+                            episode_steps=spec.episode_steps)
            if spec.robot == "free" else NextagePeg(spec.config_dir, spec.episode_steps))
-    noise_config = load_noise(params("executor.yaml"), "executor.yaml")
+    noise_config = peg_noise_config(spec.config_dir)
     learner = LearnerCore(peg_learner_config(spec, env.action_dim), env.state_dim,
                           env.action_dim)
     episodes = []

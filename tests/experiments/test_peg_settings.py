@@ -40,3 +40,12 @@ def test_peg_networks_are_the_thesis_ch_8_3_2_ones():
     assert bound * 0.99 < hidden.weight.abs().max().item() <= bound
     q = agent.q_values(np.zeros((4, 3)), np.zeros((4, 3)))
     assert np.all(np.abs(q) < 1e-6)           # Q starts at ~0, the top of [-100, 0]
+
+
+def test_the_peg_explores_on_every_step_as_the_thesis():
+    from qg_experiments.peg import peg_noise_config
+    panda = load_ros_params(config_file("executor.yaml"))["noise"]
+    assert panda["clean_fraction"] > 0.0                  # the Panda's stall remedy ...
+    noise = peg_noise_config()
+    assert noise.clean_fraction == noise.clean_episode_fraction == 0.0   # ... not the peg's
+    assert (noise.kind, noise.sigma) == (panda["kind"], panda["sigma"])
