@@ -174,7 +174,8 @@ def test_record_video_writes_a_playable_video_of_qginsertion(tmp_path) -> None:
 
 
 @pytest.mark.parametrize("env_id", sorted(set(gym_envs.IN_PROCESS_ENV_IDS)
-                                           - {"QGSparseMountainCar-v0"}))   # Gymnasium's car
+                                           - {"QGSparseMountainCar-v0",    # Gymnasium's car
+                                              "QGPeg-v0"}))                # no arm to draw
 def test_in_process_environments_render_rgb_arrays_and_refuse_other_modes(
         env_id: str, monkeypatch: pytest.MonkeyPatch) -> None:
     assert gymnasium.spec(env_id).entry_point
@@ -205,3 +206,30 @@ def test_the_sparse_mountain_car_pays_minus_one_per_step_and_zero_at_the_goal() 
     assert terminated and info["is_success"] and rewards[-1] == 0.0
     assert rewards[:-1] == [-1.0] * (len(rewards) - 1) and 50 < len(rewards) < 300
     env.close()
+
+
+def test_the_free_peg_is_the_experiments_environment_and_refuses_a_nan() -> None:
+    """``QGPeg-v0``'s episode from start k is the one experiment 5's episode k runs: the same
+    states and rewards for the same actions; a cap truncates; a NaN action is refused."""
+    from qg_common.params import config_file, load_ros_params
+    from qg_experiments.environments import make_environment
+
+    env = gymnasium.make("qg_experiments:QGPeg-v0", max_steps=3).unwrapped
+    own = make_environment("peg", load_ros_params(config_file("peg_env.yaml")), episode_steps=3)
+    obs, info = env.reset(seed=0, options={"start": 11})
+    assert info["start"] == 11 and not info["is_success"]
+    np.testing.assert_array_equal(obs, own.reset(seed=11).astype(np.float32))
+    actions = [np.array([0.5, -1.0, 0.2]), np.zeros(3), np.array([-1.0, 1.0, -1.0])]
+    for k, action in enumerate(actions):
+        obs, reward, terminated, truncated, info = env.step(action.astype(np.float32))
+        state, own_reward, own_terminal = own.step(action.astype(np.float32).astype(float))
+        np.testing.assert_array_equal(obs, state.astype(np.float32))
+        assert reward == own_reward < 0.0 and terminated == own_terminal is False
+        assert truncated == (k == 2) and info["position_error"] > 0.0075
+    with pytest.raises(RuntimeError, match="call reset"):
+        env.step(np.zeros(3))
+    env.reset(seed=1)
+    with pytest.raises(ValueError, match="finite"):
+        env.step(np.array([np.nan, 0.0, 0.0]))
+    env.close()
+    own.close()

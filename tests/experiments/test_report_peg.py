@@ -50,3 +50,12 @@ def test_each_learning_rate_is_paired_by_seed_and_corrected_over_the_rates() -> 
 
 def test_no_pairs_no_table() -> None:
     assert peg_paired([_run("ddpg", 1e-3, 0, [-1.0], q=0.0)], tail=1) == []
+
+
+def test_the_td3_reference_says_what_a_maintained_agent_did() -> None:
+    from qg_experiments.report.peg_sections import td3_reference_line
+    line = td3_reference_line({"runs": [
+        {"seed": 0, "steps": 20000, "tests": 20, "inserted": 20, "mean_return": -7.94},
+        {"seed": 1, "steps": 20000, "tests": 20, "inserted": 17, "mean_return": -31.25}]})
+    assert "after 20,000 training steps inserted 20 of 20, 17 of 20 fixed test starts" in line
+    assert "(seeds 0, 1; mean return -7.9, -31.2)" in line

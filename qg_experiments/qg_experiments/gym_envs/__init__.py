@@ -15,6 +15,7 @@ Registering only names the classes: it loads neither pybullet, torch nor rclpy.
 
 =========================  ==============================================================
 ``QGInsertion-v0``         the Panda shaft into the bearing, in process (:mod:`.insertion`)
+``QGPeg-v0``               the free peg into the clearance-fit hole, experiment 5's (:mod:`.peg`)
 ``QGNextagePeg-v0``        the Nextage peg into the clearance-fit hole, in process (:mod:`.peg`)
 ``QGInsertionROS-v0``      the Panda shaft through a running robot process (:mod:`.ros_insertion`)
 ``QGSparseMountainCar-v0`` Gymnasium's continuous mountain car, reward -1 per step and 0 at the
@@ -29,6 +30,7 @@ __all__ = ["ENV_IDS", "IN_PROCESS_ENV_IDS", "ROS_ENV_IDS", "register_envs"]
 #: Environments that need nothing but this Python environment.
 IN_PROCESS_ENV_IDS = {
     "QGInsertion-v0": "qg_experiments.gym_envs.insertion:InsertionEnv",
+    "QGPeg-v0": "qg_experiments.gym_envs.peg:FreePegEnv",
     "QGNextagePeg-v0": "qg_experiments.gym_envs.peg:NextagePegEnv",
     "QGSparseMountainCar-v0": "qg_experiments.gym_envs.sparse_mountain_car:SparseMountainCar",
 }

@@ -1,4 +1,10 @@
-"""``QGNextagePeg-v0``: the Nextage peg-in-hole in process, on the runner's ``NextagePeg``.
+"""The clearance-fit peg-in-hole (thesis ch. 3.1.1, 8.3.2) as Gymnasium environments.
+
+``QGPeg-v0``: the free peg of experiment 5 (``sim_robot_node``'s ``PegEnv``: a force-limited
+drive moves the upright peg, no arm), exactly the environment of ``experiments/peg.py``'s runs,
+so a standard agent (Stable-Baselines3's) can be run on the thesis's own task beside them.
+
+``QGNextagePeg-v0``: the Nextage peg-in-hole in process, on the runner's ``NextagePeg``.
 
 The simulated Nextage under the bridge's task-space position loop and the executor's
 ``PegTask`` (tip position state, position-offset actions, ``exp(-d/0.03) - 1`` or sparse reward),
@@ -16,8 +22,10 @@ from typing import Any
 import gymnasium
 import numpy as np
 from gymnasium import spaces
+from qg_common.params import config_file, load_ros_params
 from qg_learning_node.executor.peg_task import PEG_ACTION_DIM, PEG_STATE_DIM
 
+from qg_experiments.environments import make_environment
 from qg_experiments.gym_envs.rendering import (
     RENDER_FPS,
     RENDER_MODES,
@@ -27,10 +35,64 @@ from qg_experiments.gym_envs.rendering import (
 )
 from qg_experiments.nextage_peg import NextagePeg
 
-__all__ = ["NextagePegEnv"]
+__all__ = ["FreePegEnv", "NextagePegEnv"]
 
 #: Start indices are drawn below this (any int the simulator's generator takes).
 _START_RANGE = 2**31 - 1
+
+
+class FreePegEnv(gymnasium.Env):
+    """The free peg (see the module docstring): the state the tip's position in the 20 cm
+    workspace scaled to [-1, 1]^3, an action a 3-D offset of at most 1 cm per axis, the reward
+    ``exp(-d/0.03) - 1`` of the tip's distance to the hole bottom; inserted ends the episode.
+    ``reset(options={"start": k})`` starts at the ``k``-th seeded free position (the one the
+    experiment's episode ``k`` would draw); otherwise the environment's generator picks it.
+
+    :param max_steps: step cap of an episode (``truncated``; the thesis: 200).
+    :param config_dir: the stack's ``config/`` (``peg_env.yaml``); ``None``: the installed files.
+    """
+
+    metadata: dict[str, Any] = {"render_modes": []}
+
+    def __init__(self, max_steps: int = 200, config_dir: str | None = None) -> None:
+        if max_steps < 1:
+            raise ValueError(f"max_steps must be >= 1, got {max_steps}")
+        self.peg = make_environment("peg", load_ros_params(config_file("peg_env.yaml",
+                                                                       config_dir)),
+                                    episode_steps=max_steps)
+        self.observation_space = spaces.Box(-1.0, 1.0, (self.peg.state_dim,), np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, (self.peg.action_dim,), np.float32)
+        self._running = False
+
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = set(options) - {"start"}
+        if unknown:
+            raise ValueError(f"unknown reset options {sorted(unknown)}: start")
+        start = int(options["start"]) if "start" in options else int(
+            self.np_random.integers(_START_RANGE))
+        state = self.peg.reset(seed=start)
+        self._running = True
+        return state.astype(np.float32), {"start": start, **self._info()}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """:raises ValueError: on a non-finite action (the peg does not move)."""
+        if not self._running:
+            raise RuntimeError("the episode has ended: call reset()")
+        state, reward, terminal = self.peg.step(np.asarray(action, dtype=np.float64))
+        truncated = not terminal and self.peg.truncated
+        self._running = not (terminal or truncated)
+        return state.astype(np.float32), float(reward), bool(terminal), truncated, self._info()
+
+    def _info(self) -> dict[str, Any]:
+        distance = float(np.linalg.norm(self.peg.tip() - self.peg.geometry.goal))
+        return {"is_success": distance < self.peg.geometry.goal_tolerance,
+                "position_error": distance}
+
+    def close(self) -> None:
+        self.peg.close()
 
 
 class NextagePegEnv(RenderedRobot, gymnasium.Env):

@@ -2,6 +2,7 @@
 Nextage; learning curves, the spread of Q across seeds, and the paired late-episode return."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +15,8 @@ from qg_experiments.report import plots
 from qg_experiments.report.divergence import split_by_excess
 from qg_experiments.report.markdown import fmt, speed, table
 
-__all__ = ["peg_section", "peg_paired", "peg_diverged", "peg_budget"]
+__all__ = ["peg_section", "peg_paired", "peg_diverged", "peg_budget", "td3_reference_line",
+           "TD3_REFERENCE"]
 
 #: Per peg experiment: section heading, figure-name prefix, what moved the peg.
 _PEG_PAGES = {
@@ -62,7 +64,28 @@ def peg_section(results: list[dict[str, Any]], figures: Path,
     lines += table(["algorithm", "lr", "seeds", f"mean return, last {tail} episodes",
                     "success, last episodes", "steps, last episodes",
                     "median std of Q (27 x 11)"], rows)
+    reference = figures.parent / "data" / TD3_REFERENCE
+    if experiment == "peg" and reference.is_file():
+        lines += ["", td3_reference_line(json.loads(reference.read_text()))]
     return lines + [""], {"curves": curves, "spread": spread, "tail": tail, "robot": experiment}
+
+
+#: ``benchmarks/peg_td3_reference.py``'s numbers, in ``docs/data``.
+TD3_REFERENCE = "peg_td3_reference.json"
+
+
+def td3_reference_line(reference: dict[str, Any]) -> str:
+    """What a maintained agent does on the same free peg (whether it can be learned at all)."""
+    runs = reference["runs"]
+    inserted = ", ".join(f"{r['inserted']} of {r['tests']}" for r in runs)
+    returns = ", ".join(f"{r['mean_return']:.1f}" for r in runs)
+    steps = sorted({r["steps"] for r in runs})
+    return (f"The same environment with a maintained agent (`benchmarks/peg_td3_reference.py`, "
+            f"`QGPeg-v0`): Stable-Baselines3's TD3 with its defaults (two 400-300 critics with "
+            f"target networks, a delayed actor, one update per step), the same exploration "
+            f"noise and discount, after {' / '.join(f'{n:,}' for n in steps)} training steps "
+            f"inserted {inserted} fixed test starts with its deterministic actor (seeds "
+            f"{', '.join(str(r['seed']) for r in runs)}; mean return {returns}).")
 
 
 def _per_pair(results: list[dict[str, Any]], value: Any) -> dict[float, dict[int, dict]]:
