@@ -41,6 +41,18 @@ __all__ = ["FreePegEnv", "NextagePegEnv"]
 _START_RANGE = 2**31 - 1
 
 
+def _start(options: dict[str, Any] | None, rng: np.random.Generator) -> int:
+    """The start index ``reset`` asked for (``options["start"]``), else one from ``rng``.
+
+    :raises ValueError: on another option.
+    """
+    options = dict(options or {})
+    unknown = set(options) - {"start"}
+    if unknown:
+        raise ValueError(f"unknown reset options {sorted(unknown)}: start")
+    return int(options["start"]) if "start" in options else int(rng.integers(_START_RANGE))
+
+
 class FreePegEnv(gymnasium.Env):
     """The free peg (see the module docstring): the state the tip's position in the 20 cm
     workspace scaled to [-1, 1]^3, an action a 3-D offset of at most 1 cm per axis, the reward
@@ -67,12 +79,7 @@ class FreePegEnv(gymnasium.Env):
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = set(options) - {"start"}
-        if unknown:
-            raise ValueError(f"unknown reset options {sorted(unknown)}: start")
-        start = int(options["start"]) if "start" in options else int(
-            self.np_random.integers(_START_RANGE))
+        start = _start(options, self.np_random)
         state = self.peg.reset(seed=start)
         self._running = True
         return state.astype(np.float32), {"start": start, **self._info()}
@@ -123,12 +130,7 @@ class NextagePegEnv(RenderedRobot, gymnasium.Env):
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = set(options) - {"start"}
-        if unknown:
-            raise ValueError(f"unknown reset options {sorted(unknown)}: start")
-        start = int(options["start"]) if "start" in options else int(
-            self.np_random.integers(_START_RANGE))
+        start = _start(options, self.np_random)
         state = self.peg.reset(start)
         self._running = True
         return state.astype(np.float32), self._info(start)
