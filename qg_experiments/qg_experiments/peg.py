@@ -35,7 +35,7 @@ from qg_experiments.nextage_peg import NextagePeg
 from qg_experiments.profile import PegBudget
 from qg_experiments.runner import ALGORITHMS, algorithm_config, config_digest, episode_noise_seed
 
-__all__ = ["PegRunSpec", "peg_specs", "peg_learner_config", "peg_noise_config", "run_peg", "GRID_STATES", "GRID_ACTIONS",
+__all__ = ["PEG_NETWORKS", "PEG_NOISE", "PegRunSpec", "peg_specs", "peg_learner_config", "peg_noise_config", "run_peg", "GRID_STATES", "GRID_ACTIONS",
            "learning_curves", "q_spread", "PEG_ROBOTS"]
 
 #: The robots that move the peg, and the experiment each one's runs are saved under.
@@ -47,6 +47,15 @@ GRID_STATES = np.array(list(itertools.product((-2 / 3, 0.0, 2 / 3), repeat=3)))
 GRID_ACTIONS = np.array([[0, 0, 0], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1],
                          [0, 0, -1], [.5, .5, -.5], [.5, -.5, -.5], [-.5, .5, -.5],
                          [-.5, -.5, -.5]], dtype=float)
+
+
+#: The thesis's peg networks (ch. 8.3.2.1): 3 x 200 both, the actor's weights He-uniform, the
+#: critic's from N(0, 0.001), no target networks.
+PEG_NETWORKS: dict[str, Any] = {"actor_hidden": (200, 200, 200), "critic_hidden": (200, 200, 200),
+                                "actor_init": "he_uniform", "critic_init": "normal_1e-3",
+                                "target_networks": False}
+#: The thesis explores on every step: none of the Panda's clean steps or episodes.
+PEG_NOISE: dict[str, float] = {"clean_fraction": 0.0, "clean_episode_fraction": 0.0}
 
 
 @dataclass(frozen=True)
@@ -83,6 +92,13 @@ class PegRunSpec:
         return PEG_ROBOTS[self.robot]
 
     @property
+    def task_settings(self) -> dict[str, Any]:
+        """What the run takes beside its fields and ``config_digest``'s files: the networks and
+        the exploration above. Saved with the run; a saved run made with others (before they
+        were the thesis's) is not this run (``tasks``)."""
+        return {"networks": PEG_NETWORKS, "noise": PEG_NOISE}
+
+    @property
     def name(self) -> str:
         return f"{self.algorithm}_lr{self.lr:g}_s{self.seed}"
 
@@ -113,11 +129,8 @@ def peg_learner_config(spec: PegRunSpec, action_dim: int) -> LearnerConfig:
     return dataclasses.replace(
         config, seed=spec.seed, iterations_per_cycle=spec.train_iterations,
         cycle_steps=spec.episode_steps,
-        ddpg=dataclasses.replace(config.ddpg, actor_hidden=(200, 200, 200),
-                                 critic_hidden=(200, 200, 200), actor_init="he_uniform",
-                                 critic_init="normal_1e-3", target_networks=False,
-                                 critic_lr=spec.lr, actor_lr=spec.lr, seed=spec.seed,
-                                 gamma=spec.gamma))
+        ddpg=dataclasses.replace(config.ddpg, **PEG_NETWORKS, critic_lr=spec.lr,
+                                 actor_lr=spec.lr, seed=spec.seed, gamma=spec.gamma))
 
 
 def peg_noise_config(config_dir: str | None = None) -> NoiseConfig:
@@ -126,7 +139,7 @@ def peg_noise_config(config_dir: str | None = None) -> NoiseConfig:
     (docs/learning.md section 17), which the peg's experiments do not test."""
     noise = load_noise(load_ros_params(config_file("executor.yaml", config_dir)),
                        "executor.yaml")
-    return dataclasses.replace(noise, clean_fraction=0.0, clean_episode_fraction=0.0)
+    return dataclasses.replace(noise, **PEG_NOISE)
 
 
 def run_peg(spec: PegRunSpec) -> dict[str, Any]:
@@ -165,7 +178,8 @@ def run_peg(spec: PegRunSpec) -> dict[str, Any]:
     states = np.repeat(GRID_STATES, len(GRID_ACTIONS), axis=0)
     actions = np.tile(GRID_ACTIONS, (len(GRID_STATES), 1))
     return {"experiment": spec.experiment, "name": spec.name, "spec": dataclasses.asdict(spec),
-            "config_digest": config_digest(spec.config_dir), "episodes": episodes,
+            "config_digest": config_digest(spec.config_dir),
+            "task_settings": spec.task_settings, "episodes": episodes,
             "q_given": agent.q_values(states, actions).reshape(len(GRID_STATES), -1).tolist(),
             "q_pi": agent.q_values(GRID_STATES, agent.act(GRID_STATES)).tolist(),
             "rl_steps": int(sum(e["steps"] for e in episodes)),

@@ -49,3 +49,22 @@ def test_the_peg_explores_on_every_step_as_the_thesis():
     noise = peg_noise_config()
     assert noise.clean_fraction == noise.clean_episode_fraction == 0.0   # ... not the peg's
     assert (noise.kind, noise.sigma) == (panda["kind"], panda["sigma"])
+
+
+def test_a_peg_run_saved_before_the_thesis_networks_is_run_again(tmp_path):
+    """A saved peg run is reused only with the networks and exploration it ran with."""
+    import json
+
+    from qg_experiments.core.stack_settings import config_digest
+    from qg_experiments.peg import PegRunSpec
+    from qg_experiments.tasks import _saved, result_path
+
+    spec = PegRunSpec(algorithm="ddpg", lr=1e-4, seed=100)
+    path = result_path(tmp_path, spec)
+    path.parent.mkdir(parents=True)
+    saved = {"spec": {**spec.__dict__}, "config_digest": config_digest(), "episodes": []}
+    path.write_text(json.dumps(saved))                       # the Panda's inits: no settings
+    assert _saved(tmp_path, spec) is None
+    path.write_text(json.dumps({**saved, "task_settings": spec.task_settings}))
+    assert _saved(tmp_path, spec) is not None
+    assert spec.task_settings["networks"]["critic_init"] == "normal_1e-3"
