@@ -35,8 +35,9 @@ from qg_experiments.nextage_peg import NextagePeg
 from qg_experiments.profile import PegBudget
 from qg_experiments.runner import ALGORITHMS, algorithm_config, config_digest, episode_noise_seed
 
-__all__ = ["PEG_NETWORKS", "PEG_NOISE", "PegRunSpec", "peg_specs", "peg_learner_config", "peg_noise_config", "run_peg", "GRID_STATES", "GRID_ACTIONS",
-           "learning_curves", "q_spread", "PEG_ROBOTS"]
+__all__ = ["PEG_NETWORKS", "PEG_NOISE", "PegRunSpec", "peg_specs", "peg_learner_config",
+           "peg_noise_config", "run_peg", "GRID_STATES", "GRID_ACTIONS", "learning_curves",
+           "q_spread", "PEG_ROBOTS"]
 
 #: The robots that move the peg, and the experiment each one's runs are saved under.
 PEG_ROBOTS = {"free": "peg", "sim_nextage": "nextage"}

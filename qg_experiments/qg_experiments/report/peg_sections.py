@@ -1,5 +1,6 @@
 """Sections 5 and 6 of ``docs/results.md``: the clearance-fit peg, free and on the simulated
-Nextage; learning curves, the spread of Q across seeds, and the paired late-episode return."""
+Nextage; learning curves, the spread of Q across seeds, QG-DDPG against DDPG per learning rate
+paired by seed, and what a maintained agent (SB3's TD3) does on the same free peg."""
 from __future__ import annotations
 
 import json
