@@ -29,4 +29,4 @@ if [[ "${1:-}" == "--fast" ]]; then
   workers="${QG_TEST_WORKERS:-0}"
 fi
 exec .venv/bin/python -m pytest -n "$workers" --dist loadfile --no-loadscope-reorder \
-    "${tier[@]}" "$@"
+    ${tier[@]+"${tier[@]}"} "$@"
