@@ -59,3 +59,15 @@ def test_the_td3_reference_says_what_a_maintained_agent_did() -> None:
         {"seed": 1, "steps": 20000, "tests": 20, "inserted": 17, "mean_return": -31.25}]})
     assert "after 20,000 training steps inserted 20 of 20, 17 of 20 fixed test starts" in line
     assert "(seeds 0, 1; mean return -7.9, -31.2)" in line
+
+
+def test_the_first_insertion_per_run_and_its_median() -> None:
+    from qg_experiments.report.peg_sections import _first_insertions
+
+    def run(seed: int, successes: list[bool]) -> dict:
+        return {"spec": {"algorithm": "qgddpg", "lr": 1e-4, "seed": seed},
+                "episodes": [{"success": s} for s in successes]}
+    first = _first_insertions([run(2, [False] * 5), run(1, [False, False, True, True]),
+                               run(0, [True] + [False] * 3)])
+    assert first == {("qgddpg", 1e-4): "3 (1, 3, -)"}
+    assert _first_insertions([run(0, [False]), run(1, [False])]) == {("qgddpg", 1e-4): "- (-, -)"}

@@ -47,10 +47,11 @@ def peg_section(results: list[dict[str, Any]], figures: Path,
     if spread:
         plots.q_spread(spread, figures / f"{prefix}_q_std.png")
     tail = max(1, spec["episodes"] // 5)
+    first = _first_insertions(results)
     rows = []
     for (a, lr), c in curves.items():
         s = spread.get((a, lr))
-        rows.append([label(a), f"{lr:g}", str(c["seeds"]),
+        rows.append([label(a), f"{lr:g}", str(c["seeds"]), first[(a, lr)],
                      fmt(float(np.mean(c["return_mean"][-tail:])), 1),
                      f"{float(np.mean(c['success_mean'][-tail:])):.0%}",
                      fmt(float(np.mean(c["steps_mean"][-tail:])), 0),
@@ -58,17 +59,36 @@ def peg_section(results: list[dict[str, Any]], figures: Path,
     lines += [f"{robot}. {spec['episodes']} episodes of at most {spec['episode_steps']} steps "
               f"per run, {spec['train_iterations']} minibatch updates after each episode (thesis: "
               "50 epochs x up to 15 minibatches, 300 episodes, 10 seeds). Networks 3 x 200, no "
-              f"target networks, actor lr = critic lr. Speed: {speed(results)}.", "",
+              f"target networks (the thesis's initialisation: the actor He-uniform, the "
+              f"critic's weights from N(0, 0.001)), actor lr = critic lr, exploration noise on "
+              f"every step. Speed: {speed(results)}.", "",
               f"![{experiment} learning curves](figures/{prefix}_learning.png)", ""]
     if spread:
         lines += [f"![{experiment} Q spread](figures/{prefix}_q_std.png)", ""]
-    lines += table(["algorithm", "lr", "seeds", f"mean return, last {tail} episodes",
+    lines += table(["algorithm", "lr", "seeds", "first inserted in episode (median; each seed)",
+                    f"mean return, last {tail} episodes",
                     "success, last episodes", "steps, last episodes",
                     "median std of Q (27 x 11)"], rows)
     reference = figures.parent / "data" / TD3_REFERENCE
     if experiment == "peg" and reference.is_file():
         lines += ["", td3_reference_line(json.loads(reference.read_text()))]
     return lines + [""], {"curves": curves, "spread": spread, "tail": tail, "robot": experiment}
+
+
+def _first_insertions(results: list[dict[str, Any]]) -> dict[tuple[str, float], str]:
+    """Per (algorithm, lr): the episode (from 1) of each run's first insertion, seed by seed,
+    with their median; "-" for a run that never inserted (the median counts it as the last)."""
+    firsts: dict[tuple[str, float], list[tuple[int, float]]] = {}
+    for r in sorted(results, key=lambda r: r["spec"]["seed"]):
+        s = r["spec"]
+        episode = next((k + 1 for k, e in enumerate(r["episodes"]) if e["success"]), np.inf)
+        firsts.setdefault((s["algorithm"], s["lr"]), []).append((s["seed"], episode))
+    def episode(e: float) -> str:
+        return "-" if e == np.inf else f"{e:.0f}"
+
+    return {key: f"{episode(float(np.median([e for _, e in runs])))} ("
+                 + ", ".join(episode(e) for _, e in runs) + ")"
+            for key, runs in firsts.items()}
 
 
 #: ``benchmarks/peg_td3_reference.py``'s numbers, in ``docs/data``.
