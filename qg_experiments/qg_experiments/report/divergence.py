@@ -38,8 +38,10 @@ def run_excess(result: dict[str, Any], gamma: float, r_min: float, r_max: float)
     """How far the run's mean Q went outside its realisable range (its own discount)."""
     g = result["spec"].get("gamma") or gamma
     low, high = min(r_min, r_min / (1 - g)), max(r_max, r_max / (1 - g))
-    return max((max(c["mean_q"] - high, low - c["mean_q"]) for c in result["cycles"]),
-               default=-math.inf)
+    # The mean Q after each block of updates: a training cycle of the robot's runs, an episode
+    # of the peg's (whose runs train after every episode and record no cycles).
+    blocks = result["cycles"] if "cycles" in result else result["episodes"]
+    return max((max(c["mean_q"] - high, low - c["mean_q"]) for c in blocks), default=-math.inf)
 
 
 def run_divergence(result: dict[str, Any], gamma: float, r_min: float = -1.0,
@@ -48,7 +50,7 @@ def run_divergence(result: dict[str, Any], gamma: float, r_min: float = -1.0,
     discount."""
     g = result["spec"].get("gamma") or gamma
     q_range = (min(r_min, r_min / (1 - g)), max(r_max, r_max / (1 - g)))
-    d, o = split_by_excess({result["name"]: run_excess(result, gamma, r_min, r_max)}, q_range)
+    d, o = split_by_excess({"run": run_excess(result, gamma, r_min, r_max)}, q_range)
     return bool(d), bool(o)
 
 

@@ -13,7 +13,7 @@ from qg_learning_node.learner.algorithms import label
 from qg_experiments import peg, stats
 from qg_experiments.profile import PegBudget
 from qg_experiments.report import plots
-from qg_experiments.report.divergence import split_by_excess
+from qg_experiments.report.divergence import run_divergence
 from qg_experiments.report.markdown import fmt, speed, table
 
 __all__ = ["peg_section", "peg_paired", "peg_diverged", "peg_budget", "td3_reference_line",
@@ -126,11 +126,8 @@ def _mean_return(episodes: slice) -> Any:
 def peg_diverged(run: dict[str, Any]) -> bool:
     """Whether the run's critic diverged: its mean Q after some episode's updates left the
     realisable range of the peg's rewards ([-1, 0] a step, so [-1 / (1 - gamma), 0]) by more
-    than the grid's margin (``report.divergence``)."""
-    g = run["spec"]["gamma"]
-    low, high = -1.0 / (1.0 - g), 0.0
-    excess = max(max(e["mean_q"] - high, low - e["mean_q"]) for e in run["episodes"])
-    return bool(split_by_excess({"run": excess}, (low, high))[0])
+    than the grid's margin (``report.divergence``, at the run's own discount)."""
+    return run_divergence(run, run["spec"]["gamma"])[0]
 
 
 def peg_paired(results: list[dict[str, Any]], tail: int) -> list[str]:
@@ -154,14 +151,16 @@ def peg_paired(results: list[dict[str, Any]], tail: int) -> list[str]:
         for name, pairs in measures.items()}   # negated: paired_comparison's lower is better
     holm = {name: dict(zip(lrs, stats.holm([c[lr].wilcoxon_p for lr in lrs]), strict=True))
             for name, c in compared.items()}
-    spread = _per_pair(results, lambda run: run["q_given"])
     diverged = _per_pair(results, peg_diverged)
+    # The spread across the seeds both algorithms ran (``peg.q_spread``: two seeds at least).
+    spread = peg.q_spread([r for r in results
+                           if r["spec"]["seed"] in diverged.get(r["spec"]["lr"], {})])
     rows = []
     for lr in lrs:
         a, b = compared["all"][lr], compared["late"][lr]
-        seeds = spread[lr]
-        q = {alg: np.array([seeds[s][alg] for s in seeds]).std(axis=0).ravel()
-             for alg in ("qgddpg", "ddpg")} if len(seeds) >= 2 else None
+        seeds = diverged[lr]
+        q = {alg: spread[(alg, lr)] for alg in ("qgddpg", "ddpg")} \
+            if ("ddpg", lr) in spread else None
         rows.append([f"{lr:g}", f"{a.n} ({', '.join(str(s) for s in seeds)})",
                      f"{a.wins_a} / {a.wins_b} / {a.ties}",
                      stats.format_interval(a.difference, 2), f"{holm['all'][lr]:.3g}",
