@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -37,10 +38,20 @@ from qg_experiments.runner import ALGORITHMS, algorithm_config, config_digest, e
 
 __all__ = ["PEG_NETWORKS", "PEG_NOISE", "PegRunSpec", "peg_specs", "peg_learner_config",
            "peg_noise_config", "run_peg", "GRID_STATES", "GRID_ACTIONS", "learning_curves",
-           "q_spread", "PEG_ROBOTS"]
+           "q_spread", "PEG_ROBOTS", "PEG_RANDOM_KINDS", "PegRandomSpec", "peg_random_specs",
+           "run_peg_random", "random_experiment", "random_curves"]
 
 #: The robots that move the peg, and the experiment each one's runs are saved under.
 PEG_ROBOTS = {"free": "peg", "sim_nextage": "nextage"}
+#: The peg's random policies, the bar both learners have to clear: ``noise``, the learners'
+#: own exploration noise on the zero action (a learner that learns nothing), and ``uniform``
+#: over the action box.
+PEG_RANDOM_KINDS = ("noise", "uniform")
+
+
+def random_experiment(experiment: str) -> str:
+    """Where the random policies of a peg experiment (``peg``, ``nextage``) are saved."""
+    return f"{experiment}_random"
 
 #: 27 states: the centres of a 3 x 3 x 3 partition of the scaled workspace [-1, 1]^3.
 GRID_STATES = np.array(list(itertools.product((-2 / 3, 0.0, 2 / 3), repeat=3)))
@@ -148,31 +159,12 @@ def run_peg(spec: PegRunSpec) -> dict[str, Any]:
     torch.set_num_threads(1)
     start = time.perf_counter()
 
-    env = (make_environment("peg", load_ros_params(config_file("peg_env.yaml", spec.config_dir)),
-                            episode_steps=spec.episode_steps)
-           if spec.robot == "free" else NextagePeg(spec.config_dir, spec.episode_steps))
-    noise_config = peg_noise_config(spec.config_dir)
+    env = _peg_env(spec.robot, spec.config_dir, spec.episode_steps)
     learner = LearnerCore(peg_learner_config(spec, env.action_dim), env.state_dim,
                           env.action_dim)
-    episodes = []
     try:
-        for index in range(spec.episodes):
-            noise = ActionNoise(noise_config, env.action_dim,
-                                episode_noise_seed(spec.seed, index))
-            state = env.reset(seed=episode_noise_seed(spec.seed, index))
-            total, success = 0.0, False
-            while not env.truncated:
-                action = noise.perturb(learner.agent.act(state))
-                next_state, reward, terminal = env.step(action)
-                learner.add_transition(state, action, reward, next_state, terminal)
-                total += reward
-                state = next_state
-                if terminal:
-                    success = True
-                    break
-            diagnostics = learner.train_cycle()
-            episodes.append({"episode": index, "steps": env.steps, "success": success,
-                             "return": total, "mean_q": float(diagnostics["mean_q"])})
+        episodes = _episodes(env, spec.seed, spec.episodes, peg_noise_config(spec.config_dir),
+                             learner.agent.act, learner)
     finally:
         env.close()
     agent = learner.agent
@@ -190,6 +182,113 @@ def run_peg(spec: PegRunSpec) -> dict[str, Any]:
             "wall_time": time.perf_counter() - start}
 
 
+def _peg_env(robot: str, config_dir: str | None, episode_steps: int) -> Any:
+    """The environment that moves the peg: the free peg, or the Nextage through the cores."""
+    if robot == "free":
+        return make_environment("peg", load_ros_params(config_file("peg_env.yaml", config_dir)),
+                                episode_steps=episode_steps)
+    return NextagePeg(config_dir, episode_steps)
+
+
+def _episodes(env: Any, seed: int, episodes: int, noise_config: NoiseConfig,
+              act: Callable[[np.ndarray], np.ndarray],
+              learner: LearnerCore | None = None) -> list[dict[str, Any]]:
+    """Run ``episodes`` episodes of ``act`` perturbed by ``noise_config``; episode ``k`` starts
+    where and explores as every run of ``seed`` does (``episode_noise_seed``), so runs of one
+    seed, learning or random, meet the same starts. With a ``learner`` it stores each step and
+    trains after each episode (``mean_q`` in the record)."""
+    records = []
+    for index in range(episodes):
+        noise = ActionNoise(noise_config, env.action_dim, episode_noise_seed(seed, index))
+        state = env.reset(seed=episode_noise_seed(seed, index))
+        total, success = 0.0, False
+        while not env.truncated:
+            action = noise.perturb(act(state))
+            next_state, reward, terminal = env.step(action)
+            if learner is not None:
+                learner.add_transition(state, action, reward, next_state, terminal)
+            total += reward
+            state = next_state
+            if terminal:
+                success = True
+                break
+        record = {"episode": index, "steps": env.steps, "success": success, "return": total}
+        if learner is not None:
+            record["mean_q"] = float(learner.train_cycle()["mean_q"])
+        records.append(record)
+    return records
+
+
+@dataclass(frozen=True)
+class PegRandomSpec:
+    """One seed of a random policy on the peg (``PEG_RANDOM_KINDS``): the episodes of a learning
+    run of that seed, from the same starts, without learning.
+
+    :param kind: ``noise`` (the learners' exploration on the zero action) or ``uniform``.
+    """
+    kind: str
+    seed: int
+    episodes: int = 100
+    episode_steps: int = 200
+    config_dir: str | None = None
+    robot: str = "free"
+
+    def __post_init__(self) -> None:
+        if self.kind not in PEG_RANDOM_KINDS:
+            raise ValueError(f"kind must be one of {PEG_RANDOM_KINDS}, got {self.kind!r}")
+        if self.robot not in PEG_ROBOTS:
+            raise ValueError(f"robot must be one of {sorted(PEG_ROBOTS)}, got {self.robot!r}")
+        if self.episodes < 1 or self.episode_steps < 1:
+            raise ValueError("episodes and episode_steps must be >= 1")
+
+    @property
+    def experiment(self) -> str:
+        return random_experiment(PEG_ROBOTS[self.robot])
+
+    @property
+    def task_settings(self) -> dict[str, Any]:
+        """The exploration the ``noise`` kind takes (``PEG_NOISE``), saved with the run."""
+        return {"noise": PEG_NOISE}
+
+    @property
+    def label(self) -> str:
+        return {"noise": "random (exploration noise)", "uniform": "random (uniform)"}[self.kind]
+
+    @property
+    def name(self) -> str:
+        return f"random_{self.kind}_s{self.seed}"
+
+    def run(self) -> dict[str, Any]:
+        return run_peg_random(self)
+
+
+def peg_random_specs(budget: PegBudget, config_dir: str | None = None,
+                     robot: str = "free") -> list[PegRandomSpec]:
+    """The random policies of the budget (``PegBudget.random``), on its seeds and episodes."""
+    return [PegRandomSpec(kind=k, seed=s, episodes=budget.episodes,
+                          episode_steps=budget.episode_steps, config_dir=config_dir, robot=robot)
+            for k in budget.random for s in budget.seeds]
+
+
+def run_peg_random(spec: PegRandomSpec) -> dict[str, Any]:
+    """The random policy's episodes (the records of ``run_peg``, without Q)."""
+    start = time.perf_counter()
+    env = _peg_env(spec.robot, spec.config_dir, spec.episode_steps)
+    noise = peg_noise_config(spec.config_dir)
+    if spec.kind == "uniform":
+        noise = dataclasses.replace(noise, kind="uniform")
+    try:
+        episodes = _episodes(env, spec.seed, spec.episodes, noise,
+                             lambda state: np.zeros(env.action_dim))
+    finally:
+        env.close()
+    return {"experiment": spec.experiment, "name": spec.name, "label": spec.label,
+            "spec": dataclasses.asdict(spec), "config_digest": config_digest(spec.config_dir),
+            "task_settings": spec.task_settings, "episodes": episodes,
+            "rl_steps": int(sum(e["steps"] for e in episodes)),
+            "wall_time": time.perf_counter() - start}
+
+
 def _groups(results: list[dict[str, Any]]) -> dict[tuple[str, float], list[dict[str, Any]]]:
     groups: dict[tuple[str, float], list[dict[str, Any]]] = {}
     for r in results:
@@ -197,18 +296,28 @@ def _groups(results: list[dict[str, Any]]) -> dict[tuple[str, float], list[dict[
     return dict(sorted(groups.items()))
 
 
+def _curve(group: list[dict[str, Any]]) -> dict[str, Any]:
+    """Mean and standard error over the runs ``group`` of return and steps per episode."""
+    n = min(len(r["episodes"]) for r in group)
+    returns = np.array([[e["return"] for e in r["episodes"][:n]] for r in group])
+    steps = np.array([[e["steps"] for e in r["episodes"][:n]] for r in group], dtype=float)
+    success = np.array([[e["success"] for e in r["episodes"][:n]] for r in group], dtype=float)
+    return {"seeds": len(group), "return_mean": returns.mean(0),
+            "return_sem": returns.std(0) / np.sqrt(len(group)),
+            "steps_mean": steps.mean(0), "success_mean": success.mean(0)}
+
+
 def learning_curves(results: list[dict[str, Any]]) -> dict[tuple[str, float], dict[str, Any]]:
     """Per (algorithm, lr): mean and standard error over seeds of return and steps per episode."""
-    curves = {}
-    for key, group in _groups(results).items():
-        n = min(len(r["episodes"]) for r in group)
-        returns = np.array([[e["return"] for e in r["episodes"][:n]] for r in group])
-        steps = np.array([[e["steps"] for e in r["episodes"][:n]] for r in group], dtype=float)
-        success = np.array([[e["success"] for e in r["episodes"][:n]] for r in group], dtype=float)
-        curves[key] = {"seeds": len(group), "return_mean": returns.mean(0),
-                       "return_sem": returns.std(0) / np.sqrt(len(group)),
-                       "steps_mean": steps.mean(0), "success_mean": success.mean(0)}
-    return curves
+    return {key: _curve(group) for key, group in _groups(results).items()}
+
+
+def random_curves(results: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Per random policy (its label), the same statistics over its seeds (``run_peg_random``)."""
+    groups: dict[str, list[dict[str, Any]]] = {}
+    for r in sorted(results, key=lambda r: r["spec"]["kind"]):
+        groups.setdefault(r["label"], []).append(r)
+    return {name: _curve(group) for name, group in groups.items()}
 
 
 def q_spread(results: list[dict[str, Any]]) -> dict[tuple[str, float], np.ndarray]:

@@ -149,6 +149,8 @@ class PegBudget:
 
     :param gamma: the peg's own discount: its episodes last up to 200 steps, ten times the
         Panda task's, whose ``learner.yaml`` discount is tuned to them.
+    :param random: random policies run on the same seeds and starts, the bar both learners
+        have to clear (``peg.PEG_RANDOM_KINDS``); none by default.
     """
     lrs: tuple[float, ...]
     algorithms: tuple[str, ...] = COMPARED
@@ -157,6 +159,7 @@ class PegBudget:
     train_iterations: int = 750
     episode_steps: int = 200
     gamma: float = 0.99
+    random: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if not self.lrs or len(self.seeds) < 2:

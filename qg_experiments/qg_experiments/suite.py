@@ -37,8 +37,10 @@ def all_specs(profile: Profile, only: tuple[str, ...] = EXPERIMENTS,
                                     config_dir, arm)
     if "nextage" in only and profile.nextage is not None:   # slower per step than the free peg
         specs += peg.peg_specs(profile.nextage, config_dir, robot="sim_nextage")
+        specs += peg.peg_random_specs(profile.nextage, config_dir, robot="sim_nextage")
     if "peg" in only:
         specs += peg.peg_specs(profile.peg, config_dir)
+        specs += peg.peg_random_specs(profile.peg, config_dir)
     if "random" in only:
         specs += random_baselines.baseline_specs(profile.random, profile.estimator, config_dir,
                                                  arm)

@@ -68,3 +68,42 @@ def test_a_peg_run_saved_before_the_thesis_networks_is_run_again(tmp_path):
     path.write_text(json.dumps({**saved, "task_settings": spec.task_settings}))
     assert _saved(tmp_path, spec) is not None
     assert spec.task_settings["networks"]["critic_init"] == "normal_1e-3"
+
+
+def test_the_random_policies_meet_the_learners_starts_and_learn_nothing():
+    """Episode k of every run of a seed starts at the same place, learning or random; the
+    ``noise`` policy is the learners' exploration on the zero action, ``uniform`` the box."""
+    import dataclasses
+
+    import numpy as np
+    import pytest
+    from qg_experiments import peg
+
+    starts: dict[str, list] = {}
+    noise = peg.peg_noise_config()
+    for name, config in (("noise", noise), ("uniform", dataclasses.replace(noise, kind="uniform"))):
+        env = peg._peg_env("free", None, 3)
+        seen: list = []
+
+        def act(state: np.ndarray, seen: list = seen) -> np.ndarray:
+            seen.append(np.array(state))
+            return np.zeros(env.action_dim)
+        records = peg._episodes(env, 7, 3, config, act)
+        env.close()
+        starts[name] = [seen[sum(r["steps"] for r in records[:k])] for k in range(3)]
+        assert all(r["steps"] == 3 and not r["success"] and "mean_q" not in r for r in records)
+    assert np.array_equal(starts["noise"], starts["uniform"])
+    assert not np.array_equal(starts["noise"][0], starts["noise"][1])   # starts differ
+    spec = peg.PegRandomSpec(kind="uniform", seed=7, episodes=2, episode_steps=3)
+    result = spec.run()
+    assert spec.experiment == "peg_random" and result["name"] == "random_uniform_s7"
+    assert [e["steps"] for e in result["episodes"]] == [3, 3] and result["rl_steps"] == 6
+    assert spec.run()["episodes"] == result["episodes"]          # seeded: the same again
+    assert peg.PegRandomSpec(kind="noise", seed=7, episodes=2, episode_steps=3).run()[
+        "episodes"] != result["episodes"]
+    with pytest.raises(ValueError, match="kind must be one of"):
+        peg.PegRandomSpec(kind="gaussian", seed=0)
+    budget = PegBudget(lrs=(1e-3,), seeds=(0, 1), random=("noise", "uniform"))
+    assert [s.name for s in peg.peg_random_specs(budget)] == [
+        "random_noise_s0", "random_noise_s1", "random_uniform_s0", "random_uniform_s1"]
+    assert load_profile("thesis").peg.random == ("noise", "uniform")

@@ -67,7 +67,40 @@ def test_the_first_insertion_per_run_and_its_median() -> None:
     def run(seed: int, successes: list[bool]) -> dict:
         return {"spec": {"algorithm": "qgddpg", "lr": 1e-4, "seed": seed},
                 "episodes": [{"success": s} for s in successes]}
+    def key(spec: dict) -> tuple:
+        return spec["algorithm"], spec["lr"]
     first = _first_insertions([run(2, [False] * 5), run(1, [False, False, True, True]),
-                               run(0, [True] + [False] * 3)])
+                               run(0, [True] + [False] * 3)], key)
     assert first == {("qgddpg", 1e-4): "3 (1, 3, -)"}
-    assert _first_insertions([run(0, [False]), run(1, [False])]) == {("qgddpg", 1e-4): "- (-, -)"}
+    assert _first_insertions([run(0, [False]), run(1, [False])], key) \
+        == {("qgddpg", 1e-4): "- (-, -)"}
+
+
+def _random(kind: str, seed: int, returns: list[float]) -> dict:
+    return {"label": f"random ({kind})", "spec": {"kind": kind, "seed": seed},
+            "episodes": [{"return": r} for r in returns]}
+
+
+def test_each_learner_is_paired_with_the_better_random_policy_on_its_seeds() -> None:
+    from qg_experiments.report.peg_sections import peg_against_random
+    results, randoms = [], []
+    for seed in range(10):
+        # uniform is the better random policy (-150 against -190); QG-DDPG beats it on every
+        # seed, late by 100; DDPG beats it early only on seeds 0-4 and never late.
+        randoms += [_random("noise", seed, [-190.0] * 10), _random("uniform", seed, [-150.0] * 10)]
+        results += [_run("qgddpg", 1e-3, seed, [-150.0] * 8 + [-50.0] * 2, q=0.0),
+                    _run("ddpg", 1e-3, seed, [-140.0 if seed < 5 else -160.0] * 8
+                         + [-150.0] * 2, q=0.0)]
+    results.append(_run("qgddpg", 1e-2, 42, [0.0] * 10, q=0.0))   # no random on seed 42
+    lines = peg_against_random(results, randoms, tail=2)
+    assert "random (uniform)" in lines[0]
+    rows = [[c.strip() for c in line.strip("|").split("|")] for line in lines
+            if line.startswith("| 0.001 |")]
+    assert [r[1] for r in rows] == ["QG-DDPG", "DDPG"]
+    qg, ddpg = rows
+    assert qg[2] == "10" and qg[3] == "10 / 0 / 0" and qg[6] == "10 / 0 / 0"
+    assert qg[4].startswith("20.00 [20.00, 20.00]") and qg[7].startswith("100.00")
+    # Holm over the 2 comparisons: 2 * 2 / 2^10
+    assert float(qg[5]) == float(qg[8]) == np.float64(4 / 2 ** 10).round(5)
+    assert ddpg[3] == "5 / 5 / 0" and ddpg[6] == "0 / 0 / 10" and float(ddpg[8]) == 1.0
+    assert peg_against_random(results, [], tail=2) == []

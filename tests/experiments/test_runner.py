@@ -75,7 +75,7 @@ def test_tiny_suite_writes_results_figures_and_report(tmp_path) -> None:
                      command="test").read_text()
     out = tmp_path / "runs" / "tiny"
     for experiment, count in (("random", 2), ("grid", 2), ("variants", 4), ("state_grid", 2),
-                              ("peg", 4), ("nextage", 4)):
+                              ("peg", 4), ("peg_random", 4), ("nextage", 4)):
         assert len(list((out / experiment).glob("*.json"))) == count, experiment
     settings = StackSettings.load()
     for experiment in ("random", "grid", "variants", "state_grid"):   # the robot's runs
@@ -86,7 +86,8 @@ def test_tiny_suite_writes_results_figures_and_report(tmp_path) -> None:
                     "thesis's 4-D wrench state", "## 3. Mean predicted Q", "## 4. Where the "
                     "thesis says the graph matters", "## 5. Clearance-fit peg", "## 6. The peg on "
                     "the simulated Nextage", "## 7. QG-DDPG against DDPG, setting by setting",
-                    "## 7b. Over all cells", "TOST p (Holm)", "agree and disagree", "Wilcoxon"):
+                    "## 7b. Over all cells", "TOST p (Holm)", "agree and disagree", "Wilcoxon",
+                    "| random (uniform) | - | 2 |", "Each learner against the better random"):
         assert section in page
     for figure in ("exp1_random_steps", "exp3_mean_q", "exp5_peg_learning", "exp5_peg_q_std",
                    "exp6_nextage_learning", "exp7_profiles", "exp7_cell_means"):

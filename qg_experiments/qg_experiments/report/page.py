@@ -8,6 +8,7 @@ from typing import Any
 
 from qg_experiments import grid
 from qg_experiments.core import StackSettings
+from qg_experiments.peg import random_experiment
 from qg_experiments.profile import Profile
 from qg_experiments.random_baselines import random_bar_of, summarize_baselines
 from qg_experiments.report.aggregate_section import aggregate_section
@@ -20,7 +21,12 @@ from qg_experiments.report.grid_sections import (
     variant_section,
 )
 from qg_experiments.report.markdown import APART_BLOCKS, marked_blocks, step_label, table
-from qg_experiments.report.peg_sections import peg_budget, peg_paired, peg_section
+from qg_experiments.report.peg_sections import (
+    peg_against_random,
+    peg_budget,
+    peg_paired,
+    peg_section,
+)
 from qg_experiments.report.tables import episodes_csv, write_bar, write_csv
 from qg_experiments.tasks import load_results
 from qg_experiments.tensorboard_log import export_runs
@@ -56,7 +62,8 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
                             current.get(experiment, set()))
 
     results_by = {name: saved(name) for name in
-                  ("random", "grid", "variants", "state_grid", "peg", "nextage")}
+                  ("random", "grid", "variants", "state_grid", "peg", "nextage",
+                   random_experiment("peg"), random_experiment("nextage"))}
     random_results, grid_results = results_by["random"], results_by["grid"]
     variant_results, state_results = results_by["variants"], results_by["state_grid"]
     random_rows = summarize_baselines(random_results) if random_results else []
@@ -87,7 +94,8 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
                       for r in results})
     timing_path = out / "timing.json"
     timing = json.loads(timing_path.read_text()) if timing_path.exists() else {}
-    robot_runs = [r for name, results in results_by.items() if name != "peg" for r in results]
+    robot_runs = [r for name, results in results_by.items()
+                  if name not in ("peg", random_experiment("peg")) for r in results]
     estimator = {"ekf": "the EKF wrench estimator (as in the ROS stack)",
                  "ground_truth": "the simulator's true contact wrench (perfect sensor)"}
     lines = ["# Results: the thesis's experiments in simulation", "",
@@ -185,10 +193,13 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
         results = results_by[experiment]
         if experiment == "nextage" and profile.nextage is None and not results:
             continue
-        section, data = peg_section(results, figures, experiment)
+        randoms = results_by[random_experiment(experiment)]
+        section, data = peg_section(results, figures, experiment, randoms)
         lines += section
         if data:
             lines += [*peg_paired(results, data["tail"]), ""]
+            against = peg_against_random(results, randoms, data["tail"])
+            lines += [*against, ""] if against else []
         peg_data.append(data)
     grids = {f"grid (`{pg.observation or settings.task.observation}`, the default)": grid_results,
              "grid with the thesis's 4-D state": state_results}

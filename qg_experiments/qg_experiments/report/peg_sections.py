@@ -16,8 +16,8 @@ from qg_experiments.report import plots
 from qg_experiments.report.divergence import run_divergence
 from qg_experiments.report.markdown import fmt, speed, table
 
-__all__ = ["peg_section", "peg_paired", "peg_diverged", "peg_budget", "td3_reference_line",
-           "TD3_REFERENCE"]
+__all__ = ["peg_section", "peg_paired", "peg_against_random", "peg_diverged", "peg_budget",
+           "td3_reference_line", "TD3_REFERENCE"]
 
 #: Per peg experiment: section heading, figure-name prefix, what moved the peg.
 _PEG_PAGES = {
@@ -31,31 +31,40 @@ _PEG_PAGES = {
 }
 
 
-def peg_section(results: list[dict[str, Any]], figures: Path,
-                experiment: str = "peg") -> tuple[list[str], dict]:
+def peg_section(results: list[dict[str, Any]], figures: Path, experiment: str = "peg",
+                randoms: list[dict[str, Any]] | None = None) -> tuple[list[str], dict]:
     """The section of a peg experiment, and its curves and spread for the closing comparison
-    (empty without runs)."""
+    (empty without runs); ``randoms``: the random policies run on its seeds
+    (``peg.run_peg_random``), in the table and the figure beside the learners."""
     heading, prefix, robot = _PEG_PAGES[experiment]
     lines = [heading, ""]
     if not results:
         return lines + ["Not run in this profile.", ""], {}
+    randoms = randoms or []
     curves = peg.learning_curves(results)
+    random_curves = peg.random_curves(randoms)
     spread = peg.q_spread(results)
     spec = results[0]["spec"]
     window = 5 if spec["episodes"] >= 20 else 1
-    plots.peg_learning(curves, window, figures / f"{prefix}_learning.png")
+    plots.peg_learning(curves, window, figures / f"{prefix}_learning.png", random_curves)
     if spread:
         plots.q_spread(spread, figures / f"{prefix}_q_std.png")
     tail = max(1, spec["episodes"] // 5)
-    first = _first_insertions(results)
-    rows = []
-    for (a, lr), c in curves.items():
-        s = spread.get((a, lr))
-        rows.append([label(a), f"{lr:g}", str(c["seeds"]), first[(a, lr)],
-                     fmt(float(np.mean(c["return_mean"][-tail:])), 1),
-                     f"{float(np.mean(c['success_mean'][-tail:])):.0%}",
-                     fmt(float(np.mean(c["steps_mean"][-tail:])), 0),
-                     "n/a" if s is None else fmt(float(np.median(s)), 3)])
+    first = _first_insertions(results, lambda s: (s["algorithm"], s["lr"]))
+    first_random = _first_insertions(randoms, lambda s: s["kind"])
+
+    def row(name: str, lr: str, c: dict[str, Any], first: str, s: np.ndarray | None) -> list[str]:
+        return [name, lr, str(c["seeds"]), first,
+                fmt(float(np.mean(c["return_mean"][-tail:])), 1),
+                f"{float(np.mean(c['success_mean'][-tail:])):.0%}",
+                fmt(float(np.mean(c["steps_mean"][-tail:])), 0),
+                "n/a" if s is None else fmt(float(np.median(s)), 3)]
+
+    rows = [row(label(a), f"{lr:g}", c, first[(a, lr)], spread.get((a, lr)))
+            for (a, lr), c in curves.items()]
+    kinds = {r["label"]: r["spec"]["kind"] for r in randoms}
+    rows += [row(name, "-", c, first_random[kinds[name]], None)
+             for name, c in random_curves.items()]
     lines += [f"{robot}. {spec['episodes']} episodes of at most {spec['episode_steps']} steps "
               f"per run, {spec['train_iterations']} minibatch updates after each episode (thesis: "
               "50 epochs x up to 15 minibatches, 300 episodes, 10 seeds). Networks 3 x 200, no "
@@ -75,14 +84,15 @@ def peg_section(results: list[dict[str, Any]], figures: Path,
     return lines + [""], {"curves": curves, "spread": spread, "tail": tail, "robot": experiment}
 
 
-def _first_insertions(results: list[dict[str, Any]]) -> dict[tuple[str, float], str]:
-    """Per (algorithm, lr): the episode (from 1) of each run's first insertion, seed by seed,
-    with their median; "-" for a run that never inserted (the median counts it as the last)."""
-    firsts: dict[tuple[str, float], list[tuple[int, float]]] = {}
+def _first_insertions(results: list[dict[str, Any]], key: Any) -> dict[Any, str]:
+    """Per ``key(spec)`` ((algorithm, lr), or a random policy's kind): the episode (from 1) of
+    each run's first insertion, seed by seed, with their median; "-" for a run that never
+    inserted (the median counts it as the last)."""
+    firsts: dict[Any, list[tuple[int, float]]] = {}
     for r in sorted(results, key=lambda r: r["spec"]["seed"]):
         s = r["spec"]
         episode = next((k + 1 for k, e in enumerate(r["episodes"]) if e["success"]), np.inf)
-        firsts.setdefault((s["algorithm"], s["lr"]), []).append((s["seed"], episode))
+        firsts.setdefault(key(s), []).append((s["seed"], episode))
     def episode(e: float) -> str:
         return "-" if e == np.inf else f"{e:.0f}"
 
@@ -186,6 +196,56 @@ def peg_paired(results: list[dict[str, Any]], tail: int) -> list[str]:
                         "all: p (Holm)", "late: QG / DDPG / ties", "late: QG - DDPG [95 % CI]",
                         "late: p (Holm)", "median Q spread QG / DDPG",
                         "QG spread smaller", "diverged QG / DDPG"], rows)]
+
+
+def peg_against_random(results: list[dict[str, Any]], randoms: list[dict[str, Any]],
+                       tail: int) -> list[str]:
+    """Each learner against the best random policy on the same seeds, which met the same starts
+    (``peg.run_peg_random``): whether it learned anything at all, per learning rate.
+
+    The best random policy is the one with the higher mean return over all its episodes and
+    seeds (as the Panda's bar is the best random setting). The measures and tests are
+    ``peg_paired``'s, Holm-corrected over every (learning rate, algorithm).
+    """
+    by_kind: dict[str, dict[int, dict[str, Any]]] = {}
+    for r in randoms:
+        by_kind.setdefault(r["spec"]["kind"], {})[r["spec"]["seed"]] = r
+    if not by_kind or not results:
+        return []
+    everything, late = _mean_return(slice(None)), _mean_return(slice(-tail, None))
+    best = by_kind[max(sorted(by_kind), key=lambda kind: np.mean(
+        [everything(r) for r in by_kind[kind].values()]))]
+    runs: dict[tuple[float, str], dict[int, dict[str, Any]]] = {}
+    for r in results:
+        s = r["spec"]
+        if s["seed"] in best:
+            runs.setdefault((s["lr"], s["algorithm"]), {})[s["seed"]] = r
+    keys = sorted(runs, key=lambda k: (-k[0], k[1] != "qgddpg"))
+    if not keys:
+        return []
+    compared = {name: [stats.paired_comparison(   # negated: paired_comparison's lower is better
+        [-measure(runs[key][seed]) for seed in sorted(runs[key])],
+        [-measure(best[seed]) for seed in sorted(runs[key])]) for key in keys]
+        for name, measure in (("all", everything), ("late", late))}
+    holm = {name: stats.holm([c.wilcoxon_p for c in tests]) for name, tests in compared.items()}
+    rows = []
+    for i, (lr, algorithm) in enumerate(keys):
+        a, b = compared["all"][i], compared["late"][i]
+        rows.append([f"{lr:g}", label(algorithm), str(a.n),
+                     f"{a.wins_a} / {a.wins_b} / {a.ties}",
+                     stats.format_interval(a.difference, 2), f"{holm['all'][i]:.3g}",
+                     f"{b.wins_a} / {b.wins_b} / {b.ties}",
+                     stats.format_interval(b.difference, 2), f"{holm['late'][i]:.3g}"])
+    name = next(iter(best.values()))["label"]
+    return [f"Each learner against the better random policy, {name} (the higher mean return "
+            f"over all episodes), on the same seeds, which met the same starts: the bar a "
+            f"learner has to clear to have learned anything. The measures and tests are the "
+            f"table's above; learner higher / random higher / ties, learner minus random, "
+            f"Holm over the {len(keys)} learner-and-learning-rate comparisons.", "",
+            *table(["lr", "learner", "pairs", "all: learner / random / ties",
+                    "all: learner - random [95 % CI]", "all: p (Holm)",
+                    "late: learner / random / ties", "late: learner - random [95 % CI]",
+                    "late: p (Holm)"], rows)]
 
 
 def peg_budget(budget: PegBudget) -> str:

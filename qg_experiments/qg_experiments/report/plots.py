@@ -95,8 +95,9 @@ def smooth(values: np.ndarray, window: int) -> np.ndarray:
 
 
 def peg_learning(curves: dict[tuple[str, float], dict[str, Any]], window: int,
-                 path: Path) -> None:
-    """The peg's episode return per learning rate (``peg.learning_curves``), smoothed."""
+                 path: Path, randoms: dict[str, dict[str, Any]] | None = None) -> None:
+    """The peg's episode return per learning rate (``peg.learning_curves``), smoothed, with the
+    random policies' (``peg.random_curves``) dashed in every panel."""
     lrs = sorted({k[1] for k in curves}, reverse=True)
     fig, axes = pyplot().subplots(1, len(lrs), figsize=(4 * len(lrs), 3.4), sharey=True,
                                   squeeze=False)
@@ -108,6 +109,10 @@ def peg_learning(curves: dict[tuple[str, float], dict[str, Any]], window: int,
             x = np.arange(len(mean)) + window
             ax.plot(x, mean, color=COLORS[a], label=f"{label(a)}, {c['seeds']} seeds")
             ax.fill_between(x, mean - sem, mean + sem, color=COLORS[a], alpha=0.2)
+        for (name, c), style in zip((randoms or {}).items(), ("--", ":"), strict=False):
+            mean = smooth(c["return_mean"], window)
+            ax.plot(np.arange(len(mean)) + window, mean, style, color="0.4", linewidth=1,
+                    label=f"{name}, {c['seeds']} seeds")
         ax.set_title(f"lr {lr:g}")
         ax.set_xlabel("episode")
     axes[0][0].set_ylabel("episode return (mean ± s.e.)" + (
