@@ -43,10 +43,10 @@ __all__ = ["PEG_NETWORKS", "PEG_NOISE", "PegRunSpec", "peg_specs", "peg_learner_
 
 #: The robots that move the peg, and the experiment each one's runs are saved under.
 PEG_ROBOTS = {"free": "peg", "sim_nextage": "nextage"}
-#: The peg's random policies, the bar both learners have to clear: ``noise``, the learners'
-#: own exploration noise on the zero action (a learner that learns nothing), and ``uniform``
-#: over the action box.
-PEG_RANDOM_KINDS = ("noise", "uniform")
+#: The peg's random policies, the bar both learners have to clear, and what each one sends:
+#: ``noise`` is a learner that learns nothing.
+PEG_RANDOM_KINDS = {"noise": "the learners' exploration noise on the zero action",
+                    "uniform": "actions uniform over the action box"}
 
 
 def random_experiment(experiment: str) -> str:
@@ -235,7 +235,7 @@ class PegRandomSpec:
 
     def __post_init__(self) -> None:
         if self.kind not in PEG_RANDOM_KINDS:
-            raise ValueError(f"kind must be one of {PEG_RANDOM_KINDS}, got {self.kind!r}")
+            raise ValueError(f"kind must be one of {tuple(PEG_RANDOM_KINDS)}, got {self.kind!r}")
         if self.robot not in PEG_ROBOTS:
             raise ValueError(f"robot must be one of {sorted(PEG_ROBOTS)}, got {self.robot!r}")
         if self.episodes < 1 or self.episode_steps < 1:

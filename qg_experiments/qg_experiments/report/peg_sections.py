@@ -70,7 +70,13 @@ def peg_section(results: list[dict[str, Any]], figures: Path, experiment: str = 
               "50 epochs x up to 15 minibatches, 300 episodes, 10 seeds). Networks 3 x 200, no "
               f"target networks (the thesis's initialisation: the actor He-uniform, the "
               f"critic's weights from N(0, 0.001)), actor lr = critic lr, exploration noise on "
-              f"every step. Speed: {speed(results)}.", "",
+              f"every step. Speed: {speed(results)}."
+              + (" Beside them, random policies on the same seeds, which meet the same starts "
+                 "and learn nothing: " + "; ".join(
+                     f"{r['label']}, {peg.PEG_RANDOM_KINDS[r['spec']['kind']]}"
+                     for r in {r["label"]: r for r in randoms}.values()) + "."
+                 if randoms else ""),
+              "",
               f"![{experiment} learning curves](figures/{prefix}_learning.png)", ""]
     if spread:
         lines += [f"![{experiment} Q spread](figures/{prefix}_q_std.png)", ""]
