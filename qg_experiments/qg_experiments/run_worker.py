@@ -9,6 +9,8 @@ from typing import Any, Protocol
 
 import torch
 
+from qg_experiments.code_version import code_version
+
 __all__ = ["RunnableSpec", "run_one"]
 
 
@@ -23,6 +25,7 @@ class RunnableSpec(Protocol):
 
 
 def run_one(spec: RunnableSpec) -> tuple[RunnableSpec, dict[str, Any]]:
-    """One run in a worker of either backend: single-threaded torch, as every worker runs."""
+    """One run in a worker of either backend: single-threaded torch, as every worker runs; the
+    result says which code made it (``code_version``, of the checkout this worker runs from)."""
     torch.set_num_threads(1)
-    return spec, spec.run()
+    return spec, {**spec.run(), "code": code_version()}

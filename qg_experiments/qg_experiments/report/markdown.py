@@ -12,10 +12,11 @@ from typing import Any
 from qg_learning_node.learner.algorithms import label
 
 from qg_experiments import stats
+from qg_experiments.code_version import UNRECORDED
 from qg_experiments.random_baselines import Bar
 
 __all__ = ["fmt", "table", "APART_BLOCKS", "marked_blocks", "write_marked_block", "speed",
-           "bar_text", "grid_cell", "grid_table"]
+           "bar_text", "grid_cell", "grid_table", "code_label"]
 
 
 def fmt(x: float | None, digits: int = 1) -> str:
@@ -44,6 +45,25 @@ def step_label(results: list[dict[str, Any]]) -> str:
     steps = sorted({(str(r.get("engine", OLD_STEP[0])), float(r.get("step_limit", OLD_STEP[1])))
                     for r in results})
     return "; ".join(f"{engine}, step limit {limit:g} s" for engine, limit in steps)
+
+
+def code_label(results: list[dict[str, Any]]) -> str:
+    """The commits ``results`` were made at (``code_version``), most runs first, with how many
+    runs each and whether its checkout had modified files; runs that recorded none last."""
+    counts: dict[tuple[str, bool], int] = {}
+    unrecorded = 0
+    for r in results:
+        code = r.get("code", UNRECORDED)
+        if code["commit"] is None:
+            unrecorded += 1
+        else:
+            key = (code["commit"][:10], bool(code["modified"]))
+            counts[key] = counts.get(key, 0) + 1
+    parts = [f"`{commit}`{' with modified files' if modified else ''} ({n} runs)"
+             for (commit, modified), n in sorted(counts.items(), key=lambda kv: -kv[1])]
+    if unrecorded:
+        parts.append(f"not recorded ({unrecorded} runs, saved before runs recorded it)")
+    return "; ".join(parts)
 
 
 def speed(results: list[dict[str, Any]]) -> str:

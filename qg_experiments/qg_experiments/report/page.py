@@ -20,7 +20,13 @@ from qg_experiments.report.grid_sections import (
     random_section,
     variant_section,
 )
-from qg_experiments.report.markdown import APART_BLOCKS, marked_blocks, step_label, table
+from qg_experiments.report.markdown import (
+    APART_BLOCKS,
+    code_label,
+    marked_blocks,
+    step_label,
+    table,
+)
 from qg_experiments.report.peg_sections import (
     peg_against_random,
     peg_budget,
@@ -116,6 +122,10 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
              f"**Physics and step.** The robot runs' engine and RL step: "
              f"{step_label(robot_runs) or 'none run'} (each section's speed line names its "
              f"own; a step ends at rest or at its limit).", "",
+             f"**Code.** The commits the runs were made at: "
+             f"{code_label([r for rs in results_by.values() for r in rs]) or 'none run'} (a "
+             f"saved run is reused while its spec and config numbers match, whatever the code; "
+             f"`code_version`).", "",
              f"**Seeds.** Every table below is computed on the report seeds "
              f"{', '.join(map(str, profile.seeds.report))}; every choice of the setup (the state, "
              f"the discount, the variants' cells) was made on the tuning seeds "
