@@ -12,6 +12,9 @@ and critic. Exploration is ``executor.yaml``'s noise on every step (no clean ste
 thesis's). At the end each network's Q is evaluated on a regular grid of 27 states with 11 fixed
 actions and with the actor's action; the spread of those predictions across seeds measures soft
 divergence (thesis Fig. 8.3).
+
+Beside the learners, random policies (``PegRandomSpec``) run the same seeds' episodes from the
+same starts without learning: the bar a learner has to clear (the thesis has none for the peg).
 """
 from __future__ import annotations
 
