@@ -9,6 +9,7 @@ so such a mix shows.
 from __future__ import annotations
 
 import subprocess
+from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
@@ -24,9 +25,10 @@ def _git(path: Path, *args: str) -> str:
 
 
 def code_version(path: Path | None = None) -> dict[str, Any]:
-    """``{"commit": sha, "modified": bool}`` of the git checkout holding ``path`` (default: this
-    package); ``UNRECORDED`` outside a checkout or without git."""
-    path = Path(__file__).resolve().parent if path is None else Path(path)
+    """``{"commit": sha, "modified": bool}`` of the git checkout holding ``path`` (default: the
+    installed ``qg_experiments``, an editable install's checkout); ``UNRECORDED`` outside a
+    checkout or without git."""
+    path = Path(str(files("qg_experiments"))) if path is None else Path(path)
     try:
         commit = _git(path, "rev-parse", "HEAD").strip()
         modified = bool(_git(path, "status", "--porcelain", "--untracked-files=no").strip())
