@@ -126,8 +126,8 @@ def test_separate_sim_bridge_and_estimator_processes_complete_a_step(stack, robo
         assert time.monotonic() - t0 < 10.0, stack.logs()
         assert event.duration <= 0.25 + 0.02
         # Two restarts: the sim's start and the reset. A process's line reaches its log file
-        # through the launcher's reading thread, a little after the process wrote it (once in
-        # a rehearsal of CI the second line was not there yet when the step had ended).
+        # through the launcher's reading thread, a little after the process wrote it (once, in
+        # a rehearsal of CI, the logs read right after the step held only the first).
         assert cli.spin_until(lambda: stack.logs().count("the sim restarted") == 2, 5.0), \
             stack.logs()
         assert np.all(np.isfinite(wrench(event.wrench_estimate)))
