@@ -67,8 +67,8 @@ def test_the_first_insertion_per_run_and_its_median() -> None:
     def run(seed: int, successes: list[bool]) -> dict:
         return {"spec": {"algorithm": "qgddpg", "lr": 1e-4, "seed": seed},
                 "episodes": [{"success": s} for s in successes]}
-    def key(spec: dict) -> tuple:
-        return spec["algorithm"], spec["lr"]
+    def key(run: dict) -> tuple:
+        return run["spec"]["algorithm"], run["spec"]["lr"]
     first = _first_insertions([run(2, [False] * 5), run(1, [False, False, True, True]),
                                run(0, [True] + [False] * 3)], key)
     assert first == {("qgddpg", 1e-4): "3 (1, 3, -)"}

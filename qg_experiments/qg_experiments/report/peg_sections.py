@@ -50,8 +50,8 @@ def peg_section(results: list[dict[str, Any]], figures: Path, experiment: str = 
     if spread:
         plots.q_spread(spread, figures / f"{prefix}_q_std.png")
     tail = max(1, spec["episodes"] // 5)
-    first = _first_insertions(results, lambda s: (s["algorithm"], s["lr"]))
-    first_random = _first_insertions(randoms, lambda s: s["kind"])
+    first = _first_insertions(results, lambda r: (r["spec"]["algorithm"], r["spec"]["lr"]))
+    first_random = _first_insertions(randoms, lambda r: r["label"])
 
     def row(name: str, lr: str, c: dict[str, Any], first: str, s: np.ndarray | None) -> list[str]:
         return [name, lr, str(c["seeds"]), first,
@@ -62,9 +62,7 @@ def peg_section(results: list[dict[str, Any]], figures: Path, experiment: str = 
 
     rows = [row(label(a), f"{lr:g}", c, first[(a, lr)], spread.get((a, lr)))
             for (a, lr), c in curves.items()]
-    kinds = {r["label"]: r["spec"]["kind"] for r in randoms}
-    rows += [row(name, "-", c, first_random[kinds[name]], None)
-             for name, c in random_curves.items()]
+    rows += [row(name, "-", c, first_random[name], None) for name, c in random_curves.items()]
     lines += [f"{robot}. {spec['episodes']} episodes of at most {spec['episode_steps']} steps "
               f"per run, {spec['train_iterations']} minibatch updates after each episode (thesis: "
               "50 epochs x up to 15 minibatches, 300 episodes, 10 seeds). Networks 3 x 200, no "
@@ -91,14 +89,14 @@ def peg_section(results: list[dict[str, Any]], figures: Path, experiment: str = 
 
 
 def _first_insertions(results: list[dict[str, Any]], key: Any) -> dict[Any, str]:
-    """Per ``key(spec)`` ((algorithm, lr), or a random policy's kind): the episode (from 1) of
+    """Per ``key(run)`` ((algorithm, lr), or a random policy's label): the episode (from 1) of
     each run's first insertion, seed by seed, with their median; "-" for a run that never
     inserted (the median counts it as the last)."""
     firsts: dict[Any, list[tuple[int, float]]] = {}
     for r in sorted(results, key=lambda r: r["spec"]["seed"]):
-        s = r["spec"]
         episode = next((k + 1 for k, e in enumerate(r["episodes"]) if e["success"]), np.inf)
-        firsts.setdefault(key(s), []).append((s["seed"], episode))
+        firsts.setdefault(key(r), []).append((r["spec"]["seed"], episode))
+
     def episode(e: float) -> str:
         return "-" if e == np.inf else f"{e:.0f}"
 
@@ -139,6 +137,19 @@ def _mean_return(episodes: slice) -> Any:
     return lambda run: float(np.mean([e["return"] for e in run["episodes"][episodes]]))
 
 
+def _measures(tail: int) -> dict[str, Any]:
+    """The two per-run measures both paired tables compare: the mean return over all episodes
+    (how fast the run learned) and over the last ``tail`` (where it got to)."""
+    return {"all": _mean_return(slice(None)), "late": _mean_return(slice(-tail, None))}
+
+
+def _paired_cells(c: stats.PairedComparison, p: float) -> list[str]:
+    """A paired comparison's cells: wins of each side and ties, the difference with its 95 %
+    interval, the (Holm-corrected) p."""
+    return [f"{c.wins_a} / {c.wins_b} / {c.ties}", stats.format_interval(c.difference, 2),
+            f"{p:.3g}"]
+
+
 def peg_diverged(run: dict[str, Any]) -> bool:
     """Whether the run's critic diverged: its mean Q after some episode's updates left the
     realisable range of the peg's rewards ([-1, 0] a step, so [-1 / (1 - gamma), 0]) by more
@@ -156,8 +167,7 @@ def peg_paired(results: list[dict[str, Any]], tail: int) -> list[str]:
     the spread of the final Q across seeds (27 states x 11 actions): its median per algorithm
     and the state-action points where QG-DDPG's is the smaller.
     """
-    measures = {"all": _per_pair(results, _mean_return(slice(None))),
-                "late": _per_pair(results, _mean_return(slice(-tail, None)))}
+    measures = {name: _per_pair(results, measure) for name, measure in _measures(tail).items()}
     lrs = [lr for lr, pairs in measures["all"].items() if pairs]
     if not lrs:
         return []
@@ -178,10 +188,7 @@ def peg_paired(results: list[dict[str, Any]], tail: int) -> list[str]:
         q = {alg: spread[(alg, lr)] for alg in ("qgddpg", "ddpg")} \
             if ("ddpg", lr) in spread else None
         rows.append([f"{lr:g}", f"{a.n} ({', '.join(str(s) for s in seeds)})",
-                     f"{a.wins_a} / {a.wins_b} / {a.ties}",
-                     stats.format_interval(a.difference, 2), f"{holm['all'][lr]:.3g}",
-                     f"{b.wins_a} / {b.wins_b} / {b.ties}",
-                     stats.format_interval(b.difference, 2), f"{holm['late'][lr]:.3g}",
+                     *_paired_cells(a, holm["all"][lr]), *_paired_cells(b, holm["late"][lr]),
                      "n/a" if q is None else
                      f"{np.median(q['qgddpg']):.3g} / {np.median(q['ddpg']):.3g}",
                      "n/a" if q is None else
@@ -218,7 +225,8 @@ def peg_against_random(results: list[dict[str, Any]], randoms: list[dict[str, An
         by_kind.setdefault(r["spec"]["kind"], {})[r["spec"]["seed"]] = r
     if not by_kind or not results:
         return []
-    everything, late = _mean_return(slice(None)), _mean_return(slice(-tail, None))
+    measures = _measures(tail)
+    everything = measures["all"]
     best = by_kind[max(sorted(by_kind), key=lambda kind: np.mean(
         [everything(r) for r in by_kind[kind].values()]))]
     runs: dict[tuple[float, str], dict[int, dict[str, Any]]] = {}
@@ -232,16 +240,13 @@ def peg_against_random(results: list[dict[str, Any]], randoms: list[dict[str, An
     compared = {name: [stats.paired_comparison(   # negated: paired_comparison's lower is better
         [-measure(runs[key][seed]) for seed in sorted(runs[key])],
         [-measure(best[seed]) for seed in sorted(runs[key])]) for key in keys]
-        for name, measure in (("all", everything), ("late", late))}
+        for name, measure in measures.items()}
     holm = {name: stats.holm([c.wilcoxon_p for c in tests]) for name, tests in compared.items()}
     rows = []
     for i, (lr, algorithm) in enumerate(keys):
         a, b = compared["all"][i], compared["late"][i]
         rows.append([f"{lr:g}", label(algorithm), str(a.n),
-                     f"{a.wins_a} / {a.wins_b} / {a.ties}",
-                     stats.format_interval(a.difference, 2), f"{holm['all'][i]:.3g}",
-                     f"{b.wins_a} / {b.wins_b} / {b.ties}",
-                     stats.format_interval(b.difference, 2), f"{holm['late'][i]:.3g}"])
+                     *_paired_cells(a, holm["all"][i]), *_paired_cells(b, holm["late"][i])])
     name = next(iter(best.values()))["label"]
     return [f"Each learner against the better random policy, {name} (the higher mean return "
             f"over all episodes), on the same seeds, which met the same starts: the bar a "
