@@ -23,6 +23,7 @@ import itertools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -37,6 +38,7 @@ from qg_learning_node.learner.learner_params import learner_config_from_params
 from qg_experiments.environments import make_environment
 from qg_experiments.nextage_peg import NextagePeg
 from qg_experiments.profile import PegBudget
+from qg_experiments.run_progress import RunProgress
 from qg_experiments.runner import ALGORITHMS, algorithm_config, config_digest, episode_noise_seed
 
 __all__ = ["PEG_NETWORKS", "PEG_NOISE", "PegRunSpec", "peg_specs", "peg_learner_config",
@@ -120,6 +122,10 @@ class PegRunSpec:
     def run(self) -> dict[str, Any]:
         return run_peg(self)
 
+    def run_resuming(self, progress: Path) -> dict[str, Any]:
+        """The run, saving its progress in ``progress`` and continuing from what is there."""
+        return run_peg(self, progress)
+
 
 def peg_specs(budget: PegBudget, config_dir: str | None = None,
               robot: str = "free") -> list[PegRunSpec]:
@@ -157,32 +163,58 @@ def peg_noise_config(config_dir: str | None = None) -> NoiseConfig:
     return dataclasses.replace(noise, **PEG_NOISE)
 
 
-def run_peg(spec: PegRunSpec) -> dict[str, Any]:
-    """Train for ``spec.episodes`` episodes; per-episode records and the final Q on the grid."""
+def run_peg(spec: PegRunSpec, progress: Path | None = None) -> dict[str, Any]:
+    """Train for ``spec.episodes`` episodes; per-episode records and the final Q on the grid.
+
+    :param progress: a file to save the run's progress in between episodes and to continue
+        from (``run_progress``); the result is the same to the bit, plus ``resumed``: where
+        and on which code the run continued.
+    """
     torch.set_num_threads(1)
     start = time.perf_counter()
-
     env = _peg_env(spec.robot, spec.config_dir, spec.episode_steps)
-    learner = LearnerCore(peg_learner_config(spec, env.action_dim), env.state_dim,
-                          env.action_dim)
+    keeper = None if progress is None else RunProgress(progress, spec)
+    saved = None if keeper is None else keeper.load()
+    if saved is None:
+        learner = LearnerCore(peg_learner_config(spec, env.action_dim), env.state_dim,
+                              env.action_dim)
+        records: list[dict[str, Any]] = []
+        resumed: list[dict[str, Any]] = []
+        earlier = 0.0
+    else:
+        learner = LearnerCore.from_state_dict(saved["learner"])
+        records, earlier = saved["episodes"], saved["wall_time"]
+        resumed = [*saved["resumed"], {"episode": len(records), "code": saved["code"]}]
+
+    def keep(record: dict[str, Any]) -> None:
+        records.append(record)
+        if keeper is not None and len(records) < spec.episodes:
+            keeper.save({"learner": learner.state_dict(), "episodes": records,
+                         "resumed": resumed,
+                         "wall_time": earlier + time.perf_counter() - start})
+
     try:
-        episodes = _episodes(env, spec.seed, spec.episodes, peg_noise_config(spec.config_dir),
-                             learner.agent.act, learner)
+        _episodes(env, spec.seed, range(len(records), spec.episodes),
+                  peg_noise_config(spec.config_dir), learner.agent.act, learner, keep)
     finally:
         env.close()
     agent = learner.agent
     states = np.repeat(GRID_STATES, len(GRID_ACTIONS), axis=0)
     actions = np.tile(GRID_ACTIONS, (len(GRID_STATES), 1))
-    return {"experiment": spec.experiment, "name": spec.name, "spec": dataclasses.asdict(spec),
-            "config_digest": config_digest(spec.config_dir),
-            "task_settings": spec.task_settings, "episodes": episodes,
-            "q_given": agent.q_values(states, actions).reshape(len(GRID_STATES), -1).tolist(),
-            "q_pi": agent.q_values(GRID_STATES, agent.act(GRID_STATES)).tolist(),
-            "rl_steps": int(sum(e["steps"] for e in episodes)),
-            **({"sim_time": env.sim_time, "step_timeouts": env.step_timeouts,
-                "engine": "pybullet", "step_limit": env.loop.rest.config.max_time}
-               if isinstance(env, NextagePeg) else {}),
-            "wall_time": time.perf_counter() - start}
+    result = {"experiment": spec.experiment, "name": spec.name, "spec": dataclasses.asdict(spec),
+              "config_digest": config_digest(spec.config_dir),
+              "task_settings": spec.task_settings, "episodes": records,
+              "q_given": agent.q_values(states, actions).reshape(len(GRID_STATES), -1).tolist(),
+              "q_pi": agent.q_values(GRID_STATES, agent.act(GRID_STATES)).tolist(),
+              "rl_steps": int(sum(e["steps"] for e in records)),
+              **({"sim_time": env.sim_time, "step_timeouts": env.step_timeouts,
+                  "engine": "pybullet", "step_limit": env.loop.rest.config.max_time}
+                 if isinstance(env, NextagePeg) else {}),
+              **({"resumed": resumed} if resumed else {}),
+              "wall_time": earlier + time.perf_counter() - start}
+    if keeper is not None:
+        keeper.remove()
+    return result
 
 
 def _peg_env(robot: str, config_dir: str | None, episode_steps: int) -> Any:
@@ -193,15 +225,16 @@ def _peg_env(robot: str, config_dir: str | None, episode_steps: int) -> Any:
     return NextagePeg(config_dir, episode_steps)
 
 
-def _episodes(env: Any, seed: int, episodes: int, noise_config: NoiseConfig,
-              act: Callable[[np.ndarray], np.ndarray],
-              learner: LearnerCore | None = None) -> list[dict[str, Any]]:
-    """Run ``episodes`` episodes of ``act`` perturbed by ``noise_config``; episode ``k`` starts
-    where and explores as every run of ``seed`` does (``episode_noise_seed``), so runs of one
-    seed, learning or random, meet the same starts. With a ``learner`` it stores each step and
-    trains after each episode (``mean_q`` in the record)."""
+def _episodes(env: Any, seed: int, indices: range, noise_config: NoiseConfig,
+              act: Callable[[np.ndarray], np.ndarray], learner: LearnerCore | None = None,
+              keep: Callable[[dict[str, Any]], None] | None = None) -> list[dict[str, Any]]:
+    """Run the episodes ``indices`` of ``act`` perturbed by ``noise_config``; episode ``k``
+    starts where and explores as every run of ``seed`` does (``episode_noise_seed``), so runs of
+    one seed, learning or random, meet the same starts, and a run continued at episode ``k``
+    runs the episodes it would have. With a ``learner`` it stores each step and trains after
+    each episode (``mean_q`` in the record); ``keep`` takes each record as its episode ends."""
     records = []
-    for index in range(episodes):
+    for index in indices:
         noise = ActionNoise(noise_config, env.action_dim, episode_noise_seed(seed, index))
         state = env.reset(seed=episode_noise_seed(seed, index))
         total, success = 0.0, False
@@ -219,6 +252,8 @@ def _episodes(env: Any, seed: int, episodes: int, noise_config: NoiseConfig,
         if learner is not None:
             record["mean_q"] = float(learner.train_cycle()["mean_q"])
         records.append(record)
+        if keep is not None:
+            keep(record)
     return records
 
 
@@ -281,7 +316,7 @@ def run_peg_random(spec: PegRandomSpec) -> dict[str, Any]:
     if spec.kind == "uniform":
         noise = dataclasses.replace(noise, kind="uniform")
     try:
-        episodes = _episodes(env, spec.seed, spec.episodes, noise,
+        episodes = _episodes(env, spec.seed, range(spec.episodes), noise,
                              lambda state: np.zeros(env.action_dim))
     finally:
         env.close()

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterator, Sequence
+from pathlib import Path
 from typing import Any
 
 from qg_experiments.run_worker import RunnableSpec, run_one
@@ -37,13 +38,15 @@ def _import_ray() -> Any:
     return ray
 
 
-def ray_results(todo: Sequence[RunnableSpec], workers: int, address: str | None = None
-                ) -> Iterator[tuple[RunnableSpec, dict[str, Any]]]:
+def ray_results(todo: Sequence[RunnableSpec], workers: int, address: str | None = None,
+                out: Path | None = None) -> Iterator[tuple[RunnableSpec, dict[str, Any]]]:
     """``(spec, result)`` of each run of ``todo`` as its Ray task ends.
 
     :param workers: CPUs of the local Ray this starts (with ``address`` None): runs at a time.
     :param address: a running Ray cluster to join (``ray://host:10001`` or ``host:6379``);
         its CPUs decide how many runs go at once.
+    :param out: the sweep's results folder, where a long run keeps its progress (on the
+        machine it runs on: a run that goes to another machine next time starts over).
     :raises RuntimeError: if ray is missing, or a run read config files other than this
         machine's (its digest differs).
     """
@@ -57,7 +60,7 @@ def ray_results(todo: Sequence[RunnableSpec], workers: int, address: str | None 
                  runtime_env={"env_vars": env}, **local)
     try:
         task = ray.remote(num_cpus=1)(run_one)
-        pending = {task.remote(spec): spec for spec in todo}
+        pending = {task.remote(spec, out): spec for spec in todo}
         while pending:
             (ref,), _ = ray.wait(list(pending), num_returns=1)
             spec = pending.pop(ref)

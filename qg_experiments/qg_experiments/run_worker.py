@@ -5,13 +5,15 @@ same result on either and neither backend module imports the other.
 """
 from __future__ import annotations
 
-from typing import Any, Protocol
+from pathlib import Path
+from typing import Any, Protocol, runtime_checkable
 
 import torch
 
 from qg_experiments.code_version import code_version
+from qg_experiments.run_progress import progress_path
 
-__all__ = ["RunnableSpec", "run_one"]
+__all__ = ["RunnableSpec", "ResumableSpec", "run_one"]
 
 
 class RunnableSpec(Protocol):
@@ -24,8 +26,24 @@ class RunnableSpec(Protocol):
     def run(self) -> dict[str, Any]: ...
 
 
-def run_one(spec: RunnableSpec) -> tuple[RunnableSpec, dict[str, Any]]:
+@runtime_checkable
+class ResumableSpec(RunnableSpec, Protocol):
+    """A run long enough to save its progress between episodes and continue from it
+    (``run_progress``)."""
+
+    def run_resuming(self, progress: Path) -> dict[str, Any]: ...
+
+
+def run_one(spec: RunnableSpec, out: Path | None = None
+            ) -> tuple[RunnableSpec, dict[str, Any]]:
     """One run in a worker of either backend: single-threaded torch, as every worker runs; the
-    result says which code made it (``code_version``, of the checkout this worker runs from)."""
+    result says which code made it (``code_version``, of the checkout this worker runs from).
+
+    :param out: the sweep's results folder: a ``ResumableSpec`` keeps its progress there.
+    """
     torch.set_num_threads(1)
-    return spec, {**spec.run(), "code": code_version()}
+    if out is not None and isinstance(spec, ResumableSpec):
+        result = spec.run_resuming(progress_path(out, spec))
+    else:
+        result = spec.run()
+    return spec, {**result, "code": code_version()}

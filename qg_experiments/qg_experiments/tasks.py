@@ -3,7 +3,8 @@
 Every run is a frozen spec with ``name``, ``experiment`` and ``run() -> dict``; its result goes
 to ``<out>/<experiment>/<name>.json`` the moment it finishes, so an interrupted sweep keeps what
 it did, and a second call with the same specs skips runs whose saved spec and config digest
-(see ``core.config_digest``) are identical. Only where a run executes depends on the backend:
+(see ``core.config_digest``) are identical. A long run (``run_worker.ResumableSpec``) also saves
+its progress there between episodes and continues from it (``run_progress``). Only where a run executes depends on the backend:
 ``process`` (the default) is a pool of one process per core on this machine, ``ray`` hands the
 runs to a Ray cluster (``ray_backend``); a worker of either calls ``run_worker.run_one``.
 Skipping, saving, the progress bar and the results are the same code for both.
@@ -11,6 +12,7 @@ Skipping, saving, the progress bar and the results are the same code for both.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import multiprocessing
 import os
@@ -59,14 +61,15 @@ def _saved(out: Path, spec: RunnableSpec) -> dict[str, Any] | None:
     return result if same else None
 
 
-def _pool_results(todo: Sequence[RunnableSpec], workers: int
+def _pool_results(todo: Sequence[RunnableSpec], workers: int, out: Path
                   ) -> Iterable[tuple[RunnableSpec, dict[str, Any]]]:
     """``(spec, result)`` of each run of ``todo`` as it ends, on ``workers`` local processes."""
+    run = functools.partial(run_one, out=out)
     if workers == 1:
-        yield from map(run_one, todo)
+        yield from map(run, todo)
         return
     with multiprocessing.get_context("spawn").Pool(workers) as pool:
-        yield from pool.imap_unordered(run_one, todo)
+        yield from pool.imap_unordered(run, todo)
 
 
 def unsaved(specs: Sequence[RunnableSpec], out: Path) -> list[RunnableSpec]:
@@ -113,9 +116,9 @@ def run_specs(specs: Sequence[RunnableSpec], out: Path, workers: int = DEFAULT_W
         finished: Iterable[tuple[RunnableSpec, dict[str, Any]]] = ()
     elif backend == "ray":          # imported here: the pool and `qgl` never import ray
         from qg_experiments.ray_backend import ray_results
-        finished = ray_results(todo, workers, address)
+        finished = ray_results(todo, workers, address, Path(out).resolve())
     else:
-        finished = _pool_results(todo, workers)
+        finished = _pool_results(todo, workers, Path(out).resolve())
     for spec, result in finished:
         keep(spec, result)
     bar.close()

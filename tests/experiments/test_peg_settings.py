@@ -88,7 +88,7 @@ def test_the_random_policies_meet_the_learners_starts_and_learn_nothing():
         def act(state: np.ndarray, seen: list = seen) -> np.ndarray:
             seen.append(np.array(state))
             return np.zeros(env.action_dim)
-        records = peg._episodes(env, 7, 3, config, act)
+        records = peg._episodes(env, 7, range(3), config, act)
         env.close()
         starts[name] = [seen[sum(r["steps"] for r in records[:k])] for k in range(3)]
         assert all(r["steps"] == 3 and not r["success"] and "mean_q" not in r for r in records)

@@ -52,8 +52,15 @@ def test_vanilla_without_graph_and_validation():
         LearnerCore(config(zero_action=[0.0]), 4, 2)
 
 
-def test_save_load_gives_identical_next_cycle(tmp_path):
-    core = LearnerCore(config(replay_capacity=30), 4, 2)
+#: TD3's parts (ch. 9's peer): twin critics, target networks, and target smoothing noise drawn
+#: from a generator of the agent's own, which a checkpoint has to carry as well.
+TD3 = {'bounds': 'qgraph+apriori', 'actor_hidden': [16, 16], 'critic_hidden': [16, 16],
+       'twin_critics': True, 'target_networks': True, 'target_noise': 0.2}
+
+
+@pytest.mark.parametrize('ddpg', [None, TD3], ids=['qgddpg', 'td3'])
+def test_save_load_gives_identical_next_cycle(tmp_path, ddpg):
+    core = LearnerCore(config(replay_capacity=30, **({'ddpg': ddpg} if ddpg else {})), 4, 2)
     feed(core, 40)
     core.train_cycle()
     core.save(tmp_path / 'learner.pt')

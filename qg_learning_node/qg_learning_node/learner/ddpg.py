@@ -301,7 +301,8 @@ class DDPG:
     def state_dict(self) -> dict:
         state = {'actor': self.actor.state_dict(), 'critic': self.critic.state_dict(),
                  'actor_opt': self.actor_opt.state_dict(),
-                 'critic_opt': self.critic_opt.state_dict(), 'train_steps': self.train_steps}
+                 'critic_opt': self.critic_opt.state_dict(), 'train_steps': self.train_steps,
+                 'target_noise_rng': self.target_noise_rng.get_state()}
         if self.config.target_networks:
             state['actor_target'] = self.actor_target.state_dict()
             state['critic_target'] = self.critic_target.state_dict()
@@ -318,6 +319,8 @@ class DDPG:
         self.actor_opt.load_state_dict(state['actor_opt'])
         self.critic_opt.load_state_dict(state['critic_opt'])
         self.train_steps = state['train_steps']
+        if 'target_noise_rng' in state:     # checkpoints from before TD3's smoothing noise had none
+            self.target_noise_rng.set_state(state['target_noise_rng'])
         if self.config.target_networks:
             self.actor_target.load_state_dict(state['actor_target'])
             self.critic_target.load_state_dict(state['critic_target'])

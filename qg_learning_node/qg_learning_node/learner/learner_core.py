@@ -149,9 +149,10 @@ class LearnerCore:
                       replay_size=len(self.replay))
         return result
 
-    def save(self, path: pathlib.Path) -> None:
-        """Checkpoint everything needed to continue exactly where this learner stands."""
-        torch.save({
+    def state_dict(self) -> dict:
+        """Everything needed to continue exactly where this learner stands: the networks and
+        their optimisers, replay memory, graph, sampling generator and counters (a snapshot)."""
+        return {
             'config': dataclasses.asdict(self.config),
             'dims': (self.state_dim, self.action_dim),
             'agent': self.agent.state_dict(),
@@ -163,11 +164,11 @@ class LearnerCore:
             'actor_version': self.actor_version,
             'census': self._census,
             'owed_offset': self._owed_offset,
-        }, pathlib.Path(path))
+        }
 
     @classmethod
-    def load(cls, path: pathlib.Path) -> LearnerCore:
-        state = torch.load(pathlib.Path(path), weights_only=False)
+    def from_state_dict(cls, state: dict) -> LearnerCore:
+        """The learner ``state_dict`` was taken of, to continue its training to the bit."""
         core = cls(LearnerConfig.from_dict(state['config']), *state['dims'])
         core.agent.load_state_dict(state['agent'])
         core.replay.load_state_dict(state['replay'])
@@ -179,3 +180,11 @@ class LearnerCore:
         core._census = state['census']
         core._owed_offset = state.get('owed_offset', 0)
         return core
+
+    def save(self, path: pathlib.Path) -> None:
+        """Checkpoint ``state_dict`` to ``path``."""
+        torch.save(self.state_dict(), pathlib.Path(path))
+
+    @classmethod
+    def load(cls, path: pathlib.Path) -> LearnerCore:
+        return cls.from_state_dict(torch.load(pathlib.Path(path), weights_only=False))
