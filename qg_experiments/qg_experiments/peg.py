@@ -43,7 +43,7 @@ from qg_experiments.runner import ALGORITHMS, algorithm_config, config_digest, e
 
 __all__ = ["PEG_NETWORKS", "PEG_NOISE", "PegRunSpec", "peg_specs", "peg_learner_config",
            "peg_noise_config", "run_peg", "GRID_STATES", "GRID_ACTIONS", "learning_curves",
-           "q_spread", "PEG_ROBOTS", "PEG_RANDOM_KINDS", "PegRandomSpec", "peg_random_specs",
+           "q_spread", "Q_POINTS", "PEG_ROBOTS", "PEG_RANDOM_KINDS", "PegRandomSpec", "peg_random_specs",
            "run_peg_random", "random_experiment", "random_curves"]
 
 #: The robots that move the peg, and the experiment each one's runs are saved under.
@@ -358,7 +358,15 @@ def random_curves(results: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     return {name: _curve(group) for name, group in groups.items()}
 
 
-def q_spread(results: list[dict[str, Any]]) -> dict[tuple[str, float], np.ndarray]:
-    """Per (algorithm, lr): std across seeds of Q for each of the 27 x 11 state-action pairs."""
-    return {key: np.array([r["q_given"] for r in group]).std(axis=0).ravel()
+#: The two sets of final Q predictions whose spread across seeds thesis Fig. 8.3 shows: each
+#: grid state with the 11 given actions, and with the run's own actor's action.
+Q_POINTS = {"given": "q_given", "pi": "q_pi"}
+
+
+def q_spread(results: list[dict[str, Any]], points: str = "given"
+             ) -> dict[tuple[str, float], np.ndarray]:
+    """Per (algorithm, lr): std across seeds of the final Q at each of ``points``
+    (``Q_POINTS``: ``given``, the 27 x 11 state-action pairs; ``pi``, the 27 states with the
+    actor's action)."""
+    return {key: np.array([r[Q_POINTS[points]] for r in group]).std(axis=0).ravel()
             for key, group in _groups(results).items() if len(group) >= 2}

@@ -1,16 +1,18 @@
 """The peg's paired comparison in results.md: per learning rate, paired by seed, Holm over the
-learning rates, and the Q spread across the seeds both algorithms ran."""
+learning rates, the Q spread across the seeds both algorithms ran, and the closing list's lines
+beside the thesis's findings."""
 from __future__ import annotations
 
 import numpy as np
-from qg_experiments.report.peg_sections import peg_paired
+from qg_experiments.report.comparison import _peg_notes
+from qg_experiments.report.peg_sections import peg_pairs, peg_paired
 
 
 def _run(algorithm: str, lr: float, seed: int, returns: list[float], q: float,
          mean_q: float = -50.0) -> dict:
     return {"spec": {"algorithm": algorithm, "lr": lr, "seed": seed, "gamma": 0.99},
             "episodes": [{"return": r, "mean_q": mean_q} for r in returns],
-            "q_given": np.full((27, 11), q).tolist()}
+            "q_given": np.full((27, 11), q).tolist(), "q_pi": np.full(27, 2 * q).tolist()}
 
 
 def _row(lines: list[str], lr: str) -> list[str]:
@@ -31,7 +33,7 @@ def test_each_learning_rate_is_paired_by_seed_and_corrected_over_the_rates() -> 
         results += [_run("ddpg", 1e-2, seed, [base] * 8, q=1.0),
                     _run("qgddpg", 1e-2, seed, [base + noise] * 8, q=1.0)]
     results.append(_run("ddpg", 1e-4, 0, [-80.0] * 8, q=0.0))   # no partner: not paired
-    lines = peg_paired(results, tail=2)
+    lines = peg_paired(peg_pairs(results, tail=2), tail=2)
     assert not any(line.startswith("| 0.0001 |") for line in lines)
     good = _row(lines, "0.001")
     assert good[1].startswith("10 (0, 1, 2")
@@ -48,8 +50,29 @@ def test_each_learning_rate_is_paired_by_seed_and_corrected_over_the_rates() -> 
     assert coin[9] == "0 of 297"               # equal spreads: QG's is not smaller anywhere
 
 
+    # The closing list: each learning rate beside the thesis's findings, then where the gain is
+    # largest, then the planned learning rate without pairs.
+    curves = {("ddpg", lr): {"return_mean": np.array([-60.0 if lr == 1e-3 else -50.0])}
+              for lr in (1e-3, 1e-2)}
+    notes = _peg_notes({"pairs": peg_pairs(results, tail=2), "curves": curves, "tail": 2,
+                        "robot": "peg", "planned_lrs": (1e-4, 1e-3, 1e-2)})
+    assert len(notes) == 4
+    assert notes[1].startswith("- Peg, lr 0.001 (10 pairs): QG-DDPG's mean return over all "
+                               "episodes higher in 10 of 10, 10.00 [10.00, 10.00]")
+    assert ": QG-DDPG faster (thesis Fig. 8.2" in notes[1] and ": not worse (" in notes[1]
+    # the actor's points: q_pi = 2 q, so its spread is twice the given actions' (0.5 q for QG)
+    assert "given actions 1.44 / 2.87 (QG-DDPG's smaller at 297 of 297)" in notes[1]
+    assert "the actor's action 2.87 / 5.74 (QG-DDPG's smaller at 27 of 27)" in notes[1]
+    assert ": not shown (thesis" in notes[0]
+    assert "largest at lr 0.001 (+10.00); DDPG's mean return over all episodes is lowest at " \
+           "lr 0.001 (-60.0)" in notes[2]
+    assert notes[3] == "- Peg, lr 0.0001: no pairs yet."
+
+
 def test_no_pairs_no_table() -> None:
-    assert peg_paired([_run("ddpg", 1e-3, 0, [-1.0], q=0.0)], tail=1) == []
+    pairs = peg_pairs([_run("ddpg", 1e-3, 0, [-1.0], q=0.0)], tail=1)
+    assert pairs is None and peg_paired(pairs, tail=1) == []
+    assert _peg_notes({"pairs": None, "curves": {}, "tail": 1, "robot": "peg"}) == []
 
 
 def test_the_td3_reference_says_what_a_maintained_agent_did() -> None:

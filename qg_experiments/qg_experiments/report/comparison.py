@@ -13,10 +13,13 @@ from qg_experiments.random_baselines import Bar
 from qg_experiments.report.divergence import divergence_counts, run_divergence
 from qg_experiments.report.grid_sections import THESIS, divergence_text, paired_line
 from qg_experiments.report.markdown import fmt, table
+from qg_experiments.report.peg_sections import PegPairs
 from qg_experiments.stalls import LAST_TRAINING, TRAINED_AT, recovery_text, stall_counts
 
 __all__ = ["graph_section", "comparison"]
 
+#: How the closing list names the peg's two sets of Q points (``peg.Q_POINTS``).
+_POINTS = {"given": "given actions", "pi": "the actor's action"}
 #: The columns' order: QG-DDPG first, as the page compares it against DDPG.
 _PAIR = tuple(reversed(COMPARED))
 
@@ -125,22 +128,51 @@ def comparison(random_rows: list[dict[str, Any]], bar: Bar | None,
                          for a in _PAIR)
         notes.append(f"- {name}: {text} (thesis: QG-DDPG did, DDPG did not).")
     for data in peg_data:
-        if not data.get("curves"):
-            continue
-        curves, spread, tail = data["curves"], data["spread"], data["tail"]
-        robot = "Peg" if data["robot"] == "peg" else "Nextage peg"
-        for lr in sorted({k[1] for k in curves}, reverse=True):
-            d, q = curves.get(("ddpg", lr)), curves.get(("qgddpg", lr))
-            if d is None or q is None:
-                continue
-            rd = float(np.mean(d["return_mean"][-tail:]))
-            rq = float(np.mean(q["return_mean"][-tail:]))
-            sd, sq = spread.get(("ddpg", lr)), spread.get(("qgddpg", lr))
-            text = (f"- {robot}, lr {lr:g}: late-episode return QG-DDPG {rq:.1f} vs DDPG {rd:.1f}"
-                    " (thesis: QG never worse, largest gain at poor learning rates)")
-            if sd is not None and sq is not None:
-                text += (f"; median Q spread across seeds QG-DDPG {np.median(sq):.3g} vs DDPG "
-                         f"{np.median(sd):.3g} (thesis at lr 1e-4: clearly smaller with QG)")
-            notes.append(text + ".")
+        notes += _peg_notes(data)
     return notes + [""]
 
+
+
+def _peg_notes(data: dict[str, Any]) -> list[str]:
+    """A peg experiment's lines of the closing list: per learning rate, QG-DDPG against DDPG
+    paired by seed (``peg_sections.peg_pairs``) beside the thesis's ch. 8.3.2 findings (Figs.
+    8.2 and 8.3 show curves and boxes; its text gives no numbers); then where the gain is
+    largest, and the learning rates the profile has not run yet."""
+    pairs: PegPairs | None = data.get("pairs")
+    if pairs is None:
+        return []
+    robot = "Peg" if data["robot"] == "peg" else "Nextage peg"
+    notes = []
+    for lr in pairs.lrs:
+        speed, late = pairs.compared["all"][lr], pairs.compared["late"][lr]
+        p_speed, p_late = pairs.holm["all"][lr], pairs.holm["late"][lr]
+        faster = ("not shown" if p_speed >= 0.05
+                  else "QG-DDPG faster" if speed.difference.mean > 0 else "DDPG faster")
+        worse = p_late < 0.05 and late.difference.mean < 0
+        text = (f"- {robot}, lr {lr:g} ({speed.n} pairs): QG-DDPG's mean return over all "
+                f"episodes higher in {speed.wins_a} of {speed.n}, "
+                f"{stats.format_interval(speed.difference, 2)}, p (Holm) = {p_speed:.3g}: "
+                f"{faster} (thesis Fig. 8.2: faster at every learning rate); over the last "
+                f"{data['tail']} {stats.format_interval(late.difference, 2)}, p = {p_late:.3g}: "
+                f"{'worse' if worse else 'not worse'} (thesis: never worse)")
+        spreads = [(points, pairs.spreads(lr, points)) for points in ("given", "pi")]
+        if all(q is not None for _, q in spreads):
+            text += "; median Q spread across seeds QG-DDPG / DDPG: " + ", ".join(
+                f"{_POINTS[points]} {np.median(q['qgddpg']):.3g} / {np.median(q['ddpg']):.3g} "
+                f"(QG-DDPG's smaller at {int(np.sum(q['qgddpg'] < q['ddpg']))} of "
+                f"{q['ddpg'].size})" for points, q in spreads) + \
+                " (thesis Fig. 8.3, lr 1e-4: clearly smaller with QG-DDPG)"
+        notes.append(text + ".")
+    if len(pairs.lrs) > 1:
+        gain = {lr: pairs.compared["all"][lr].difference.mean for lr in pairs.lrs}
+        ddpg = {lr: float(np.mean(data["curves"][("ddpg", lr)]["return_mean"]))
+                for lr in pairs.lrs}
+        best, poorest = max(gain, key=gain.get), min(ddpg, key=ddpg.get)
+        notes.append(f"- {robot}: QG-DDPG's gain over all episodes is largest at lr {best:g} "
+                     f"({gain[best]:+.2f}); DDPG's mean return over all episodes is lowest at "
+                     f"lr {poorest:g} ({ddpg[poorest]:.1f}) (thesis: the gain is largest where "
+                     f"DDPG does poorly, at lr 1e-4 of its three).")
+    missing = [lr for lr in data.get("planned_lrs", ()) if lr not in pairs.lrs]
+    if missing:
+        notes.append(f"- {robot}, lr {', '.join(f'{lr:g}' for lr in missing)}: no pairs yet.")
+    return notes

@@ -207,7 +207,9 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
         section, data = peg_section(results, figures, experiment, randoms)
         lines += section
         if data:
-            lines += [*peg_paired(results, data["tail"]), ""]
+            budget = profile.peg if experiment == "peg" else profile.nextage
+            data["planned_lrs"] = budget.lrs if budget is not None else ()
+            lines += [*peg_paired(data["pairs"], data["tail"]), ""]
             against = peg_against_random(results, randoms, data["tail"])
             lines += [*against, ""] if against else []
         peg_data.append(data)

@@ -4,6 +4,7 @@ paired by seed, and what a maintained agent (SB3's TD3) does on the same free pe
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -16,8 +17,8 @@ from qg_experiments.report import plots
 from qg_experiments.report.divergence import run_divergence
 from qg_experiments.report.markdown import fmt, speed, table
 
-__all__ = ["peg_section", "peg_paired", "peg_against_random", "peg_diverged", "peg_budget",
-           "td3_reference_line", "TD3_REFERENCE"]
+__all__ = ["peg_section", "PegPairs", "peg_pairs", "peg_paired", "peg_against_random",
+           "peg_diverged", "peg_budget", "td3_reference_line", "TD3_REFERENCE"]
 
 #: Per peg experiment: section heading, figure-name prefix, what moved the peg.
 _PEG_PAGES = {
@@ -45,11 +46,12 @@ def peg_section(results: list[dict[str, Any]], figures: Path, experiment: str = 
     random_curves = peg.random_curves(randoms)
     spread = peg.q_spread(results)
     spec = results[0]["spec"]
+    tail = max(1, spec["episodes"] // 5)
     window = 5 if spec["episodes"] >= 20 else 1
     plots.peg_learning(curves, window, figures / f"{prefix}_learning.png", random_curves)
     if spread:
-        plots.q_spread(spread, figures / f"{prefix}_q_std.png")
-    tail = max(1, spec["episodes"] // 5)
+        plots.q_spread({points: peg.q_spread(results, points) for points in peg.Q_POINTS},
+                       figures / f"{prefix}_q_std.png")
     first = _first_insertions(results, lambda r: (r["spec"]["algorithm"], r["spec"]["lr"]))
     first_random = _first_insertions(randoms, lambda r: r["label"])
 
@@ -85,7 +87,8 @@ def peg_section(results: list[dict[str, Any]], figures: Path, experiment: str = 
     reference = figures.parent / "data" / TD3_REFERENCE
     if experiment == "peg" and reference.is_file():
         lines += ["", td3_reference_line(json.loads(reference.read_text()))]
-    return lines + [""], {"curves": curves, "spread": spread, "tail": tail, "robot": experiment}
+    return lines + [""], {"curves": curves, "pairs": peg_pairs(results, tail), "tail": tail,
+                          "robot": experiment}
 
 
 def _first_insertions(results: list[dict[str, Any]], key: Any) -> dict[Any, str]:
@@ -157,20 +160,41 @@ def peg_diverged(run: dict[str, Any]) -> bool:
     return run_divergence(run, run["spec"]["gamma"])[0]
 
 
-def peg_paired(results: list[dict[str, Any]], tail: int) -> list[str]:
-    """QG-DDPG against DDPG on the same seeds, learning rate by learning rate (the thesis's
-    claim is per learning rate: faster at every one, most at the poor ones).
+@dataclass(frozen=True)
+class PegPairs:
+    """QG-DDPG against DDPG per learning rate, on the seeds both ran (``peg_pairs``).
 
-    Two measures per run: the mean return over all episodes (how fast it learned: the area under
-    its learning curve) and over the last ``tail`` (where it got to); Wilcoxon signed-rank over
-    the seeds, Holm-corrected over the learning rates. Beside them the thesis's second claim,
-    the spread of the final Q across seeds (27 states x 11 actions): its median per algorithm
-    and the state-action points where QG-DDPG's is the smaller.
+    :param lrs: the learning rates with pairs, largest first.
+    :param compared: per measure (``_measures``: ``all``, ``late``) and lr, the paired
+        comparison (QG-DDPG as A: a positive difference is QG-DDPG's higher return).
+    :param holm: the same, its Wilcoxon p Holm-corrected over the learning rates.
+    :param diverged: lr -> seed -> algorithm -> whether the critic diverged.
+    :param spread: per set of points (``peg.Q_POINTS``) and (algorithm, lr), the std of the
+        final Q across the paired seeds.
     """
+    lrs: list[float]
+    compared: dict[str, dict[float, stats.PairedComparison]]
+    holm: dict[str, dict[float, float]]
+    diverged: dict[float, dict[int, dict[str, bool]]]
+    spread: dict[str, dict[tuple[str, float], np.ndarray]]
+
+    def spreads(self, lr: float, points: str = "given") -> dict[str, np.ndarray] | None:
+        """QG-DDPG's and DDPG's spread at ``lr``, or None (fewer than two paired seeds)."""
+        spread = self.spread[points]
+        return ({alg: spread[(alg, lr)] for alg in ("qgddpg", "ddpg")}
+                if ("ddpg", lr) in spread and ("qgddpg", lr) in spread else None)
+
+
+def peg_pairs(results: list[dict[str, Any]], tail: int) -> PegPairs | None:
+    """QG-DDPG against DDPG on the same seeds, learning rate by learning rate (the thesis's
+    claim is per learning rate): each run's mean return over all episodes (how fast it learned:
+    the area under its learning curve) and over the last ``tail`` (where it got to), Wilcoxon
+    signed-rank over the seeds, Holm over the learning rates; divergence; and the thesis's
+    second claim, the spread of the final Q across seeds. None without a pair."""
     measures = {name: _per_pair(results, measure) for name, measure in _measures(tail).items()}
     lrs = [lr for lr, pairs in measures["all"].items() if pairs]
     if not lrs:
-        return []
+        return None
     compared = {name: {lr: stats.paired_comparison(
         [-pairs[lr][seed]["qgddpg"] for seed in pairs[lr]],
         [-pairs[lr][seed]["ddpg"] for seed in pairs[lr]]) for lr in lrs}
@@ -179,32 +203,41 @@ def peg_paired(results: list[dict[str, Any]], tail: int) -> list[str]:
             for name, c in compared.items()}
     diverged = _per_pair(results, peg_diverged)
     # The spread across the seeds both algorithms ran (``peg.q_spread``: two seeds at least).
-    spread = peg.q_spread([r for r in results
-                           if r["spec"]["seed"] in diverged.get(r["spec"]["lr"], {})])
+    paired = [r for r in results if r["spec"]["seed"] in diverged.get(r["spec"]["lr"], {})]
+    return PegPairs(lrs, compared, holm, diverged,
+                    {points: peg.q_spread(paired, points) for points in peg.Q_POINTS})
+
+
+def peg_paired(pairs: PegPairs | None, tail: int) -> list[str]:
+    """The table of ``peg_pairs``: per learning rate both measures' wins, differences and p,
+    the median Q spread (given actions) with the points where QG-DDPG's is the smaller, and the
+    diverged critics."""
+    if pairs is None:
+        return []
     rows = []
-    for lr in lrs:
-        a, b = compared["all"][lr], compared["late"][lr]
-        seeds = diverged[lr]
-        q = {alg: spread[(alg, lr)] for alg in ("qgddpg", "ddpg")} \
-            if ("ddpg", lr) in spread else None
+    for lr in pairs.lrs:
+        a, b = pairs.compared["all"][lr], pairs.compared["late"][lr]
+        seeds = pairs.diverged[lr]
+        q = pairs.spreads(lr)
         rows.append([f"{lr:g}", f"{a.n} ({', '.join(str(s) for s in seeds)})",
-                     *_paired_cells(a, holm["all"][lr]), *_paired_cells(b, holm["late"][lr]),
+                     *_paired_cells(a, pairs.holm["all"][lr]),
+                     *_paired_cells(b, pairs.holm["late"][lr]),
                      "n/a" if q is None else
                      f"{np.median(q['qgddpg']):.3g} / {np.median(q['ddpg']):.3g}",
                      "n/a" if q is None else
                      f"{int(np.sum(q['qgddpg'] < q['ddpg']))} of {q['ddpg'].size}",
-                     " / ".join(str(sum(runs[alg] for runs in diverged[lr].values()))
+                     " / ".join(str(sum(runs[alg] for runs in seeds.values()))
                                 for alg in ("qgddpg", "ddpg"))])
     return [f"QG-DDPG against DDPG per learning rate, paired by seed (the seeds both ran). "
             f"*All*: each run's mean return over all its episodes (the area under its learning "
             f"curve: how fast it learned); *late*: over its last {tail}. QG-DDPG higher / DDPG "
             f"higher / ties; QG-DDPG minus DDPG with its 95 % interval; two-sided Wilcoxon "
-            f"signed-rank p, Holm-corrected over the {len(lrs)} learning rates (with n pairs "
-            f"the smallest p is 2 / 2^n: 0.0625 for 5, 0.002 for 10). Q spread: the standard "
-            f"deviation across those seeds of each of the 27 x 11 final Q predictions (thesis "
-            f"Fig. 8.3), its median QG-DDPG / DDPG, and the points where QG-DDPG's is smaller. "
-            f"Diverged: the runs whose mean Q after an episode's updates left [-1 / (1 - gamma), "
-            f"0] by more than a tenth of its width (as the grid's).",
+            f"signed-rank p, Holm-corrected over the {len(pairs.lrs)} learning rates (with n "
+            f"pairs the smallest p is 2 / 2^n: 0.0625 for 5, 0.002 for 10). Q spread: the "
+            f"standard deviation across those seeds of each of the 27 x 11 final Q predictions "
+            f"(thesis Fig. 8.3), its median QG-DDPG / DDPG, and the points where QG-DDPG's is "
+            f"smaller. Diverged: the runs whose mean Q after an episode's updates left "
+            f"[-1 / (1 - gamma), 0] by more than a tenth of its width (as the grid's).",
             "", *table(["lr", "pairs (seeds)", "all: QG / DDPG / ties", "all: QG - DDPG [95 % CI]",
                         "all: p (Holm)", "late: QG / DDPG / ties", "late: QG - DDPG [95 % CI]",
                         "late: p (Holm)", "median Q spread QG / DDPG",

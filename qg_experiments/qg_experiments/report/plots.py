@@ -121,16 +121,20 @@ def peg_learning(curves: dict[tuple[str, float], dict[str, Any]], window: int,
     _save(fig, path)
 
 
-def q_spread(spread: dict[tuple[str, float], np.ndarray], path: Path) -> None:
-    """Box plot of the std of Q across seeds per (algorithm, lr) (``peg.q_spread``)."""
-    keys = sorted(spread, key=lambda k: (-k[1], k[0]))
-    fig, ax = pyplot().subplots(figsize=(7, 3.5))
-    ax.boxplot([spread[k] for k in keys])
-    ax.set_xticks(range(1, len(keys) + 1), [f"{label(a)}\nlr {lr:g}" for a, lr in keys],
-                  fontsize=8)
-    ax.set_yscale("log")
-    ax.set_ylabel("std of Q across seeds")
-    ax.set_title("Spread of predicted Q on 27 states x 11 actions")
+def q_spread(spread: dict[str, dict[tuple[str, float], np.ndarray]], path: Path) -> None:
+    """Box plots of the std of Q across seeds per (algorithm, lr), one panel per set of points
+    (``peg.Q_POINTS``: the given actions, the actor's), as thesis Fig. 8.3."""
+    titles = {"given": "27 states x 11 given actions", "pi": "27 states, the actor's action"}
+    fig, axes = pyplot().subplots(1, len(spread), figsize=(4.2 * len(spread), 3.5), sharey=True,
+                                  squeeze=False)
+    for ax, (points, boxes) in zip(axes[0], spread.items()):
+        keys = sorted(boxes, key=lambda k: (-k[1], k[0]))
+        ax.boxplot([boxes[k] for k in keys])
+        ax.set_xticks(range(1, len(keys) + 1), [f"{label(a)}\nlr {lr:g}" for a, lr in keys],
+                      fontsize=8)
+        ax.set_yscale("log")
+        ax.set_title(titles.get(points, points), fontsize=9)
+    axes[0][0].set_ylabel("std of final Q across seeds")
     _save(fig, path)
 
 
