@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 from qg_experiments.report.comparison import _peg_notes
-from qg_experiments.report.peg_sections import peg_pairs, peg_paired
+from qg_experiments.report.peg_sections import peg_paired, peg_pairs
 
 
 def _run(algorithm: str, lr: float, seed: int, returns: list[float], q: float,
