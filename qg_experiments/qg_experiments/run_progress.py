@@ -32,7 +32,8 @@ from qg_experiments.core.stack_settings import config_digest
 __all__ = ["PROGRESS_EVERY", "PROGRESS_SUFFIX", "RunProgress", "progress_path"]
 
 #: [s] of wall time between two saves. A save of the peg's learner at its largest (60,000
-#: transitions in replay and graph) takes ~0.85 s and 34 MB: at most 0.7 % of the run's time.
+#: transitions in replay and graph) takes ~0.87 s and 34 MB: at most 0.7 % of the run's time
+#: (``benchmarks/progress_save_bench.py``).
 PROGRESS_EVERY = 120.0
 #: What a progress file's name ends with (not ``.json``: ``tasks.load_results`` reads those).
 PROGRESS_SUFFIX = ".progress.pt"
