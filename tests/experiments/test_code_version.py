@@ -25,3 +25,11 @@ def test_the_report_counts_runs_per_commit_most_first() -> None:
     assert code_label(runs) == ("`aaaaaaaaaa` (3 runs); `bbbbbbbbbb` with modified files (1 runs); "
                                 "not recorded (2 runs, saved before runs recorded it)")
     assert code_label([]) == ""
+    # a run continued on another commit counts under both; one continued on its own, once
+    resumed = [{"code": {"commit": "b" * 40, "modified": False},
+                "resumed": [{"episode": 40, "code": {"commit": "a" * 40, "modified": False}}]},
+               {"code": {"commit": "a" * 40, "modified": False},
+                "resumed": [{"episode": 9, "code": {"commit": "a" * 40, "modified": False}}]}]
+    assert code_label(resumed) == ("`aaaaaaaaaa` (2 runs); `bbbbbbbbbb` (1 runs); 2 of them "
+                                   "continued from saved progress, counted under each commit "
+                                   "they ran on")

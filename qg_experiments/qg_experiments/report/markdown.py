@@ -49,18 +49,26 @@ def step_label(results: list[dict[str, Any]]) -> str:
 
 def code_label(results: list[dict[str, Any]]) -> str:
     """The commits ``results`` were made at (``code_version``), most runs first, with how many
-    runs each and whether its checkout had modified files; runs that recorded none last."""
+    runs each and whether its checkout had modified files; runs that recorded none last. A run
+    continued from saved progress (``run_progress``: its ``resumed`` entries) counts under each
+    commit it ran on."""
     counts: dict[tuple[str, bool], int] = {}
-    unrecorded = 0
+    unrecorded = resumed = 0
     for r in results:
         code = r.get("code", UNRECORDED)
         if code["commit"] is None:
             unrecorded += 1
-        else:
-            key = (code["commit"][:10], bool(code["modified"]))
+            continue
+        resumed += bool(r.get("resumed"))
+        for key in {(c["commit"][:10], bool(c["modified"]))
+                    for c in (code, *(part["code"] for part in r.get("resumed", ())))
+                    if c["commit"] is not None}:
             counts[key] = counts.get(key, 0) + 1
     parts = [f"`{commit}`{' with modified files' if modified else ''} ({n} runs)"
              for (commit, modified), n in sorted(counts.items(), key=lambda kv: -kv[1])]
+    if resumed:
+        parts.append(f"{resumed} of them continued from saved progress, counted under each "
+                     "commit they ran on")
     if unrecorded:
         parts.append(f"not recorded ({unrecorded} runs, saved before runs recorded it)")
     return "; ".join(parts)
