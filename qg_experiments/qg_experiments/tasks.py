@@ -23,6 +23,7 @@ from typing import Any
 from tqdm import tqdm
 
 from qg_experiments.core.stack_settings import config_digest
+from qg_experiments.run_progress import progress_path
 from qg_experiments.run_worker import RunnableSpec, run_one
 
 __all__ = ["RunnableSpec", "BACKENDS", "DEFAULT_WORKERS", "result_path", "run_specs",
@@ -101,6 +102,10 @@ def run_specs(specs: Sequence[RunnableSpec], out: Path, workers: int = DEFAULT_W
         else:
             results[f"{spec.experiment}/{spec.name}"] = saved
     workers = max(1, min(workers, len(todo)))
+    continuing = [spec.name for spec in todo if progress_path(out, spec).exists()]
+    if continuing:
+        print(f"{description}: {len(continuing)} run(s) continue from saved progress "
+              f"({', '.join(continuing)})", flush=True)
     bar = tqdm(total=len(specs), initial=len(specs) - len(todo), desc=description, unit="run",
                dynamic_ncols=True)
 

@@ -46,7 +46,7 @@ def save_every_episode(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def test_a_sweep_stopped_mid_run_continues_the_run_to_the_same_result(
-        tmp_path, monkeypatch, save_every_episode):
+        tmp_path, monkeypatch, capsys, save_every_episode):
     straight = run_peg(SPEC)
     assert "resumed" not in straight
     with monkeypatch.context() as patch:
@@ -60,6 +60,7 @@ def test_a_sweep_stopped_mid_run_continues_the_run_to_the_same_result(
     assert not result_path(tmp_path, SPEC).exists()
 
     (result,) = run_specs([SPEC], tmp_path, workers=1)
+    assert f"1 run(s) continue from saved progress ({SPEC.name})" in capsys.readouterr().out
     assert numbers(result) == numbers(straight)        # episodes, final Q: to the bit
     assert [r["episode"] for r in result["resumed"]] == [2]
     assert result["resumed"][0]["code"] == result["code"]
