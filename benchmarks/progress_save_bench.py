@@ -44,7 +44,8 @@ def main() -> None:
         saves, loads = [], []
         for _ in range(args.rounds):
             start = time.perf_counter()
-            keeper.save({"learner": learner.state_dict(), "episodes": episodes}, force=True)
+            keeper.save({"learner": learner.state_dict(), "episodes": episodes},
+                        len(episodes), spec.episodes, 0.0, force=True)
             saves.append(time.perf_counter() - start)
             start = time.perf_counter()
             LearnerCore.from_state_dict(keeper.load()["learner"])

@@ -7,7 +7,7 @@
 #   scripts/experiments.sh --profile tiny   every code path in a minute (also a CI test)
 # Further arguments go to `python -m qg_experiments` (e.g. --only random,grid,
 # --report-only). Saved runs are reused, so an interrupted suite resumes where it stopped
-# (a peg run from its progress of the last 2 minutes).
+# (a peg run from its progress of the last 2 minutes); --status says how far a sweep is.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"

@@ -1,4 +1,4 @@
-"""Command line: ``python -m qg_experiments [--profile small] [--only ...]``.
+"""Command line: ``python -m qg_experiments [--profile small] [--only ...] [--status]``.
 
 Runs go to a pool of one process per core (``--workers`` to change), or with ``--backend ray``
 to a local Ray (``--address`` joins a Ray cluster); the results are the same either way.
@@ -11,7 +11,8 @@ import sys
 from pathlib import Path
 
 from qg_experiments.profile import load_profile
-from qg_experiments.suite import EXPERIMENTS, run_suite
+from qg_experiments.suite import EXPERIMENTS, all_specs, run_suite
+from qg_experiments.sweep_status import sweep_status
 from qg_experiments.tasks import BACKENDS, DEFAULT_WORKERS
 
 
@@ -42,6 +43,9 @@ def main(argv: list[str] | None = None) -> None:
                         "keeps a long sweep on one set of numbers while config/ is edited")
     parser.add_argument("--report-only", action="store_true",
                         help="only regenerate results.md from saved results")
+    parser.add_argument("--status", action="store_true",
+                        help="say where the sweep of --only stands (saved runs, runs under way "
+                        "and their episodes, the time left) and run nothing")
     args = parser.parse_args(argv)
     if args.workers < 1:
         parser.error(f"--workers must be at least 1, got {args.workers}")
@@ -52,6 +56,11 @@ def main(argv: list[str] | None = None) -> None:
     if unknown:
         parser.error(f"unknown experiments {sorted(unknown)}")
     profile = load_profile(args.profile, args.profiles_file, args.estimator)
+    if args.status:
+        lines = sweep_status(all_specs(profile, only, args.config_dir),
+                             args.out / profile.name, args.workers)
+        print("\n".join([f"{profile.name} ({args.out / profile.name}):", *lines]))
+        return
     command = "python -m qg_experiments " + shlex.join(
         sys.argv[1:] if argv is None else argv)
     path = run_suite(profile, args.out, args.docs, () if args.report_only else only,

@@ -190,8 +190,8 @@ def run_peg(spec: PegRunSpec, progress: Path | None = None) -> dict[str, Any]:
         records.append(record)
         if keeper is not None and len(records) < spec.episodes:
             keeper.save({"learner": learner.state_dict(), "episodes": records,
-                         "resumed": resumed,
-                         "wall_time": earlier + time.perf_counter() - start})
+                         "resumed": resumed}, len(records), spec.episodes,
+                        earlier + time.perf_counter() - start)
 
     try:
         _episodes(env, spec.seed, range(len(records), spec.episodes),

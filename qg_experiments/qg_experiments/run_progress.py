@@ -29,7 +29,7 @@ from typing import Any
 from qg_experiments.code_version import code_version
 from qg_experiments.core.stack_settings import config_digest
 
-__all__ = ["PROGRESS_EVERY", "PROGRESS_SUFFIX", "RunProgress", "progress_path"]
+__all__ = ["PROGRESS_EVERY", "PROGRESS_SUFFIX", "RunProgress", "peek", "progress_path"]
 
 #: [s] of wall time between two saves. A save of the peg's learner at its largest (60,000
 #: transitions in replay and graph) takes ~0.87 s and 34 MB: at most 0.7 % of the run's time
@@ -68,33 +68,42 @@ class RunProgress:
 
     def load(self) -> dict[str, Any] | None:
         """The saved state of this run (``save``'s ``state``, plus ``code``: the code that saved
-        it), or None: no file, or one that is not this run's (a warning says which)."""
+        it, and ``wall_time``), or None: no file, or one that is not this run's (a warning says
+        which)."""
         if not self.path.exists():
             return None
         try:
             with self.path.open("rb") as file:
-                saved = pickle.load(file)
+                header = pickle.load(file)
+                # (the first files of 2026-11-29 held the state inside the header)
+                state = header["state"] if "state" in header else pickle.load(file)
         except Exception as exc:      # a truncated or foreign file: the run starts over
             warnings.warn(f"{self.path} does not load ({exc!r}); the run starts over",
                           stacklevel=2)
             return None
-        if not isinstance(saved, dict) or saved.get("identity") != self._identity:
+        if header.get("identity") != self._identity:
             warnings.warn(f"{self.path} is the progress of another setting; the run starts over",
                           stacklevel=2)
             return None
-        return {"code": saved["code"], **saved["state"]}
+        return {"code": header["code"], "wall_time": header.get("wall_time", 0.0), **state}
 
-    def save(self, state: dict[str, Any], force: bool = False) -> bool:
-        """Save ``state`` if ``every`` seconds have passed since the last save (or ``force``);
-        True if it saved."""
+    def save(self, state: dict[str, Any], done: int, of: int, wall_time: float,
+             force: bool = False) -> bool:
+        """Save ``state``, the run's ``done`` of ``of`` episodes after ``wall_time`` s, if
+        ``every`` seconds have passed since the last save (or ``force``); True if it saved.
+
+        The file holds two pickles: a small header (``peek`` reads it alone: which run, how
+        far, on which code) and the state."""
         if not force and time.monotonic() - self._last_save < self.every:
             return False
         self.path.parent.mkdir(parents=True, exist_ok=True)
         partial = self.path.with_name(self.path.name + ".tmp")
+        header = {"identity": self._identity, "code": code_version(), "done": done, "of": of,
+                  "wall_time": wall_time}
         # pickle's protocol 5, not torch.save's 2: the graph's lists save 7 times as fast.
         with partial.open("wb") as file:
-            pickle.dump({"identity": self._identity, "code": code_version(), "state": state},
-                        file, protocol=5)
+            pickle.dump(header, file, protocol=5)
+            pickle.dump(state, file, protocol=5)
         os.replace(partial, self.path)
         self._last_save = time.monotonic()
         return True
@@ -102,3 +111,14 @@ class RunProgress:
     def remove(self) -> None:
         """The run has ended: its result is what stays."""
         self.path.unlink(missing_ok=True)
+
+
+def peek(path: Path) -> dict[str, Any] | None:
+    """A progress file's header without its state (``done`` of ``of`` episodes, ``wall_time``,
+    ``code``), for a sweep's status; None if there is none or it does not read."""
+    try:
+        with Path(path).open("rb") as file:
+            header = pickle.load(file)
+    except (OSError, pickle.UnpicklingError, EOFError):
+        return None
+    return header if isinstance(header, dict) and "done" in header else None

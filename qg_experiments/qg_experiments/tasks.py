@@ -27,7 +27,7 @@ from qg_experiments.run_progress import progress_path
 from qg_experiments.run_worker import RunnableSpec, run_one
 
 __all__ = ["RunnableSpec", "BACKENDS", "DEFAULT_WORKERS", "result_path", "run_specs",
-           "run_one", "load_results", "unsaved"]
+           "run_one", "load_results", "saved_result", "unsaved"]
 
 #: Where runs execute: a process pool on this machine, or a Ray cluster (local or remote).
 BACKENDS = ("process", "ray")
@@ -39,7 +39,9 @@ def result_path(out: Path, spec: RunnableSpec) -> Path:
     return Path(out) / spec.experiment / f"{spec.name}.json"
 
 
-def _saved(out: Path, spec: RunnableSpec) -> dict[str, Any] | None:
+def saved_result(out: Path, spec: RunnableSpec) -> dict[str, Any] | None:
+    """The saved result of ``spec`` under ``out``, or None: none saved, or one of another
+    setting (spec fields, config digest or task settings)."""
     path = result_path(out, spec)
     if not path.exists():
         return None
@@ -75,7 +77,7 @@ def _pool_results(todo: Sequence[RunnableSpec], workers: int, out: Path
 
 def unsaved(specs: Sequence[RunnableSpec], out: Path) -> list[RunnableSpec]:
     """The specs that have no saved result under ``out`` (or only one of another setting)."""
-    return [spec for spec in specs if _saved(out, spec) is None]
+    return [spec for spec in specs if saved_result(out, spec) is None]
 
 
 def run_specs(specs: Sequence[RunnableSpec], out: Path, workers: int = DEFAULT_WORKERS,
@@ -96,7 +98,7 @@ def run_specs(specs: Sequence[RunnableSpec], out: Path, workers: int = DEFAULT_W
     results: dict[str, dict[str, Any]] = {}
     todo = []
     for spec in specs:
-        saved = _saved(out, spec)
+        saved = saved_result(out, spec)
         if saved is None:
             todo.append(spec)
         else:

@@ -57,16 +57,16 @@ def test_a_peg_run_saved_before_the_thesis_networks_is_run_again(tmp_path):
 
     from qg_experiments.core.stack_settings import config_digest
     from qg_experiments.peg import PegRunSpec
-    from qg_experiments.tasks import _saved, result_path
+    from qg_experiments.tasks import result_path, saved_result
 
     spec = PegRunSpec(algorithm="ddpg", lr=1e-4, seed=100)
     path = result_path(tmp_path, spec)
     path.parent.mkdir(parents=True)
     saved = {"spec": {**spec.__dict__}, "config_digest": config_digest(), "episodes": []}
     path.write_text(json.dumps(saved))                       # the Panda's inits: no settings
-    assert _saved(tmp_path, spec) is None
+    assert saved_result(tmp_path, spec) is None
     path.write_text(json.dumps({**saved, "task_settings": spec.task_settings}))
-    assert _saved(tmp_path, spec) is not None
+    assert saved_result(tmp_path, spec) is not None
     assert spec.task_settings["networks"]["critic_init"] == "normal_1e-3"
 
 

@@ -8,12 +8,11 @@ generator to matter to the bit.
 from __future__ import annotations
 
 import json
-import pickle
 
 import pytest
 from qg_experiments import run_progress
 from qg_experiments.peg import PegRunSpec, run_peg
-from qg_experiments.run_progress import RunProgress, progress_path
+from qg_experiments.run_progress import RunProgress, peek, progress_path
 from qg_experiments.tasks import result_path, run_specs
 from qg_learning_node.learner.learner_core import LearnerCore
 
@@ -54,7 +53,8 @@ def test_a_sweep_stopped_mid_run_continues_the_run_to_the_same_result(
         with pytest.raises(KeyboardInterrupt):
             run_specs([SPEC], tmp_path, workers=1)
     progress = progress_path(tmp_path, SPEC)
-    saved = pickle.loads(progress.read_bytes())["state"]
+    assert {k: peek(progress)[k] for k in ("done", "of")} == {"done": 2, "of": SPEC.episodes}
+    saved = RunProgress(progress, SPEC).load()
     assert [e["episode"] for e in saved["episodes"]] == [0, 1]
     assert saved["episodes"] == straight["episodes"][:2]
     assert not result_path(tmp_path, SPEC).exists()
@@ -90,7 +90,31 @@ def test_progress_of_another_setting_or_a_broken_file_is_started_over(
 
 def test_progress_is_saved_only_every_so_often(tmp_path):
     keeper = RunProgress(tmp_path / "p.progress.pt", SPEC, every=3600.0)
-    assert not keeper.save({"episodes": []})
-    assert not keeper.path.exists()
-    assert keeper.save({"episodes": []}, force=True) and keeper.path.exists()
+    assert not keeper.save({"episodes": []}, 0, 4, 0.0)
+    assert not keeper.path.exists() and peek(keeper.path) is None
+    assert keeper.save({"episodes": []}, 0, 4, 1.5, force=True) and keeper.path.exists()
     assert RunProgress(keeper.path, SPEC).load()["episodes"] == []
+    assert peek(keeper.path)["wall_time"] == 1.5
+
+
+def test_the_status_of_a_sweep_counts_saved_running_and_waiting_runs_and_the_time_left(
+        tmp_path, monkeypatch, save_every_episode):
+    from qg_experiments.sweep_status import sweep_status
+    saved, running, waiting = (PegRunSpec(algorithm="qgddpg", lr=1e-3, seed=seed, episodes=4,
+                                          train_iterations=5, episode_steps=30)
+                               for seed in (5, 6, 7))
+    run_specs([saved], tmp_path, workers=1)
+    path = result_path(tmp_path, saved)   # as if the run had taken an hour
+    path.write_text(json.dumps({**json.loads(path.read_text()), "wall_time": 3600.0}))
+    with monkeypatch.context() as patch:
+        stop_in_episode(patch, 3)
+        with pytest.raises(KeyboardInterrupt):
+            run_specs([running], tmp_path, workers=1)
+    lines = sweep_status([saved, running, waiting], tmp_path, workers=2)
+    assert lines[0] == "peg: 1 of 3 runs saved, 1 under way, 1 waiting"
+    assert lines[1].startswith(f"  {running.name}: episode 2 of 4, ")
+    # an hour a run: the waiting one and half of the one under way
+    assert lines[2] == "  left: ~1.5 worker-hours (60.0 min a saved run)"
+    assert lines[3] == "left in all: ~0.8 h on 2 worker(s), at the saved runs' pace"
+    assert sweep_status([saved], tmp_path, workers=2) == [
+        "peg: 1 of 1 runs saved, 0 under way, 0 waiting"]
