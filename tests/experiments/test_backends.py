@@ -43,6 +43,8 @@ def test_ray_runs_give_the_pools_results_and_resume(tmp_path: Path) -> None:
                 == _without_wall_time(result_path(tmp_path / "pool", spec))), spec.name
     assert [r["spec"] for r in on_ray] == [r["spec"] for r in pooled]
     assert len(on_ray[0]["cycles"]) > 0 and on_ray[0]["rl_steps"] > 0   # a run that learned
+    # The peg run kept its progress where the Ray worker ran, and removed it at its end.
+    assert not list(tmp_path.glob("*/*/*.progress.pt*"))
     # A second call finds both runs saved: nothing runs, nothing is rewritten.
     saved = {p: p.stat().st_mtime_ns for p in (tmp_path / "ray").glob("*/*.json")}
     assert len(saved) == 2
