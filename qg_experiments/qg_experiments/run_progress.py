@@ -8,8 +8,8 @@ wall time, between two episodes, and starts from there when it runs again. Its e
 seeded by their index (``runner.episode_noise_seed``), so a resumed run is the run to the bit
 (``tests/experiments/test_run_progress.py``).
 
-A progress file is used only by the run it was written for: the same spec, config digest and
-task settings, the identity ``tasks`` reuses a saved run by. Anything else there (another
+A progress file is used only by the run it was written for (``run_identity``: the same spec,
+config digest and task settings, as ``tasks`` reuses a saved run). Anything else there (another
 setting's run, a file that does not load) is started over, with a warning, and overwritten. The
 file is replaced whole (written beside, then renamed), so a run killed while it saves leaves the
 previous one, and it is removed when the run ends.
@@ -18,7 +18,6 @@ On Ray, a run saves where its worker runs: a run resumed on another machine star
 """
 from __future__ import annotations
 
-import dataclasses
 import os
 import pickle
 import time
@@ -27,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from qg_experiments.code_version import code_version
-from qg_experiments.core.stack_settings import config_digest
+from qg_experiments.run_identity import run_identity
 
 __all__ = ["PROGRESS_EVERY", "PROGRESS_SUFFIX", "RunProgress", "peek", "progress_path"]
 
@@ -44,14 +43,6 @@ def progress_path(out: Path, spec: Any) -> Path:
     return Path(out) / spec.experiment / f"{spec.name}{PROGRESS_SUFFIX}"
 
 
-def _identity(spec: Any) -> dict[str, Any]:
-    """What makes two runs the same run: ``tasks``' reuse check, config folder aside."""
-    fields = dataclasses.asdict(spec)
-    fields.pop("config_dir", None)
-    return {"spec": fields, "config_digest": config_digest(spec.config_dir),
-            "task_settings": getattr(spec, "task_settings", {})}
-
-
 class RunProgress:
     """The progress file of one run.
 
@@ -63,7 +54,7 @@ class RunProgress:
     def __init__(self, path: Path, spec: Any, every: float | None = None) -> None:
         self.path = Path(path)
         self.every = PROGRESS_EVERY if every is None else every
-        self._identity = _identity(spec)
+        self._identity = run_identity(spec)
         self._last_save = time.monotonic()
 
     def load(self) -> dict[str, Any] | None:

@@ -3,15 +3,14 @@
 Every run is a frozen spec with ``name``, ``experiment`` and ``run() -> dict``; its result goes
 to ``<out>/<experiment>/<name>.json`` the moment it finishes, so an interrupted sweep keeps what
 it did, and a second call with the same specs skips runs whose saved spec and config digest
-(see ``core.config_digest``) are identical. A long run (``run_worker.ResumableSpec``) also saves
-its progress there between episodes and continues from it (``run_progress``). Only where a run executes depends on the backend:
-``process`` (the default) is a pool of one process per core on this machine, ``ray`` hands the
+(``run_identity``: spec, config digest, task settings) are identical. A long run
+(``run_worker.ResumableSpec``) also saves its progress there between episodes and continues from
+it (``run_progress``). Only where a run executes depends on the backend: ``process`` (the default) is a pool of one process per core on this machine, ``ray`` hands the
 runs to a Ray cluster (``ray_backend``); a worker of either calls ``run_worker.run_one``.
 Skipping, saving, the progress bar and the results are the same code for both.
 """
 from __future__ import annotations
 
-import dataclasses
 import functools
 import json
 import multiprocessing
@@ -22,7 +21,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from qg_experiments.core.stack_settings import config_digest
+from qg_experiments.run_identity import run_identity, saved_identity
 from qg_experiments.run_progress import progress_path
 from qg_experiments.run_worker import RunnableSpec, run_one
 
@@ -41,26 +40,12 @@ def result_path(out: Path, spec: RunnableSpec) -> Path:
 
 def saved_result(out: Path, spec: RunnableSpec) -> dict[str, Any] | None:
     """The saved result of ``spec`` under ``out``, or None: none saved, or one of another
-    setting (spec fields, config digest or task settings)."""
+    run (``run_identity``)."""
     path = result_path(out, spec)
     if not path.exists():
         return None
     result = json.loads(path.read_text())
-    # A spec field added after a run was saved, at its default, leaves that run the same run.
-    defaults = {f.name: f.default for f in dataclasses.fields(spec)
-                if f.default is not dataclasses.MISSING}
-    saved_spec = json.loads(json.dumps({**defaults, **result.get("spec", {})}))
-    current = json.loads(json.dumps(dataclasses.asdict(spec)))
-    # Where the config files were read (config/, or a frozen copy for a long sweep) is not the
-    # run's identity; their numbers are (``config_digest``).
-    for fields in (saved_spec, current):
-        fields.pop("config_dir", None)
-    # Settings a spec takes from elsewhere than its fields (a standard task's settings of our
-    # agents) are saved with the run; a run saved before they existed had none.
-    settings = json.loads(json.dumps(getattr(spec, "task_settings", {})))
-    same = (saved_spec == current
-            and result.get("config_digest") == config_digest(spec.config_dir)
-            and result.get("task_settings", {}) == settings)
+    same = saved_identity(result, spec) == run_identity(spec)
     return result if same else None
 
 
