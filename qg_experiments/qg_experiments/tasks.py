@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import functools
 import json
-import multiprocessing
 import os
 from collections.abc import Collection, Iterable, Sequence
 from pathlib import Path
@@ -24,6 +23,7 @@ from tqdm import tqdm
 from qg_experiments.run_identity import run_identity, saved_identity
 from qg_experiments.run_progress import progress_path
 from qg_experiments.run_worker import RunnableSpec, run_one
+from qg_experiments.worker_pool import pool_results
 
 __all__ = ["RunnableSpec", "BACKENDS", "DEFAULT_WORKERS", "result_path", "run_specs",
            "run_one", "load_results", "saved_result", "unsaved"]
@@ -51,13 +51,10 @@ def saved_result(out: Path, spec: RunnableSpec) -> dict[str, Any] | None:
 
 def _pool_results(todo: Sequence[RunnableSpec], workers: int, out: Path
                   ) -> Iterable[tuple[RunnableSpec, dict[str, Any]]]:
-    """``(spec, result)`` of each run of ``todo`` as it ends, on ``workers`` local processes."""
+    """``(spec, result)`` of each run of ``todo`` as it ends, on ``workers`` local processes
+    (``worker_pool``: a worker that dies stops the sweep, naming its run)."""
     run = functools.partial(run_one, out=out)
-    if workers == 1:
-        yield from map(run, todo)
-        return
-    with multiprocessing.get_context("spawn").Pool(workers) as pool:
-        yield from pool.imap_unordered(run, todo)
+    yield from map(run, todo) if workers == 1 else pool_results(run, todo, workers)
 
 
 def unsaved(specs: Sequence[RunnableSpec], out: Path) -> list[RunnableSpec]:
