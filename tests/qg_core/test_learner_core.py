@@ -39,6 +39,8 @@ def test_cycles_and_zero_action_loops():
     assert result['directly_connected'] == 2 and result['total'] == 98
     assert result['loose_end'] == 0
     assert 0.0 <= result['frac_raised_lower'] <= 1.0
+    # the critic, frozen while the actor's loss runs through it, trains again afterwards
+    assert all(p.requires_grad for p in core.agent.critic.parameters())
 
 
 def test_vanilla_without_graph_and_validation():

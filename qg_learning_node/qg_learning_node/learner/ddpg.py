@@ -247,15 +247,24 @@ class DDPG:
         for opt in self._critic_opts():
             opt.step()
 
-        pre_tanh = self.actor[:-1](s)      # the actor without its output tanh
-        actor_loss = -self.q(s, torch.tanh(pre_tanh)).mean()
-        if self.config.actor_preact_penalty > 0:
-            actor_loss = actor_loss + self.config.actor_preact_penalty * torch.mean(pre_tanh ** 2)
-        self.actor_opt.zero_grad()
-        actor_loss.backward()
+        # The actor's loss goes through the critics, whose weights it does not train: frozen
+        # for it, their weight gradients are not computed at all (~a tenth of an update; the
+        # actor's gradient is the same to the bit).
+        critics = [c for c in (self.critic, self.critic2) if c is not None]
+        for critic in critics:
+            critic.requires_grad_(False)
+        try:
+            pre_tanh = self.actor[:-1](s)      # the actor without its output tanh
+            actor_loss = -self.q(s, torch.tanh(pre_tanh)).mean()
+            if self.config.actor_preact_penalty > 0:
+                actor_loss = actor_loss + (self.config.actor_preact_penalty
+                                           * torch.mean(pre_tanh ** 2))
+            self.actor_opt.zero_grad()
+            actor_loss.backward()
+        finally:
+            for critic in critics:
+                critic.requires_grad_(True)
         self.actor_opt.step()
-        for opt in self._critic_opts():
-            opt.zero_grad()  # the actor loss also filled critic gradients
 
         if self.config.target_networks:
             self._soft_update()
