@@ -132,7 +132,6 @@ def comparison(random_rows: list[dict[str, Any]], bar: Bar | None,
     return notes + [""]
 
 
-
 def _peg_notes(data: dict[str, Any]) -> list[str]:
     """A peg experiment's lines of the closing list: per learning rate, QG-DDPG against DDPG
     paired by seed (``peg_sections.peg_pairs``) beside the thesis's ch. 8.3.2 findings (Figs.
@@ -153,7 +152,8 @@ def _peg_notes(data: dict[str, Any]) -> list[str]:
                 f"episodes higher in {speed.wins_a} of {speed.n}, "
                 f"{stats.format_interval(speed.difference, 2)}, p (Holm) = {p_speed:.3g}: "
                 f"{faster} (thesis Fig. 8.2: faster at every learning rate); over the last "
-                f"{data['tail']} {stats.format_interval(late.difference, 2)}, p = {p_late:.3g}: "
+                f"{data['tail']} episodes {stats.format_interval(late.difference, 2)}, "
+                f"p = {p_late:.3g}: "
                 f"{'worse' if worse else 'not worse'} (thesis: never worse)")
         spreads = [(points, pairs.spreads(lr, points)) for points in ("given", "pi")]
         if all(q is not None for _, q in spreads):
