@@ -66,8 +66,7 @@ class RunProgress:
         try:
             with self.path.open("rb") as file:
                 header = pickle.load(file)
-                # (the first files of 2026-11-29 held the state inside the header)
-                state = header["state"] if "state" in header else pickle.load(file)
+                state = pickle.load(file)
         except Exception as exc:      # a truncated or foreign file: the run starts over
             warnings.warn(f"{self.path} does not load ({exc!r}); the run starts over",
                           stacklevel=2)
@@ -76,7 +75,7 @@ class RunProgress:
             warnings.warn(f"{self.path} is the progress of another setting; the run starts over",
                           stacklevel=2)
             return None
-        return {"code": header["code"], "wall_time": header.get("wall_time", 0.0), **state}
+        return {"code": header["code"], "wall_time": header["wall_time"], **state}
 
     def save(self, state: dict[str, Any], done: int, of: int, wall_time: float,
              force: bool = False) -> bool:
