@@ -10,7 +10,8 @@ logged at their arrival on the same clock, the loop's (``LoopLink.now_ns``: simu
 lockstep, the wall clock in realtime), as rosbag2 logs receive times: one time base per bag, and
 a bag starts with its first message. Episode boundaries come from ``/episode_status``: a bag
 opens when an episode starts resetting and closes once the episode has ended and all of its
-transitions have arrived.
+transitions and ticks have arrived (the ticks come in blocks, behind the RL-rate messages: a
+CI run under load closed a bag before the last step's ticks, and its bag had no tick at all).
 
 What the bags hold and how much their folder may take is ``recording.*``
 (``qg_recording.disk_keeper``): an episode the policy refuses (disk nearly full, budget full of
@@ -107,6 +108,8 @@ class RecorderNode(Node):
         self.transitions = 0
         self.final_steps: int | None = None
         self.ended_at = 0.0
+        self.ended_ns = 0                   # the loop's clock when the episode ended
+        self.recorded_ns = 0                # the newest tick the recorder has been handed
         self._latched: dict[str, bytes] = {}     # latched topic -> its latest message
         group = MutuallyExclusiveCallbackGroup()
         self._subscribe(EpisodeStatus, topics.EPISODE_STATUS, self._on_status, _STATUS_QOS, group)
@@ -130,6 +133,8 @@ class RecorderNode(Node):
                        extra: Sequence[TopicRows] = ()) -> None:
         """Record the loop's ticks (``sample_ring`` records; nothing between episodes) and the
         ``extra`` rows made of them (``/tf``)."""
+        if len(records):
+            self.recorded_ns = int(records["t_ns"][-1])
         if self.episode_id:
             # The ticks come in blocks, up to a few ms after their stamps: those stamped before
             # the bag opened (its first message) belong to no episode.
@@ -204,6 +209,7 @@ class RecorderNode(Node):
             self.recorder.record_raw("/episode_status", t_ns, data)
             if msg.state in _FINAL and self.final_steps is None:
                 self.final_steps, self.ended_at = int(msg.step), time.monotonic()
+                self.ended_ns = t_ns
                 self._closer.reset()
 
     def _on_transition(self, t_ns: int, data: bytes, msg: Transition) -> None:
@@ -223,7 +229,7 @@ class RecorderNode(Node):
             self.recorder.record_raw("/ee_at_rest", t_ns, data)
 
     def _close_if_complete(self) -> None:
-        """Close the bag once the episode has ended and all its transitions are in.
+        """Close the bag once the episode has ended and all its transitions and ticks are in.
 
         Called by the timer only, never from a message callback: messages published just
         before the final status (the last ``/ee_at_rest``) may sit in the same batch of ready
@@ -236,11 +242,16 @@ class RecorderNode(Node):
         if waited < _SETTLE:
             return
         late = waited > self.config.close_timeout
-        if self.transitions >= self.final_steps or late:
+        ticks_in = self.recorded_ns >= self.ended_ns
+        if (self.transitions >= self.final_steps and ticks_in) or late:
             if late and self.transitions < self.final_steps:
                 self.get_logger().warning(
                     f"closing bag of {self.episode_id} with {self.transitions} of "
                     f"{self.final_steps} transitions")
+            if late and not ticks_in:
+                self.get_logger().warning(
+                    f"closing bag of {self.episode_id} without the ticks after "
+                    f"{self.recorded_ns} ns (it ended at {self.ended_ns} ns)")
             self._close()
 
     def _close(self) -> None:

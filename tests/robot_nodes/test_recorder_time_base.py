@@ -79,35 +79,87 @@ def test_realtime_bag_is_stamped_like_the_live_messages(stack, machine_to_itself
         assert 0 <= t_ns - stamp_ns(event) < 10**9, (t_ns, stamp_ns(event))
 
 
-def test_ticks_stamped_before_the_bag_opened_are_not_recorded(tmp_path: Path) -> None:
-    """The loop's ticks reach the recorder in blocks, a few ms after their stamps: a block that
-    arrives just after an episode's first status holds ticks from before it (a suite run found a
-    bag whose first message was a tick 4.6 ms older than its opening status)."""
+def _ticks(stamps):
+    """Loop records (``sample_ring.record_dtype``, 7 joints) stamped ``stamps``."""
     import numpy as np
-    import rclpy
-    from qg_recording.bag_reader import read_raw
-    from qg_recording.episode_recorder import EpisodeRecorder
-    from rclpy.serialization import serialize_message
     from robot_bridge_node.core.sample_ring import record_dtype
-    from robot_bridge_node.core.tick_messages import TickNames
+    ticks = np.zeros(len(stamps), dtype=record_dtype(7))
+    ticks["t_ns"] = stamps
+    return ticks
+
+
+@pytest.fixture
+def recorder_node(tmp_path: Path):
+    """A recorder node writing into ``tmp_path``, its messages handed to it by the test."""
+    import rclpy
+    from qg_recording.episode_recorder import EpisodeRecorder
     from robot_bridge_node.recorder_node import RecorderNode
 
     rclpy.init(domain_id=232)          # no test's processes use it; nothing is published
     try:
         node = RecorderNode()
         node.recorder = EpisodeRecorder(tmp_path)
-        opened = 1_000_000_000
-        msg = status("resetting")
-        node._on_status(opened, serialize_message(msg), msg)
-        ticks = np.zeros(10, dtype=record_dtype(7))
-        ticks["t_ns"] = opened + np.arange(-5, 5) * 1_000_000     # 5 before, 5 from the opening
-        node.record_samples(ticks, TickNames(tuple(f"j{i}" for i in range(7)), "base"))
-        node._close()
+        yield node
         node.destroy_node()
     finally:
         rclpy.shutdown()
+
+
+def _on_status(node, t_ns: int, state: str) -> None:
+    from rclpy.serialization import serialize_message
+    msg = status(state)
+    node._on_status(t_ns, serialize_message(msg), msg)
+
+
+def test_ticks_stamped_before_the_bag_opened_are_not_recorded(recorder_node, tmp_path: Path) -> None:
+    """The loop's ticks reach the recorder in blocks, a few ms after their stamps: a block that
+    arrives just after an episode's first status holds ticks from before it (a suite run found a
+    bag whose first message was a tick 4.6 ms older than its opening status)."""
+    import numpy as np
+    from qg_recording.bag_reader import read_raw
+    from robot_bridge_node.core.tick_messages import TickNames
+
+    node, opened = recorder_node, 1_000_000_000
+    _on_status(node, opened, "resetting")
+    node.record_samples(_ticks(opened + np.arange(-5, 5) * 1_000_000),  # 5 before, 5 from it
+                        TickNames(tuple(f"j{i}" for i in range(7)), "base"))
+    node._close()
     bag = tmp_path / EPISODE
     stamps = [m.t_ns for m in read_raw(bag, ["/joint_states"])]
     assert stamps == [opened + k * 1_000_000 for k in range(5)]
     first = next(iter(read_raw(bag)))
     assert (first.topic, first.t_ns) == ("/episode_status", opened)
+
+
+def test_a_bag_waits_for_the_ticks_of_its_last_step(recorder_node, tmp_path: Path) -> None:
+    """The final status overtakes the last step's ticks (they come in blocks, behind the RL-rate
+    messages): the bag stays open until the ticks up to the episode's end are in, and a loop
+    that sends no more closes it after ``close_timeout`` without them. A CI run under load
+    closed a bag first, and it held no tick at all."""
+    import numpy as np
+    from qg_recording.bag_reader import read_raw
+    from robot_bridge_node.core.tick_messages import TickNames
+    from robot_bridge_node.recorder_node import _SETTLE
+
+    node, names = recorder_node, TickNames(tuple(f"j{i}" for i in range(7)), "base")
+    opened, ended = 1_000_000_000, 1_500_000_000
+    _on_status(node, opened, "resetting")
+    _on_status(node, ended, "done")             # the episode's 500 ticks not handed over yet
+    node.ended_at -= 2 * _SETTLE                # the settling time has passed
+    node._close_if_complete()
+    assert node.recorder.active, "closed before the episode's ticks were in"
+    node.record_samples(_ticks(opened + np.arange(250) * 1_000_000), names)
+    node._close_if_complete()
+    assert node.recorder.active, "closed with half of the episode's ticks"
+    node.record_samples(_ticks(opened + np.arange(250, 501) * 1_000_000), names)
+    node._close_if_complete()
+    assert not node.recorder.active
+    stamps = [m.t_ns for m in read_raw(tmp_path / EPISODE, ["/joint_states"])]
+    assert stamps == [opened + k * 1_000_000 for k in range(501)]
+
+    node.recorder.runs_dir = tmp_path / "next"       # the next episode (same id: another folder)
+    _on_status(node, 2_000_000_000, "resetting")
+    _on_status(node, 2_100_000_000, "done")          # ... and no tick comes any more
+    node.ended_at -= node.config.close_timeout + _SETTLE
+    node._close_if_complete()
+    assert not node.recorder.active
