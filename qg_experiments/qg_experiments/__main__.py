@@ -11,7 +11,8 @@ import sys
 from pathlib import Path
 
 from qg_experiments.profile import load_profile
-from qg_experiments.suite import EXPERIMENTS, all_specs, run_suite
+from qg_experiments.run_archive import archive_folder
+from qg_experiments.suite import EXPERIMENTS, all_specs, restore, run_suite
 from qg_experiments.sweep_status import sweep_status
 from qg_experiments.tasks import BACKENDS, DEFAULT_WORKERS
 
@@ -44,8 +45,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--report-only", action="store_true",
                         help="only regenerate results.md from saved results")
     parser.add_argument("--status", action="store_true",
-                        help="say where the sweep of --only stands (saved runs, runs under way "
-                        "and their episodes, the time left) and run nothing")
+                        help="say where the sweep of --only stands (saved runs, archived ones "
+                        "restored first; runs under way and their episodes; the time left) and "
+                        "run nothing")
     args = parser.parse_args(argv)
     if args.workers < 1:
         parser.error(f"--workers must be at least 1, got {args.workers}")
@@ -57,6 +59,8 @@ def main(argv: list[str] | None = None) -> None:
         parser.error(f"unknown experiments {sorted(unknown)}")
     profile = load_profile(args.profile, args.profiles_file, args.estimator)
     if args.status:
+        restore(profile, args.out / profile.name, archive_folder(args.docs, profile.name),
+                args.config_dir)
         lines = sweep_status(all_specs(profile, only, args.config_dir),
                              args.out / profile.name, args.workers)
         print("\n".join([f"{profile.name} ({args.out / profile.name}):", *lines]))

@@ -3,7 +3,9 @@
 Random baselines, the grid, the variants of experiment 4 (at fixed cells), the grid with the
 thesis's state and the peg runs (free and on the Nextage) are independent and share one pool of
 workers (a process per core, or Ray: ``tasks.BACKENDS``).
-Results land in ``<out>/<profile>/<experiment>/`` and wall times in ``timing.json`` there.
+Results land in ``<out>/<profile>/<experiment>/`` and wall times in ``timing.json`` there; each
+is kept as well in ``<docs>/data/<profile>/runs/`` (``run_archive``), from which a fresh clone
+restores them before it runs or reports anything.
 """
 from __future__ import annotations
 
@@ -14,9 +16,10 @@ from typing import Any
 
 from qg_experiments import grid, peg, random_baselines, report
 from qg_experiments.profile import Profile
-from qg_experiments.tasks import DEFAULT_WORKERS, run_specs, unsaved
+from qg_experiments.run_archive import archive_folder
+from qg_experiments.tasks import DEFAULT_WORKERS, restore_archived, run_specs, unsaved
 
-__all__ = ["EXPERIMENTS", "run_suite", "all_specs", "planned_runs", "current_runs"]
+__all__ = ["EXPERIMENTS", "run_suite", "all_specs", "planned_runs", "current_runs", "restore"]
 
 EXPERIMENTS = ("random", "grid", "variants", "state_grid", "peg", "nextage")
 
@@ -66,15 +69,26 @@ def run_suite(profile: Profile, out: Path, docs: Path, only: tuple[str, ...] = E
     """
     out = Path(out) / profile.name
     out.mkdir(parents=True, exist_ok=True)
+    archive = archive_folder(Path(docs), profile.name)
+    restore(profile, out, archive, config_dir)
     start = time.perf_counter()
     specs = all_specs(profile, only, config_dir)
     step = "+".join(only)
     # A step whose runs are all saved keeps the time recorded when they ran.
     if specs and unsaved(specs, out):
-        run_specs(specs, out, workers, f"{profile.name}: {step}", backend, address)
+        run_specs(specs, out, workers, f"{profile.name}: {step}", backend, address, archive)
         _record_time(out, step, time.perf_counter() - start, command)
     return report.write_report(profile, out, Path(docs), config_dir, planned_runs(profile),
                                current_runs(profile, config_dir))
+
+
+def restore(profile: Profile, out: Path, archive: Path, config_dir: str | None = None) -> None:
+    """Restore into ``out`` the archived runs of ``profile`` it lacks (``run_archive``), and
+    say how many."""
+    restored = restore_archived(all_specs(profile, EXPERIMENTS, config_dir), out, archive)
+    if restored:
+        print(f"{profile.name}: {len(restored)} finished run(s) restored from {archive}",
+              flush=True)
 
 
 def current_runs(profile: Profile, config_dir: str | None = None) -> dict[str, set[str]]:

@@ -5,7 +5,8 @@ to ``<out>/<experiment>/<name>.json`` the moment it finishes, so an interrupted 
 it did, and a second call with the same specs skips runs whose saved spec and config digest
 (``run_identity``: spec, config digest, task settings) are identical. A long run
 (``run_worker.ResumableSpec``) also saves its progress there between episodes and continues from
-it (``run_progress``). Only where a run executes depends on the backend: ``process`` (the
+it (``run_progress``). With an ``archive`` (``run_archive``: the report's data folder, versioned)
+each result is kept there too, and restored from there into ``out`` on a fresh machine. Only where a run executes depends on the backend: ``process`` (the
 default) is a pool of one process per core on this machine (``worker_pool``), ``ray`` hands the
 runs to a Ray cluster (``ray_backend``); a worker of either calls ``run_worker.run_one``.
 Skipping, saving, the progress bar and the results are the same code for both.
@@ -21,13 +22,14 @@ from typing import Any
 
 from tqdm import tqdm
 
+from qg_experiments.run_archive import archive_result, archived_result
 from qg_experiments.run_identity import run_identity, saved_identity
 from qg_experiments.run_progress import progress_path
 from qg_experiments.run_worker import RunnableSpec, run_one
 from qg_experiments.worker_pool import pool_results
 
 __all__ = ["RunnableSpec", "BACKENDS", "DEFAULT_WORKERS", "result_path", "run_specs",
-           "run_one", "load_results", "saved_result", "unsaved"]
+           "run_one", "load_results", "saved_result", "unsaved", "restore_archived"]
 
 #: Where runs execute: a process pool on this machine, or a Ray cluster (local or remote).
 BACKENDS = ("process", "ray")
@@ -50,6 +52,25 @@ def saved_result(out: Path, spec: RunnableSpec) -> dict[str, Any] | None:
     return result if same else None
 
 
+def restore_archived(specs: Sequence[RunnableSpec], out: Path, archive: Path) -> list[str]:
+    """Save under ``out`` the archived result (``run_archive``) of each of ``specs`` that has
+    none there, when it is of the same run; the names of the runs restored."""
+    restored = []
+    for spec in specs:
+        if saved_result(out, spec) is None:
+            result = archived_result(archive, spec)
+            if result is not None:
+                _save(out, spec, result)
+                restored.append(spec.name)
+    return restored
+
+
+def _save(out: Path, spec: RunnableSpec, result: dict[str, Any]) -> None:
+    path = result_path(out, spec)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(result))
+
+
 def _pool_results(todo: Sequence[RunnableSpec], workers: int, out: Path
                   ) -> Iterable[tuple[RunnableSpec, dict[str, Any]]]:
     """``(spec, result)`` of each run of ``todo`` as it ends, on ``workers`` local processes
@@ -65,13 +86,14 @@ def unsaved(specs: Sequence[RunnableSpec], out: Path) -> list[RunnableSpec]:
 
 def run_specs(specs: Sequence[RunnableSpec], out: Path, workers: int = DEFAULT_WORKERS,
               description: str = "runs", backend: str = "process",
-              address: str | None = None) -> list[dict[str, Any]]:
+              address: str | None = None, archive: Path | None = None) -> list[dict[str, Any]]:
     """Run every spec not already saved under ``out``; results in the order of ``specs``.
 
     :param workers: runs at a time on this machine: processes of the pool (1 runs in this
         process), or the CPUs of the local Ray; a Ray cluster at ``address`` uses its own CPUs.
     :param backend: one of :data:`BACKENDS`.
     :param address: the Ray cluster to join (``ray`` backend only; None starts a local one).
+    :param archive: where each finished result is kept as well (``run_archive``); None: not.
     :raises ValueError: for an unknown backend, or an address without the ``ray`` backend.
     """
     if backend not in BACKENDS:
@@ -95,9 +117,9 @@ def run_specs(specs: Sequence[RunnableSpec], out: Path, workers: int = DEFAULT_W
                dynamic_ncols=True)
 
     def keep(spec: RunnableSpec, result: dict[str, Any]) -> None:
-        path = result_path(out, spec)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(result))
+        _save(out, spec, result)
+        if archive is not None:
+            archive_result(archive, spec, result)
         results[f"{spec.experiment}/{spec.name}"] = result
         bar.set_postfix_str(f"{spec.name} {result['wall_time']:.0f}s")
         bar.update()
