@@ -44,6 +44,8 @@ from robot_bridge_node.core.tick_messages import TickNames, TopicRows, record_ti
 __all__ = ["RecorderConfig", "RECORDER_SECTION", "RecorderNode"]
 
 _FINAL = ("done", "aborted")
+#: [s] the most a new episode's first status waits for the ticks of the episode before it.
+_TICKS_WAIT = 0.5
 #: [s] a bag stays open at least this long after its episode ended (see ``_close_if_complete``).
 _SETTLE = 0.1
 #: ``/episode_status`` as its publisher offers it (transient local: a late recorder still gets
@@ -110,6 +112,7 @@ class RecorderNode(Node):
         self.ended_at = 0.0
         self.ended_ns = 0                   # the loop's clock when the episode ended
         self.recorded_ns = 0                # the newest tick the recorder has been handed
+        self._ticks_in = threading.Condition()  # ... which the reader thread announces
         self._latched: dict[str, bytes] = {}     # latched topic -> its latest message
         group = MutuallyExclusiveCallbackGroup()
         self._subscribe(EpisodeStatus, topics.EPISODE_STATUS, self._on_status, _STATUS_QOS, group)
@@ -133,16 +136,18 @@ class RecorderNode(Node):
                        extra: Sequence[TopicRows] = ()) -> None:
         """Record the loop's ticks (``sample_ring`` records; nothing between episodes) and the
         ``extra`` rows made of them (``/tf``)."""
-        if len(records):
-            self.recorded_ns = int(records["t_ns"][-1])
+        if not len(records):
+            return
         if self.episode_id:
             # The ticks come in blocks, up to a few ms after their stamps: those stamped before
             # the bag opened (its first message) belong to no episode.
             opened = self.opened_ns
-            records = records[records["t_ns"] >= opened]
-            if len(records):
-                record_ticks(self.recorder, records, names,
-                             [rows.since(opened) for rows in extra])
+            taken = records[records["t_ns"] >= opened]
+            if len(taken):
+                record_ticks(self.recorder, taken, names, [rows.since(opened) for rows in extra])
+        with self._ticks_in:               # announced once in the bag, not before
+            self.recorded_ns = int(records["t_ns"][-1])
+            self._ticks_in.notify_all()
 
     # --- latched topics ---------------------------------------------------------------------
     def latch(self, topic: str, data: bytes) -> None:
@@ -189,6 +194,9 @@ class RecorderNode(Node):
         if not self.config.record or not msg.episode_id or msg.episode_id == self.refused_id:
             return
         if msg.episode_id != self.episode_id and msg.state not in _FINAL:
+            if self.final_steps is not None:     # the last episode ended: its ticks first
+                with self._ticks_in:
+                    self._ticks_in.wait_for(self._all_ticks_in, _TICKS_WAIT)
             self._close()
             with self.lock:
                 try:
@@ -242,7 +250,7 @@ class RecorderNode(Node):
         if waited < _SETTLE:
             return
         late = waited > self.config.close_timeout
-        ticks_in = self.recorded_ns >= self.ended_ns
+        ticks_in = self._all_ticks_in()
         if (self.transitions >= self.final_steps and ticks_in) or late:
             if late and self.transitions < self.final_steps:
                 self.get_logger().warning(
@@ -253,6 +261,10 @@ class RecorderNode(Node):
                     f"closing bag of {self.episode_id} without the ticks after "
                     f"{self.recorded_ns} ns (it ended at {self.ended_ns} ns)")
             self._close()
+
+    def _all_ticks_in(self) -> bool:
+        """Whether the ticks up to the ended episode's last have been recorded."""
+        return self.recorded_ns >= self.ended_ns
 
     def _close(self) -> None:
         with self.lock:

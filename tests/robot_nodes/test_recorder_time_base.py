@@ -18,10 +18,10 @@ pytestmark = pytest.mark.ros   # a realtime robot process
 EPISODE = "rt_0001"
 
 
-def status(state: str):
+def status(state: str, episode: str = EPISODE):
     from qg_common.conversions import time_msg
     from qg_interfaces.msg import EpisodeStatus
-    return EpisodeStatus(stamp=time_msg(time.time_ns()), episode_id=EPISODE, state=state, mode="test",
+    return EpisodeStatus(stamp=time_msg(time.time_ns()), episode_id=episode, state=state, mode="test",
                          reward_type="sparse", initial_pose=2, step=0, max_steps=1)
 
 
@@ -105,9 +105,9 @@ def recorder_node(tmp_path: Path):
         rclpy.shutdown()
 
 
-def _on_status(node, t_ns: int, state: str) -> None:
+def _on_status(node, t_ns: int, state: str, episode: str = EPISODE) -> None:
     from rclpy.serialization import serialize_message
-    msg = status(state)
+    msg = status(state, episode)
     node._on_status(t_ns, serialize_message(msg), msg)
 
 
@@ -163,3 +163,32 @@ def test_a_bag_waits_for_the_ticks_of_its_last_step(recorder_node, tmp_path: Pat
     node.ended_at -= node.config.close_timeout + _SETTLE
     node._close_if_complete()
     assert not node.recorder.active
+
+
+def test_the_next_episodes_first_status_waits_for_the_last_ones_ticks(recorder_node,
+                                                                       tmp_path: Path) -> None:
+    """Episodes back to back: the next episode's ``resetting`` may come before the last step's
+    ticks of the episode before. Its bag takes them first (the reader thread hands them over
+    40 ms later here), then the next bag opens."""
+    import threading
+    import time
+
+    import numpy as np
+    from qg_recording.bag_reader import read_raw
+    from robot_bridge_node.core.tick_messages import TickNames
+
+    node, names = recorder_node, TickNames(tuple(f"j{i}" for i in range(7)), "base")
+    opened, ended = 1_000_000_000, 1_100_000_000
+    _on_status(node, opened, "resetting")
+    _on_status(node, ended, "done")
+    late = threading.Timer(0.04, node.record_samples,
+                           (_ticks(opened + np.arange(101) * 1_000_000), names))
+    late.start()
+    start = time.monotonic()
+    _on_status(node, ended, "resetting", "rt_0002")
+    waited = time.monotonic() - start
+    late.join()
+    assert waited < 0.4, waited          # (not the whole _TICKS_WAIT)
+    assert node.recorder.episode_id == "rt_0002" and node.opened_ns == ended
+    stamps = [m.t_ns for m in read_raw(tmp_path / EPISODE, ["/joint_states"])]
+    assert stamps == [opened + k * 1_000_000 for k in range(101)]
