@@ -4,9 +4,10 @@ A run's result is saved under ``--out`` (``tasks.result_path``), a folder outsid
 control, with the run's progress files. A machine that is reset takes that folder with it: one
 reset took the 34 finished runs of the thesis's peg (about 10 hours of two cores) and left only
 their episode CSVs, which hold no final Q and cannot rebuild the report. So each finished run
-is also kept, gzipped, in ``docs/data/<profile>/runs/<experiment>/<name>.json.gz`` (a few kB to
-a few tens of kB; versioned like the report's CSVs), and a sweep or a report on a fresh clone
-first restores into ``--out`` every archived run it would otherwise miss. An archived run is
+is also kept, gzipped, in ``docs/data/<profile>/archived_runs/<experiment>/<name>.json.gz``
+(tens of kB; versioned like the report's CSVs; not ``runs/``, a name ``.gitignore`` leaves
+out at any depth), and a sweep or a report on a fresh clone first restores into ``--out``
+every archived run it would otherwise miss. An archived run is
 restored only while it is the same run (``run_identity``: spec, config digest, task settings),
 as a saved one is reused.
 """
@@ -25,7 +26,7 @@ __all__ = ["archive_folder", "archived_path", "archive_result", "archived_result
 
 def archive_folder(docs: Path, profile: str) -> Path:
     """Where the runs of ``profile`` are archived, beside its report's data."""
-    return Path(docs) / "data" / profile / "runs"
+    return Path(docs) / "data" / profile / "archived_runs"
 
 
 def archived_path(archive: Path, spec: RunnableSpec) -> Path:

@@ -4,8 +4,8 @@ Random baselines, the grid, the variants of experiment 4 (at fixed cells), the g
 thesis's state and the peg runs (free and on the Nextage) are independent and share one pool of
 workers (a process per core, or Ray: ``tasks.BACKENDS``).
 Results land in ``<out>/<profile>/<experiment>/`` and wall times in ``timing.json`` there; each
-is kept as well in ``<docs>/data/<profile>/runs/`` (``run_archive``), from which a fresh clone
-restores them before it runs or reports anything.
+is kept as well in ``<docs>/data/<profile>/archived_runs/`` (``run_archive``), from which a
+fresh clone restores them before it runs or reports anything.
 """
 from __future__ import annotations
 

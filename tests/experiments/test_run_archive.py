@@ -14,6 +14,7 @@ from qg_experiments.peg import PegRunSpec
 from qg_experiments.run_archive import archive_folder, archive_result, archived_path
 from qg_experiments.tasks import restore_archived, result_path, run_specs, saved_result
 
+ROOT = Path(__file__).resolve().parents[2]
 SPEC = PegRunSpec(algorithm="qgddpg", lr=1e-3, seed=5, episodes=2, train_iterations=3,
                   episode_steps=20)
 OTHER = PegRunSpec(algorithm="ddpg", lr=1e-3, seed=5, episodes=2, train_iterations=3,
@@ -22,7 +23,7 @@ OTHER = PegRunSpec(algorithm="ddpg", lr=1e-3, seed=5, episodes=2, train_iteratio
 
 def test_a_finished_run_is_archived_and_a_fresh_machine_restores_it_without_running_it(
         tmp_path: Path) -> None:
-    archive = tmp_path / "docs" / "data" / "thesis" / "runs"
+    archive = archive_folder(tmp_path / "docs", "thesis")
     run_specs([SPEC], tmp_path / "machine1", workers=1, archive=archive)
     result = saved_result(tmp_path / "machine1", SPEC)
     path = archived_path(archive, SPEC)
@@ -41,7 +42,7 @@ def test_a_finished_run_is_archived_and_a_fresh_machine_restores_it_without_runn
 
 
 def test_an_archived_run_of_another_setting_is_not_restored(tmp_path: Path) -> None:
-    archive = tmp_path / "runs"
+    archive = tmp_path / "archived_runs"
     run_specs([SPEC], tmp_path / "machine1", workers=1, archive=archive)
     path = archived_path(archive, SPEC)
     result = json.loads(gzip.decompress(path.read_bytes()))
@@ -64,3 +65,11 @@ def test_the_status_of_a_fresh_clone_counts_the_archived_runs(tmp_path: Path, ca
     printed = capsys.readouterr().out
     assert "tiny: 1 finished run(s) restored from" in printed
     assert "peg: 1 of 4 runs saved" in printed, printed
+
+
+def test_the_archive_is_versioned() -> None:
+    """``.gitignore`` leaves ``runs/`` out at any depth: the archive must not be one."""
+    import subprocess
+    path = archived_path(archive_folder(Path("docs"), "thesis"), SPEC)
+    ignored = subprocess.run(["git", "check-ignore", "-q", str(path)], cwd=ROOT)
+    assert ignored.returncode == 1, f"{path} is git-ignored"
