@@ -77,6 +77,8 @@ def test_tiny_suite_writes_results_figures_and_report(tmp_path) -> None:
     for experiment, count in (("random", 2), ("grid", 2), ("variants", 4), ("state_grid", 2),
                               ("peg", 4), ("peg_random", 4), ("nextage", 4)):
         assert len(list((out / experiment).glob("*.json"))) == count, experiment
+        archived = tmp_path / "docs" / "data" / "tiny" / "archived_runs" / experiment
+        assert len(list(archived.glob("*.json.gz"))) == count, experiment   # run_archive
     head = next((out / "grid").glob("*.json"))
     commit = json.loads(head.read_text())["code"]["commit"]
     assert len(commit) == 40 and f"**Code.** The commits the runs were made at: `{commit[:10]}`" \
