@@ -4,7 +4,10 @@ It builds its networks for the executor's task: the executor owns the state defi
 publishes the sizes on its latched ``executor/task_spec``, so a learner started before or after
 it learns them from the one place they are set (a resumed learner checks its checkpoint's
 against them; a robot whose task does not fit is logged and its transitions are not used). Until
-then it has no networks and sends no heartbeat, so the executor does not count on it yet.
+then it has no networks and sends no heartbeat, so the executor does not count on it yet. A
+robot's transitions that come before its task (a restarted learner hears the next episode's
+first transition before the latched task, which discovery brings later) are held and taken once
+the task arrives: a suite run under load lost one that way.
 
 With ``learner.schedule: cycle`` (the thesis) it trains ``iterations_per_cycle`` times every
 ``cycle_steps`` transitions, in the transition callback; with ``async`` a training thread keeps
@@ -66,6 +69,8 @@ CHECKPOINT_INFO_NAME = "learner.json"
 CHECKPOINT_GRACE = 3.0
 #: [s] at most one warning this often about transitions the learner cannot use.
 WARN_PERIOD = 5.0
+#: Transitions held per robot until its executor's task arrives (more are not used).
+EARLY_LIMIT = 10_000
 
 
 def _core_class() -> type[LearnerCore]:
@@ -92,6 +97,7 @@ class LearnerNode(Node):
         self.lock = threading.Lock()
         self.tasks: dict[str, TaskSpec] = {}      # robot -> its executor's task, if it fits
         self.refused: dict[str, str] = {}         # robot -> why its transitions are not used
+        self.early: dict[str, list[Transition]] = {}   # robot -> transitions before its task
         self.last_warning = -float("inf")
         self.received: dict[str, int] = {}        # transitions per episode id
         self.last_taken: dict[str, float] = {}    # episode id -> when its last one was taken
@@ -144,15 +150,21 @@ class LearnerNode(Node):
             else:
                 self.refused.pop(robot, None)
                 self.tasks[robot] = msg
+        early = self.early.pop(robot, [])
         if robot in self.refused:
-            self.get_logger().error(f"{self.refused[robot]}: its transitions are not used")
+            self.get_logger().error(f"{self.refused[robot]}: its transitions are not used"
+                                    + (f" ({len(early)} held ones dropped)" if early else ""))
             return
         self.get_logger().info(f"task of {who}: {msg.kind}, observation {msg.observation}, "
                                f"{dims[0]}-D states, {dims[1]}-D actions"
-                               + ("; networks built for it" if built else ""))
+                               + ("; networks built for it" if built else "")
+                               + (f"; taking the {len(early)} transition(s) that came before it"
+                                  if early else ""))
         if built:
             self._publish_actor()
             self._publish_diagnostics()
+        for held in early:                   # in their order, before any later one
+            self._on_transition(held, robot)
 
     def _usable(self, t: TransitionRecord, robot: str) -> bool:
         """Whether the transition fits the networks; a (throttled) error says why not."""
@@ -180,6 +192,11 @@ class LearnerNode(Node):
     def _on_transition(self, msg: Transition, robot: str = "") -> None:
         t = TransitionRecord.from_message(msg)
         with self.lock:
+            if robot not in self.tasks and robot not in self.refused:
+                held = self.early.setdefault(robot, [])
+                if len(held) < EARLY_LIMIT:     # taken when the task comes (``_on_task``)
+                    held.append(msg)
+                    return
             if not self._usable(t, robot):
                 return
             cycle_due = self.core.add_transition(t.state, t.action, t.reward, t.next_state,

@@ -101,3 +101,29 @@ def test_an_aborted_episode_is_not_checkpointed_a_completed_test_episode_is(lear
         "episode_id": "exam", "mode": "test", "state": "done", "steps": 2,
         "episode_return": -1.5, "success": True, "initial_pose": 4, "received": 2,
         "transitions": 5}
+
+
+def test_transitions_before_the_task_are_held_and_taken_when_it_comes(tmp_path) -> None:
+    """A restarted learner may hear an episode's first transition before the executor's
+    latched task (discovery brings it later): it is held, not dropped, and the episode is
+    checkpointed whole."""
+    import rclpy
+    from qg_interfaces.msg import TaskSpec
+    from qg_learning_node import learner_node
+
+    rclpy.init(args=["--ros-args", "-p", f"checkpoint_dir:={tmp_path}", "-p", "resume:=false"],
+               domain_id=232)
+    node = learner_node.LearnerNode()
+    try:
+        _take(node, "early", 0)
+        _take(node, "early", 1)
+        assert node.core is None and len(node.early[""]) == 2
+        node._on_task(TaskSpec(kind="residual", observation="tilt_only", state_dim=2,
+                               action_dim=2))
+        assert node.core.steps == 2 and not node.early and node.received["early"] == 2
+        _take(node, "early", 2)
+        _end(node, "early", 3)
+        assert _saved_steps(node) == 3      # every transition in: checkpointed at once
+    finally:
+        node.destroy_node()
+        rclpy.shutdown()
