@@ -17,8 +17,8 @@ from qg_experiments.report import plots
 from qg_experiments.report.divergence import run_divergence
 from qg_experiments.report.markdown import fmt, speed, table
 
-__all__ = ["peg_section", "PegPairs", "peg_pairs", "peg_paired", "peg_against_random",
-           "peg_diverged", "peg_budget", "td3_reference_line", "TD3_REFERENCE"]
+__all__ = ["peg_section", "PegPairs", "peg_pairs", "per_pair", "peg_paired",
+           "peg_against_random", "peg_diverged", "peg_budget", "td3_reference_line", "TD3_REFERENCE"]
 
 #: Per peg experiment: section heading, figure-name prefix, what moved the peg.
 _PEG_PAGES = {
@@ -126,7 +126,7 @@ def td3_reference_line(reference: dict[str, Any]) -> str:
             f"{', '.join(str(r['seed']) for r in runs)}; mean return {returns}).")
 
 
-def _per_pair(results: list[dict[str, Any]], value: Any) -> dict[float, dict[int, dict]]:
+def per_pair(results: list[dict[str, Any]], value: Any) -> dict[float, dict[int, dict]]:
     """lr -> seed -> algorithm -> ``value(run)``, for the (lr, seed) pairs both algorithms ran."""
     runs: dict[float, dict[int, dict[str, Any]]] = {}
     for r in results:
@@ -191,7 +191,7 @@ def peg_pairs(results: list[dict[str, Any]], tail: int) -> PegPairs | None:
     the area under its learning curve) and over the last ``tail`` (where it got to), Wilcoxon
     signed-rank over the seeds, Holm over the learning rates; divergence; and the thesis's
     second claim, the spread of the final Q across seeds. None without a pair."""
-    measures = {name: _per_pair(results, measure) for name, measure in _measures(tail).items()}
+    measures = {name: per_pair(results, measure) for name, measure in _measures(tail).items()}
     lrs = [lr for lr, pairs in measures["all"].items() if pairs]
     if not lrs:
         return None
@@ -201,9 +201,12 @@ def peg_pairs(results: list[dict[str, Any]], tail: int) -> PegPairs | None:
         for name, pairs in measures.items()}   # negated: paired_comparison's lower is better
     holm = {name: dict(zip(lrs, stats.holm([c[lr].wilcoxon_p for lr in lrs]), strict=True))
             for name, c in compared.items()}
-    diverged = _per_pair(results, peg_diverged)
-    # The spread across the seeds both algorithms ran (``peg.q_spread``: two seeds at least).
-    paired = [r for r in results if r["spec"]["seed"] in diverged.get(r["spec"]["lr"], {})]
+    diverged = per_pair(results, peg_diverged)
+    # The spread across the seeds both algorithms ran (``peg.q_spread``: two seeds at least),
+    # of the runs that hold their final Q (all a sweep saves; not runs read back from episode
+    # rows, as ``benchmarks/peg_episode_pairs.py`` does).
+    paired = [r for r in results if r["spec"]["seed"] in diverged.get(r["spec"]["lr"], {})
+              and peg.Q_POINTS["given"] in r]
     return PegPairs(lrs, compared, holm, diverged,
                     {points: peg.q_spread(paired, points) for points in peg.Q_POINTS})
 
