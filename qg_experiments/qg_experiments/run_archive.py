@@ -7,7 +7,7 @@ their episode CSVs, which hold no final Q and cannot rebuild the report. So each
 is also kept, gzipped, in ``docs/data/<profile>/archived_runs/<experiment>/<name>.json.gz``
 (tens of kB; versioned like the report's CSVs; not ``runs/``, a name ``.gitignore`` leaves
 out at any depth), and a sweep or a report on a fresh clone first restores into ``--out``
-every archived run it would otherwise miss. An archived run is
+every archived run it would otherwise miss (``tasks.restore_archived``). An archived run is
 restored only while it is the same run (``run_identity``: spec, config digest, task settings),
 as a saved one is reused.
 """

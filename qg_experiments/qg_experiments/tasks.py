@@ -5,10 +5,11 @@ to ``<out>/<experiment>/<name>.json`` the moment it finishes, so an interrupted 
 it did, and a second call with the same specs skips runs whose saved spec and config digest
 (``run_identity``: spec, config digest, task settings) are identical. A long run
 (``run_worker.ResumableSpec``) also saves its progress there between episodes and continues from
-it (``run_progress``). With an ``archive`` (``run_archive``: the report's data folder, versioned)
-each result is kept there too, and restored from there into ``out`` on a fresh machine. Only where a run executes depends on the backend: ``process`` (the
-default) is a pool of one process per core on this machine (``worker_pool``), ``ray`` hands the
-runs to a Ray cluster (``ray_backend``); a worker of either calls ``run_worker.run_one``.
+it (``run_progress``). With an ``archive`` (``run_archive``: beside the report's data,
+versioned) each result is kept there too, and ``restore_archived`` brings it back into ``out``
+on a fresh machine. Only where a run executes depends on the backend: ``process`` (the default)
+is a pool of one process per core on this machine (``worker_pool``), ``ray`` hands the runs to a
+Ray cluster (``ray_backend``); a worker of either calls ``run_worker.run_one``.
 Skipping, saving, the progress bar and the results are the same code for both.
 """
 from __future__ import annotations

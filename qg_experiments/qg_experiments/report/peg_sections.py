@@ -18,7 +18,8 @@ from qg_experiments.report.divergence import run_divergence
 from qg_experiments.report.markdown import fmt, speed, table
 
 __all__ = ["peg_section", "PegPairs", "peg_pairs", "per_pair", "peg_paired",
-           "peg_against_random", "peg_diverged", "peg_budget", "td3_reference_line", "TD3_REFERENCE"]
+           "peg_against_random", "peg_diverged", "peg_budget", "td3_reference_line",
+           "TD3_REFERENCE"]
 
 #: Per peg experiment: section heading, figure-name prefix, what moved the peg.
 _PEG_PAGES = {
