@@ -8,8 +8,9 @@ insertion, return and mean Q of every episode) and, since, every finished run ar
 two (an archived run wins over its CSV rows) and prints, per learning rate, the measures of
 results.md's paired table that episode rows give: QG-DDPG against DDPG over all episodes and
 over the last 60 (wins, difference with its 95 % interval, Wilcoxon p, Holm over the learning
-rates with pairs), each run's first insertion, the share inserted late and the diverged critics.
-The final Q (Fig. 8.3's spread) is only in whole runs, so it is not here. The last line is JSON.
+rates with pairs), each run's first insertion, the share inserted late and the diverged critics;
+then results.md's table of each learner against the better random policy on the same seeds
+(``peg_random_episodes.csv``, all 20 runs of the random bar). The final Q (Fig. 8.3's spread) is only in whole runs, so it is not here. The last line is JSON.
 
 Usage: python benchmarks/peg_episode_pairs.py [--docs docs]
 """
@@ -24,25 +25,35 @@ from typing import Any
 
 import numpy as np
 from qg_experiments import stats
-from qg_experiments.report.peg_sections import peg_diverged, peg_pairs, per_pair
+from qg_experiments.peg import PegRandomSpec
+from qg_experiments.report import peg_sections
 from qg_experiments.run_archive import archive_folder
 
 TAIL = 60          # results.md's late window: the last fifth of 300 episodes
 
 
+def _run_of(name: str, gamma: float) -> dict[str, Any]:
+    """An empty run named ``name``: a learner's ``<algorithm>_lr<lr>_s<seed>`` or a random
+    policy's ``random_<kind>_s<seed>`` (``PegRunSpec.name``, ``PegRandomSpec.name``)."""
+    first, middle, seed = name.split("_")
+    if first == "random":
+        spec = PegRandomSpec(kind=middle, seed=int(seed[1:]))
+        return {"spec": {"kind": middle, "seed": spec.seed}, "label": spec.label, "episodes": []}
+    return {"spec": {"algorithm": first, "lr": float(middle[2:]), "seed": int(seed[1:]),
+                     "gamma": gamma}, "episodes": []}
+
+
 def csv_runs(path: Path, gamma: float = 0.99) -> dict[str, dict[str, Any]]:
-    """The runs of an episodes CSV (``run,episode,steps,success,return,mean_q``), by name."""
+    """The runs of an episodes CSV (``run,episode,steps,success,return[,mean_q]``), by name."""
     runs: dict[str, dict[str, Any]] = {}
     with open(path) as rows:
         for row in csv.DictReader(rows):
-            algorithm, lr, seed = row["run"].split("_")
-            run = runs.setdefault(row["run"], {
-                "spec": {"algorithm": algorithm, "lr": float(lr[2:]), "seed": int(seed[1:]),
-                         "gamma": gamma}, "episodes": []})
+            run = runs.setdefault(row["run"], _run_of(row["run"], gamma))
             run["episodes"].append({"episode": int(row["episode"]), "steps": int(row["steps"]),
                                     "success": row["success"] == "True",
                                     "return": float(row["return"]),
-                                    "mean_q": float(row["mean_q"])})
+                                    **({"mean_q": float(row["mean_q"])} if "mean_q" in row
+                                       else {})})
     for run in runs.values():
         run["episodes"].sort(key=lambda e: e["episode"])
     return runs
@@ -71,12 +82,12 @@ def main() -> None:
     sources = {s: sum(r["source"] == s for r in results) for s in ("csv", "archive")}
     print(f"{len(results)} runs: {sources['csv']} from the episode CSV, "
           f"{sources['archive']} archived")
-    pairs = peg_pairs(results, TAIL)
+    pairs = peg_sections.peg_pairs(results, TAIL)
     assert pairs is not None, "no learning rate has a pair"
-    per_run = {"first": per_pair(results, first_insertion),
-               "late_inserted": per_pair(results, lambda r: mean_of(r, "success", -TAIL)),
-               "diverged": per_pair(results, peg_diverged),
-               "all_return": per_pair(results, lambda r: mean_of(r, "return"))}
+    per_run = {"first": peg_sections.per_pair(results, first_insertion),
+               "late_inserted": peg_sections.per_pair(results, lambda r: mean_of(r, "success", -TAIL)),
+               "diverged": peg_sections.per_pair(results, peg_sections.peg_diverged),
+               "all_return": peg_sections.per_pair(results, lambda r: mean_of(r, "return"))}
     summary: dict[str, Any] = {"runs": sources, "learning_rates": {}}
     for lr in pairs.lrs:
         seeds = list(pairs.diverged[lr])
@@ -99,6 +110,8 @@ def main() -> None:
                   f"{np.mean(row['all_return']):.1f}")
             entry[algorithm] = row
         summary["learning_rates"][f"{lr:g}"] = entry
+    randoms = list(csv_runs(args.docs / "data" / "thesis" / "peg_random_episodes.csv").values())
+    print("\n".join(peg_sections.peg_against_random(results, randoms, TAIL)))
     print(json.dumps(summary))
 
 
