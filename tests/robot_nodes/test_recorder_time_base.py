@@ -1,7 +1,8 @@
 """The recorder in realtime mode: one time base per bag, the wall clock the live messages carry.
 
 Episodes are driven by hand here (a status, a reset, one step, the final status), so only the
-robot process runs.
+robot process runs. Where a bag begins and ends against the loop's ticks is tested on the
+recorder node alone, its callbacks called directly with made-up ticks.
 """
 from __future__ import annotations
 
@@ -88,6 +89,11 @@ def _ticks(stamps):
     return ticks
 
 
+def _names():
+    from robot_bridge_node.core.tick_messages import TickNames
+    return TickNames(tuple(f"j{i}" for i in range(7)), "base")
+
+
 @pytest.fixture
 def recorder_node(tmp_path: Path):
     """A recorder node writing into ``tmp_path``, its messages handed to it by the test."""
@@ -117,12 +123,10 @@ def test_ticks_stamped_before_the_bag_opened_are_not_recorded(recorder_node, tmp
     bag whose first message was a tick 4.6 ms older than its opening status)."""
     import numpy as np
     from qg_recording.bag_reader import read_raw
-    from robot_bridge_node.core.tick_messages import TickNames
 
     node, opened = recorder_node, 1_000_000_000
     _on_status(node, opened, "resetting")
-    node.record_samples(_ticks(opened + np.arange(-5, 5) * 1_000_000),  # 5 before, 5 from it
-                        TickNames(tuple(f"j{i}" for i in range(7)), "base"))
+    node.record_samples(_ticks(opened + np.arange(-5, 5) * 1_000_000), _names())  # 5 before
     node._close()
     bag = tmp_path / EPISODE
     stamps = [m.t_ns for m in read_raw(bag, ["/joint_states"])]
@@ -138,10 +142,9 @@ def test_a_bag_waits_for_the_ticks_of_its_last_step(recorder_node, tmp_path: Pat
     closed a bag first, and it held no tick at all."""
     import numpy as np
     from qg_recording.bag_reader import read_raw
-    from robot_bridge_node.core.tick_messages import TickNames
     from robot_bridge_node.recorder_node import _SETTLE
 
-    node, names = recorder_node, TickNames(tuple(f"j{i}" for i in range(7)), "base")
+    node, names = recorder_node, _names()
     opened, ended = 1_000_000_000, 1_500_000_000
     _on_status(node, opened, "resetting")
     _on_status(node, ended, "done")             # the episode's 500 ticks not handed over yet
@@ -171,13 +174,11 @@ def test_the_next_episodes_first_status_waits_for_the_last_ones_ticks(recorder_n
     ticks of the episode before. Its bag takes them first (the reader thread hands them over
     40 ms later here), then the next bag opens."""
     import threading
-    import time
 
     import numpy as np
     from qg_recording.bag_reader import read_raw
-    from robot_bridge_node.core.tick_messages import TickNames
 
-    node, names = recorder_node, TickNames(tuple(f"j{i}" for i in range(7)), "base")
+    node, names = recorder_node, _names()
     opened, ended = 1_000_000_000, 1_100_000_000
     _on_status(node, opened, "resetting")
     _on_status(node, ended, "done")
