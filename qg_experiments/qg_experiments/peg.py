@@ -168,10 +168,11 @@ def run_peg(spec: PegRunSpec, progress: Path | None = None) -> dict[str, Any]:
 
     :param progress: a file to save the run's progress in between episodes and to continue
         from (``run_progress``); the result is the same to the bit, plus ``resumed``: where
-        and on which code the run continued.
+        and on which code the run continued. Its ``wall_time`` and ``cpu_time`` add up its
+        sessions (``cpu_time`` None: continued from progress saved without it).
     """
     torch.set_num_threads(1)
-    start = time.perf_counter()
+    start, cpu_start = time.perf_counter(), time.process_time()
     env = _peg_env(spec.robot, spec.config_dir, spec.episode_steps)
     keeper = None if progress is None else RunProgress(progress, spec)
     saved = None if keeper is None else keeper.load()
@@ -180,18 +181,22 @@ def run_peg(spec: PegRunSpec, progress: Path | None = None) -> dict[str, Any]:
                               env.action_dim)
         records: list[dict[str, Any]] = []
         resumed: list[dict[str, Any]] = []
-        earlier = 0.0
+        earlier, earlier_cpu = 0.0, 0.0
     else:
         learner = LearnerCore.from_state_dict(saved["learner"])
         records, earlier = saved["episodes"], saved["wall_time"]
+        earlier_cpu = saved.get("cpu_time")
         resumed = [*saved["resumed"], {"episode": len(records), "code": saved["code"]}]
+
+    def cpu_time() -> float | None:
+        return None if earlier_cpu is None else earlier_cpu + time.process_time() - cpu_start
 
     def keep(record: dict[str, Any]) -> None:
         records.append(record)
         if keeper is not None and len(records) < spec.episodes:
             keeper.save({"learner": learner.state_dict(), "episodes": records,
-                         "resumed": resumed}, len(records), spec.episodes,
-                        earlier + time.perf_counter() - start)
+                         "resumed": resumed, "cpu_time": cpu_time()}, len(records),
+                        spec.episodes, earlier + time.perf_counter() - start)
 
     try:
         _episodes(env, spec.seed, range(len(records), spec.episodes),
@@ -211,7 +216,7 @@ def run_peg(spec: PegRunSpec, progress: Path | None = None) -> dict[str, Any]:
                   "engine": "pybullet", "step_limit": env.loop.rest.config.max_time}
                  if isinstance(env, NextagePeg) else {}),
               **({"resumed": resumed} if resumed else {}),
-              "wall_time": earlier + time.perf_counter() - start}
+              "wall_time": earlier + time.perf_counter() - start, "cpu_time": cpu_time()}
     if keeper is not None:
         keeper.remove()
     return result

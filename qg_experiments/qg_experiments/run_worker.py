@@ -5,6 +5,7 @@ same result on either and neither backend module imports the other.
 """
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
@@ -37,13 +38,16 @@ class ResumableSpec(RunnableSpec, Protocol):
 def run_one(spec: RunnableSpec, out: Path | None = None
             ) -> tuple[RunnableSpec, dict[str, Any]]:
     """One run in a worker of either backend: single-threaded torch, as every worker runs; the
-    result says which code made it (``code_version``, of the checkout this worker runs from).
+    result says which code made it (``code_version``, of the checkout this worker runs from) and
+    the CPU time it took (``cpu_time`` [s]: unlike ``wall_time`` it does not count the time the
+    worker waited for a core or was paused; a resumed run gives its own, over its sessions).
 
     :param out: the sweep's results folder: a ``ResumableSpec`` keeps its progress there.
     """
     torch.set_num_threads(1)
+    cpu = time.process_time()
     if out is not None and isinstance(spec, ResumableSpec):
         result = spec.run_resuming(progress_path(out, spec))
     else:
         result = spec.run()
-    return spec, {**result, "code": code_version()}
+    return spec, {"cpu_time": time.process_time() - cpu, **result, "code": code_version()}

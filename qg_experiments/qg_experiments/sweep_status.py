@@ -47,7 +47,7 @@ def sweep_status(specs: Sequence[Any], out: Path, workers: int) -> list[str]:
         if not saved:
             lines.append("  left: unknown until one of its runs is saved")
             continue
-        per_run = float(np.mean([r["wall_time"] for r in saved]))
+        per_run = float(np.mean([r.get("cpu_time") or r["wall_time"] for r in saved]))
         left = per_run * (waiting + sum(1 - h["done"] / h["of"] for _, h in under_way))
         left_total += left
         lines.append(f"  left: ~{left / 3600:.1f} worker-hours ({per_run / 60:.1f} min a "

@@ -23,3 +23,14 @@ def test_the_speed_line_of_robot_runs_starts_with_their_step_and_a_free_peg_has_
     assert "250 ms simulated per step, 40% of steps ended by the step timeout" in line
     free_peg = speed([{"rl_steps": 100, "wall_time": 10.0}])      # no robot loop, no rest
     assert free_peg == "100 RL steps in 0.2 worker-minutes (10.00 steps/s)"
+
+
+def test_the_speed_line_counts_cpu_time_when_every_run_has_it() -> None:
+    """A sweep paused for a benchmark (or beside other work) took longer than it worked: the
+    runs' CPU time is the worker time when all of them recorded it, the wall time beside."""
+    paused = [{"rl_steps": 300, "wall_time": 120.0, "cpu_time": 30.0},
+              {"rl_steps": 300, "wall_time": 120.0, "cpu_time": 30.0}]
+    assert speed(paused) == ("600 RL steps in 1.0 worker-minutes of CPU (10.00 steps/s; 4.0 of "
+                             "wall time)")
+    older = [*paused, {"rl_steps": 600, "wall_time": 60.0}]        # saved before runs had it
+    assert speed(older) == "1200 RL steps in 5.0 worker-minutes (4.00 steps/s)"

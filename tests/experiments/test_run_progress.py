@@ -19,7 +19,7 @@ from qg_learning_node.learner.learner_core import LearnerCore
 SPEC = PegRunSpec(algorithm="qgddpg", lr=1e-3, seed=5, episodes=4, train_iterations=5,
                   episode_steps=30)
 #: What a continued run adds to, or has other than, its result.
-BESIDE = ("wall_time", "code", "resumed")
+BESIDE = ("wall_time", "cpu_time", "code", "resumed")
 
 
 def numbers(result: dict) -> dict:
@@ -65,6 +65,7 @@ def test_a_sweep_stopped_mid_run_continues_the_run_to_the_same_result(
     assert [r["episode"] for r in result["resumed"]] == [2]
     assert result["resumed"][0]["code"] == result["code"]
     assert result["wall_time"] > saved["wall_time"]
+    assert result["cpu_time"] > saved["cpu_time"] > 0.0      # both sessions' CPU
     assert not progress.exists()                        # the result is what stays
     assert json.loads(result_path(tmp_path, SPEC).read_text())["resumed"] == result["resumed"]
 
@@ -104,8 +105,9 @@ def test_the_status_of_a_sweep_counts_saved_running_and_waiting_runs_and_the_tim
                                           train_iterations=5, episode_steps=30)
                                for seed in (5, 6, 7))
     run_specs([saved], tmp_path, workers=1)
-    path = result_path(tmp_path, saved)   # as if the run had taken an hour
-    path.write_text(json.dumps({**json.loads(path.read_text()), "wall_time": 3600.0}))
+    path = result_path(tmp_path, saved)   # as if the run had taken an hour of CPU, paused for
+    path.write_text(json.dumps({**json.loads(path.read_text()),     # another (its CPU counts)
+                                "cpu_time": 3600.0, "wall_time": 7200.0}))
     with monkeypatch.context() as patch:
         stop_in_episode(patch, 3)
         with pytest.raises(KeyboardInterrupt):

@@ -76,12 +76,20 @@ def code_label(results: list[dict[str, Any]]) -> str:
 
 def speed(results: list[dict[str, Any]]) -> str:
     """The step's engine and limit, RL steps, worker time and simulated time of ``results``,
-    as one phrase."""
+    as one phrase. The worker time is the runs' CPU time when every run recorded it
+    (``run_worker.run_one``): a sweep paused or sharing its cores counts its wall time, not its
+    work."""
     steps = sum(r.get("rl_steps", 0) for r in results)
     wall = sum(r["wall_time"] for r in results)
     sim = sum(r.get("sim_time", 0.0) for r in results)
     timeouts = sum(r.get("step_timeouts", 0) for r in results)
-    text = f"{steps} RL steps in {wall / 60:.1f} worker-minutes ({steps / wall:.2f} steps/s)"
+    cpu = [r.get("cpu_time") for r in results]
+    if cpu and None not in cpu:
+        work = sum(cpu)
+        text = (f"{steps} RL steps in {work / 60:.1f} worker-minutes of CPU "
+                f"({steps / work:.2f} steps/s; {wall / 60:.1f} of wall time)")
+    else:
+        text = f"{steps} RL steps in {wall / 60:.1f} worker-minutes ({steps / wall:.2f} steps/s)"
     if sim:                    # a robot's loop, whose steps end at rest or at the step limit
         text = f"{step_label(results)}; {text}"
         text += (f", {sim / max(steps, 1) * 1e3:.0f} ms simulated per step, "
