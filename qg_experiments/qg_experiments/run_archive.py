@@ -18,7 +18,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from qg_experiments.run_identity import run_identity, saved_identity
+from qg_experiments.run_identity import is_run_of
 from qg_experiments.run_worker import RunnableSpec
 
 __all__ = ["archive_folder", "archived_path", "archive_result", "archived_result"]
@@ -49,4 +49,4 @@ def archived_result(archive: Path, spec: RunnableSpec) -> dict[str, Any] | None:
     if not path.exists():
         return None
     result = json.loads(gzip.decompress(path.read_bytes()))
-    return result if saved_identity(result, spec) == run_identity(spec) else None
+    return result if is_run_of(result, spec) else None

@@ -1,5 +1,5 @@
 """What makes two experiment runs the same run: the test by which a sweep reuses a saved run
-(``tasks.saved_result``) and a run continues from saved progress (``run_progress``).
+(``tasks.saved_result``) or an archived one (``run_archive``) and a run continues from saved progress (``run_progress``).
 
 A run is its spec's fields, the numbers of the config files it read (``config_digest``; where
 they were read, config/ or a frozen copy for a long sweep, is not part of it) and the settings it
@@ -14,7 +14,7 @@ from typing import Any
 
 from qg_experiments.core.stack_settings import config_digest
 
-__all__ = ["run_identity", "saved_identity"]
+__all__ = ["run_identity", "saved_identity", "is_run_of"]
 
 
 def _fields(values: dict[str, Any]) -> dict[str, Any]:
@@ -39,3 +39,8 @@ def saved_identity(result: dict[str, Any], spec: Any) -> dict[str, Any]:
     return {"spec": _fields({**defaults, **result.get("spec", {})}),
             "config_digest": result.get("config_digest"),
             "task_settings": result.get("task_settings", {})}
+
+
+def is_run_of(result: dict[str, Any], spec: Any) -> bool:
+    """Whether the saved ``result`` is of the run ``spec`` describes on this machine."""
+    return saved_identity(result, spec) == run_identity(spec)

@@ -24,7 +24,7 @@ from typing import Any
 from tqdm import tqdm
 
 from qg_experiments.run_archive import archive_result, archived_result
-from qg_experiments.run_identity import run_identity, saved_identity
+from qg_experiments.run_identity import is_run_of
 from qg_experiments.run_progress import progress_path
 from qg_experiments.run_worker import RunnableSpec, run_one
 from qg_experiments.worker_pool import pool_results
@@ -49,8 +49,7 @@ def saved_result(out: Path, spec: RunnableSpec) -> dict[str, Any] | None:
     if not path.exists():
         return None
     result = json.loads(path.read_text())
-    same = saved_identity(result, spec) == run_identity(spec)
-    return result if same else None
+    return result if is_run_of(result, spec) else None
 
 
 def restore_archived(specs: Sequence[RunnableSpec], out: Path, archive: Path) -> list[str]:
