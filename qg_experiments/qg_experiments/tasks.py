@@ -23,7 +23,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from qg_experiments.run_archive import archive_result, archived_result
+from qg_experiments.run_archive import archive_result, archived_path, archived_result
 from qg_experiments.run_identity import is_run_of
 from qg_experiments.run_progress import progress_path
 from qg_experiments.run_worker import RunnableSpec, run_one
@@ -56,12 +56,13 @@ def restore_archived(specs: Sequence[RunnableSpec], out: Path, archive: Path) ->
     """Save under ``out`` the archived result (``run_archive``) of each of ``specs`` that has
     none there, when it is of the same run; the names of the runs restored."""
     restored = []
-    for spec in specs:
-        if saved_result(out, spec) is None:
-            result = archived_result(archive, spec)
-            if result is not None:
-                _save(out, spec, result)
-                restored.append(spec.name)
+    for spec in specs:   # a stat first: a sweep starts with every run of its profile here
+        if not archived_path(archive, spec).exists() or saved_result(out, spec) is not None:
+            continue
+        result = archived_result(archive, spec)
+        if result is not None:
+            _save(out, spec, result)
+            restored.append(spec.name)
     return restored
 
 
