@@ -5,9 +5,15 @@ wrench setpoint says, refused torques never reach libfranka, a missed signal tim
 until recovered, and an unreachable address is refused in time with its reason."""
 from __future__ import annotations
 
+import contextlib
 import os
 import re
+import socket
+import subprocess
+import sys
+import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import mujoco
@@ -15,7 +21,12 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from franka_robot_node.core.fr3_description import FR3_READY, fr3_arm
-from franka_robot_node.core.franka_arm import FrankaConnectError, FrankaFault, TorqueRejected
+from franka_robot_node.core.franka_arm import (
+    FCI_PORT,
+    FrankaConnectError,
+    FrankaFault,
+    TorqueRejected,
+)
 from franka_robot_node.core.franka_config import FrankaConfig
 from franka_robot_node.plugin import FRANKA, describe_franka
 from franka_sim_node.core.franky_sim_host import FrankySimHost
@@ -211,18 +222,67 @@ def test_a_missed_signal_timeout_is_a_fault_until_recovered(robot):
     assert len(_hold(arm, 0.1)) > 50
 
 
+#: A loopback address whose command port takes no connection (``_silent_port``).
+SILENT = f"127.0.{35 + os.getpid() % 200}.251"
+
+
+@contextlib.contextmanager
+def _silent_port(accepts: bool) -> Iterator[None]:
+    """libfranka's port at ``SILENT``, listening but never answering. ``accepts`` False: its
+    queue of one is full, so a connection is not even taken (an address that does not answer);
+    True: connections are taken and never answered (something else listening there, or a robot
+    that hangs)."""
+    with socket.socket() as server:
+        server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        server.bind((SILENT, FCI_PORT))
+        server.listen(0 if not accepts else 8)
+        filler = None if accepts else socket.create_connection((SILENT, FCI_PORT), timeout=1.0)
+        try:
+            yield
+        finally:
+            if filler is not None:
+                filler.close()
+
+
 @pytest.mark.ros
 @pytest.mark.parametrize("address, reason", [(UNSERVED, "connection refused"),
-                                             ("10.255.255.1", "no answer within 1.0 s")],
+                                             (SILENT, "no answer within 1.0 s")],
                          ids=["nothing_serves", "no_answer"])
 def test_an_unreachable_address_is_refused_in_time_with_its_reason(address, reason):
     """Refused connections are retried for ``connect_timeout`` (franky-sim may be starting), a
-    silent address is given up after it (libfranka alone waits 60 s); both name the address."""
+    silent address is given up after it (libfranka alone waits 60 s); both name the address.
+    Nothing is left running: libfranka is never called (an abandoned libfranka connect spins a
+    core until its own 60 s are up: ~56 s of a test worker's CPU, before)."""
     start = time.monotonic()
-    with pytest.raises(FrankaConnectError, match=reason) as refused:
+    silent = _silent_port(accepts=False) if address == SILENT else contextlib.nullcontext()
+    with silent, pytest.raises(FrankaConnectError, match=reason) as refused:
         FRANKA.create({"franka": {"address": address, "connect_timeout": 1.0}})
     assert time.monotonic() - start < 2.0
     assert address in str(refused.value)
+    assert not [t.name for t in threading.enumerate() if t.name == "franka connect"]
+    cpu = time.process_time()
+    time.sleep(0.5)
+    assert time.process_time() - cpu < 0.2       # (a spinning libfranka: ~0.48 s)
+
+
+@pytest.mark.ros
+def test_a_port_that_takes_the_connection_but_never_answers_is_given_up_in_time():
+    """Past the port, libfranka's own handshake: a robot that never answers it is given up
+    after ``connect_timeout`` too. libfranka's thread is abandoned there (and spins), so the
+    attempt runs in a process of its own."""
+    code = ("import time\n"
+            "from franka_robot_node.plugin import FRANKA\n"
+            "start = time.monotonic()\n"
+            "try:\n"
+            f"    FRANKA.create({{'franka': {{'address': {SILENT!r}, 'connect_timeout': 1.0}}}})\n"
+            "except Exception as exc:\n"
+            "    print(type(exc).__name__, exc)\n"
+            "print(f'after {time.monotonic() - start:.2f} s')\n")
+    with _silent_port(accepts=True):
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             timeout=60, check=True).stdout
+    assert f"FrankaConnectError the Franka at {SILENT}" in out and "no answer within 1.0 s" in out
+    assert float(re.search(r"after ([0-9.]+) s", out).group(1)) < 2.0, out
 
 
 def test_franky_sims_shaft_cell_is_the_tasks():

@@ -24,6 +24,7 @@ stale torque on the arm.
 from __future__ import annotations
 
 import logging
+import socket
 import threading
 import time
 
@@ -50,6 +51,10 @@ _POLL = 5e-5
 _PAYLOAD_INERTIA = [1e-5, 0.0, 0.0, 0.0, 1e-5, 0.0, 0.0, 0.0, 1e-5]
 #: [s] How often a refused connection is tried again until ``connect_timeout``.
 _RETRY = 0.2
+#: Why a connection failed, after the address.
+_NO_ANSWER = "no answer within {} s (wrong address, robot off, or its network unreachable)"
+_REFUSED = ("connection refused: nothing serves libfranka there (robot off, FCI not enabled in "
+            "Desk, or franky-sim not started)")
 
 
 class FrankaFault(HardwareFault):
@@ -71,9 +76,12 @@ def connect_robot(config: FrankaConfig):  # -> franky.Robot (franky is imported 
     """``franky.Robot`` at ``config.address``, or ``FrankaConnectError`` within
     ``connect_timeout``.
 
-    libfranka waits 60 s for an address that does not answer and calls a refused connection a
-    missing FCI feature; here a refused connection is retried (franky-sim may still be starting)
-    and the whole attempt is bounded, the reason saying which address failed how.
+    libfranka waits 60 s for an address that does not answer, spinning a whole core all the
+    while, and calls a refused connection a missing FCI feature. So the command port is first
+    reached with a TCP connection of our own (``_reach``), which can time out: libfranka is
+    only called for an address that answers. A refused connection is retried (franky-sim may
+    still be starting), the whole attempt is bounded, and the reason says which address failed
+    how.
     """
     import franky
     policy = {"ignore": franky.RealtimeConfig.Ignore,
@@ -81,6 +89,10 @@ def connect_robot(config: FrankaConfig):  # -> franky.Robot (franky is imported 
     deadline = time.monotonic() + config.connect_timeout
     where = f"the Franka at {config.address} (TCP port {FCI_PORT})"
     while True:
+        reached = _reach(config.address, deadline, where, config.connect_timeout)
+        if not reached:                       # refused, with time left to try again
+            time.sleep(_RETRY)
+            continue
         outcome: dict[str, object] = {}
 
         def attempt() -> None:
@@ -89,7 +101,8 @@ def connect_robot(config: FrankaConfig):  # -> franky.Robot (franky is imported 
             except Exception as exc:  # noqa: BLE001 - reported below, whatever libfranka raised
                 outcome["error"] = exc
 
-        # libfranka's connect cannot be interrupted: a thread of its own, abandoned on timeout.
+        # libfranka's connect cannot be interrupted: a thread of its own, abandoned on timeout
+        # (the port answered, so only a robot that stops answering midway leaves it behind).
         worker = threading.Thread(target=attempt, name="franka connect", daemon=True)
         worker.start()
         worker.join(max(0.0, deadline - time.monotonic()))
@@ -97,15 +110,35 @@ def connect_robot(config: FrankaConfig):  # -> franky.Robot (franky is imported 
             return outcome["robot"]
         error = outcome.get("error")
         if error is None:
-            raise FrankaConnectError(f"{where}: no answer within {config.connect_timeout} s "
-                                     "(wrong address, robot off, or its network unreachable)")
+            raise FrankaConnectError(f"{where}: " + _NO_ANSWER.format(config.connect_timeout))
         refused = "refused" in str(error)
         if not refused or time.monotonic() + _RETRY >= deadline:
-            reason = ("connection refused: nothing serves libfranka there (robot off, FCI "
-                      "not enabled in Desk, or franky-sim not started)") if refused else \
-                f"{type(error).__name__}: {error}"
+            reason = _REFUSED if refused else f"{type(error).__name__}: {error}"
             raise FrankaConnectError(f"{where}: {reason}") from error
         time.sleep(_RETRY)
+
+
+def _reach(address: str, deadline: float, where: str, timeout: float) -> bool:
+    """Whether the command port at ``address`` takes a TCP connection (closed again at once,
+    before any handshake: franky-sim logs a client that disconnected and takes the next one);
+    False when it is refused and there is time to try again before ``deadline``
+    (``time.monotonic``).
+
+    :raises FrankaConnectError: if it does not answer by ``deadline``, is refused with no time
+        left, or cannot be reached at all (no route, a name that does not resolve).
+    """
+    try:
+        with socket.create_connection((address, FCI_PORT),
+                                      timeout=max(1e-3, deadline - time.monotonic())):
+            return True
+    except TimeoutError as exc:
+        raise FrankaConnectError(f"{where}: " + _NO_ANSWER.format(timeout)) from exc
+    except ConnectionRefusedError as exc:
+        if time.monotonic() + _RETRY < deadline:
+            return False
+        raise FrankaConnectError(f"{where}: {_REFUSED}") from exc
+    except OSError as exc:
+        raise FrankaConnectError(f"{where}: {exc.strerror or exc}") from exc
 
 
 def load_in_flange(model: ArmModel, tool_frame: str, com: np.ndarray) -> np.ndarray:
