@@ -10,7 +10,8 @@ results.md's paired table that episode rows give: QG-DDPG against DDPG over all 
 over the last 60 (wins, difference with its 95 % interval, Wilcoxon p, Holm over the learning
 rates with pairs), each run's first insertion, the share inserted late and the diverged critics;
 then results.md's table of each learner against the better random policy on the same seeds
-(``peg_random_episodes.csv``, all 20 runs of the random bar). The final Q (Fig. 8.3's spread) is only in whole runs, so it is not here. The last line is JSON.
+(``peg_random_episodes.csv``, all 20 runs of the random bar). The final Q (Fig. 8.3's
+spread) is only in whole runs, so it is not here. The last line is JSON.
 
 Usage: python benchmarks/peg_episode_pairs.py [--docs docs]
 """
@@ -85,7 +86,8 @@ def main() -> None:
     pairs = peg_sections.peg_pairs(results, TAIL)
     assert pairs is not None, "no learning rate has a pair"
     per_run = {"first": peg_sections.per_pair(results, first_insertion),
-               "late_inserted": peg_sections.per_pair(results, lambda r: mean_of(r, "success", -TAIL)),
+               "late_inserted": peg_sections.per_pair(
+                   results, lambda r: mean_of(r, "success", -TAIL)),
                "diverged": peg_sections.per_pair(results, peg_sections.peg_diverged),
                "all_return": peg_sections.per_pair(results, lambda r: mean_of(r, "return"))}
     summary: dict[str, Any] = {"runs": sources, "learning_rates": {}}

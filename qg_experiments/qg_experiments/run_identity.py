@@ -1,5 +1,6 @@
 """What makes two experiment runs the same run: the test by which a sweep reuses a saved run
-(``tasks.saved_result``) or an archived one (``run_archive``) and a run continues from saved progress (``run_progress``).
+(``tasks.saved_result``) or an archived one (``run_archive``) and a run continues from saved
+progress (``run_progress``).
 
 A run is its spec's fields, the numbers of the config files it read (``config_digest``; where
 they were read, config/ or a frozen copy for a long sweep, is not part of it) and the settings it
