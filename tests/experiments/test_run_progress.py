@@ -120,3 +120,12 @@ def test_the_status_of_a_sweep_counts_saved_running_and_waiting_runs_and_the_tim
     assert lines[3] == "left in all: ~0.8 h on 2 worker(s), at the saved runs' pace"
     assert sweep_status([saved], tmp_path, workers=2) == [
         "peg: 1 of 1 runs saved, 0 under way, 0 waiting"]
+    # The waiting run saved too, without its CPU time (as runs were saved before they recorded
+    # it) and with 5 h of pauses in its wall time: the estimate leaves it out.
+    run_specs([waiting], tmp_path, workers=1)
+    other = result_path(tmp_path, waiting)
+    other.write_text(json.dumps({**json.loads(other.read_text()), "cpu_time": None,
+                                 "wall_time": 18000.0}))
+    lines = sweep_status([saved, running, waiting], tmp_path, workers=2)
+    assert lines[0] == "peg: 2 of 3 runs saved, 1 under way, 0 waiting"
+    assert lines[2] == "  left: ~0.5 worker-hours (60.0 min a saved run)"
