@@ -11,7 +11,8 @@ over the last 60 (wins, difference with its 95 % interval, Wilcoxon p, Holm over
 rates with pairs), each run's first insertion, the share inserted late and the diverged critics;
 then results.md's table of each learner against the better random policy on the same seeds
 (``peg_random_episodes.csv``, all 20 runs of the random bar). The final Q (Fig. 8.3's
-spread) is only in whole runs, so it is not here. The last line is JSON.
+spread across seeds) is only in whole runs: it is printed over the paired seeds whose runs are
+archived, with their number. The last line is JSON.
 
 Usage: python benchmarks/peg_episode_pairs.py [--docs docs]
 """
@@ -25,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from qg_experiments import stats
+from qg_experiments import peg, stats
 from qg_experiments.peg import PegRandomSpec
 from qg_experiments.report import peg_sections
 from qg_experiments.run_archive import archive_folder
@@ -70,6 +71,26 @@ def mean_of(run: dict[str, Any], field: str, first: int = 0) -> float:
     return float(np.mean([e[field] for e in run["episodes"][first:]]))
 
 
+def q_spread_lines(pairs: peg_sections.PegPairs, results: list[dict[str, Any]],
+                   lr: float) -> list[str]:
+    """Fig. 8.3 at ``lr``: the median across points of each algorithm's std of the final Q over
+    the paired seeds whose whole runs are kept, and at how many points QG-DDPG's is the
+    smaller, for the given actions and for each run's own actor's action."""
+    seeds = sorted({r["spec"]["seed"] for r in results if r["spec"]["lr"] == lr
+                    and r["spec"]["seed"] in pairs.diverged[lr]
+                    and peg.Q_POINTS["given"] in r})
+    lines = []
+    for points, label in (("given", "the given actions"), ("pi", "the actor's action")):
+        q = pairs.spreads(lr, points)
+        if q is None:
+            return [f"Q spread: fewer than two paired seeds with their final Q ({len(seeds)})"]
+        lines.append(f"Q spread over seeds {', '.join(map(str, seeds))}, {label}: median "
+                     f"QG-DDPG / DDPG {np.median(q['qgddpg']):.3g} / {np.median(q['ddpg']):.3g}"
+                     f"; QG-DDPG's the smaller at {int(np.sum(q['qgddpg'] < q['ddpg']))} of "
+                     f"{q['ddpg'].size} points")
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--docs", type=Path, default=Path("docs"))
@@ -111,6 +132,8 @@ def main() -> None:
                   f"{sum(row['diverged'])} of {len(seeds)}; mean return over all episodes "
                   f"{np.mean(row['all_return']):.1f}")
             entry[algorithm] = row
+        entry["q_spread"] = q_spread_lines(pairs, results, lr)
+        print("\n".join(f"  {line}" for line in entry["q_spread"]))
         summary["learning_rates"][f"{lr:g}"] = entry
     randoms = list(csv_runs(args.docs / "data" / "thesis" / "peg_random_episodes.csv").values())
     print("\n".join(peg_sections.peg_against_random(results, randoms, TAIL)))
