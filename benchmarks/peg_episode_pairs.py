@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from qg_experiments import peg, stats
+from qg_experiments import stats
 from qg_experiments.peg import PegRandomSpec
 from qg_experiments.report import peg_sections
 from qg_experiments.run_archive import archive_folder
@@ -71,14 +71,11 @@ def mean_of(run: dict[str, Any], field: str, first: int = 0) -> float:
     return float(np.mean([e[field] for e in run["episodes"][first:]]))
 
 
-def q_spread_lines(pairs: peg_sections.PegPairs, results: list[dict[str, Any]],
-                   lr: float) -> list[str]:
+def q_spread_lines(pairs: peg_sections.PegPairs, lr: float) -> list[str]:
     """Fig. 8.3 at ``lr``: the median across points of each algorithm's std of the final Q over
     the paired seeds whose whole runs are kept, and at how many points QG-DDPG's is the
     smaller, for the given actions and for each run's own actor's action."""
-    seeds = sorted({r["spec"]["seed"] for r in results if r["spec"]["lr"] == lr
-                    and r["spec"]["seed"] in pairs.diverged[lr]
-                    and peg.Q_POINTS["given"] in r})
+    seeds = pairs.spread_seeds[lr]
     lines = []
     for points, label in (("given", "the given actions"), ("pi", "the actor's action")):
         q = pairs.spreads(lr, points)
@@ -132,7 +129,7 @@ def main() -> None:
                   f"{sum(row['diverged'])} of {len(seeds)}; mean return over all episodes "
                   f"{np.mean(row['all_return']):.1f}")
             entry[algorithm] = row
-        entry["q_spread"] = q_spread_lines(pairs, results, lr)
+        entry["q_spread"] = q_spread_lines(pairs, lr)
         print("\n".join(f"  {line}" for line in entry["q_spread"]))
         summary["learning_rates"][f"{lr:g}"] = entry
     randoms = list(csv_runs(args.docs / "data" / "thesis" / "peg_random_episodes.csv").values())

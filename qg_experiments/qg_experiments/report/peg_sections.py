@@ -172,12 +172,14 @@ class PegPairs:
     :param diverged: lr -> seed -> algorithm -> whether the critic diverged.
     :param spread: per set of points (``peg.Q_POINTS``) and (algorithm, lr), the std of the
         final Q across the paired seeds.
+    :param spread_seeds: per lr, the paired seeds whose runs hold their final Q (the spread's).
     """
     lrs: list[float]
     compared: dict[str, dict[float, stats.PairedComparison]]
     holm: dict[str, dict[float, float]]
     diverged: dict[float, dict[int, dict[str, bool]]]
     spread: dict[str, dict[tuple[str, float], np.ndarray]]
+    spread_seeds: dict[float, list[int]]
 
     def spreads(self, lr: float, points: str = "given") -> dict[str, np.ndarray] | None:
         """QG-DDPG's and DDPG's spread at ``lr``, or None (fewer than two paired seeds)."""
@@ -208,8 +210,10 @@ def peg_pairs(results: list[dict[str, Any]], tail: int) -> PegPairs | None:
     # rows, as ``benchmarks/peg_episode_pairs.py`` does).
     paired = [r for r in results if r["spec"]["seed"] in diverged.get(r["spec"]["lr"], {})
               and peg.Q_POINTS["given"] in r]
+    seeds = {lr: sorted({r["spec"]["seed"] for r in paired if r["spec"]["lr"] == lr})
+             for lr in lrs}
     return PegPairs(lrs, compared, holm, diverged,
-                    {points: peg.q_spread(paired, points) for points in peg.Q_POINTS})
+                    {points: peg.q_spread(paired, points) for points in peg.Q_POINTS}, seeds)
 
 
 def peg_paired(pairs: PegPairs | None, tail: int) -> list[str]:
