@@ -1,64 +1,42 @@
-"""The thesis peg's paired numbers from what the repository keeps: episode rows and archived runs.
+"""The thesis peg's paired numbers per run and seed, from what the repository keeps: archived runs
+and episode rows.
 
-results.md section 5 is computed from the runs' JSON under ``runs/experiments/thesis``, a folder
-outside version control; a reset machine took with it the 34 runs finished by the end of
-2026-11-29's fourth session. What survived is their per-episode table (``docs/data/thesis/peg_episodes.csv``: steps,
-insertion, return and mean Q of every episode) and, since, every finished run archived whole
-(``docs/data/thesis/archived_runs/peg``, ``qg_experiments.run_archive``). This script joins the
-two (an archived run wins over its CSV rows) and prints, per learning rate, the measures of
-results.md's paired table that episode rows give: QG-DDPG against DDPG over all episodes and
-over the last 60 (wins, difference with its 95 % interval, Wilcoxon p, Holm over the learning
-rates with pairs), each run's first insertion, the share inserted late and the diverged critics;
-then results.md's table of each learner against the better random policy on the same seeds
-(``peg_random_episodes.csv``, all 20 runs of the random bar). The final Q (Fig. 8.3's
-spread across seeds) is only in whole runs: it is printed over the paired seeds whose runs are
-archived, with their number. The last line is JSON.
+results.md section 5 (``python -m qg_experiments.peg_report``) reports the same runs: each one
+archived whole (``docs/data/thesis/archived_runs/peg``, ``qg_experiments.run_archive``) or, when
+a reset machine took its JSON, read back from its episode rows (``docs/data/thesis/
+peg_episodes.csv``, ``qg_experiments.episode_rows``). This script prints, per learning rate, the
+paired measures of the section's table (QG-DDPG against DDPG over all episodes and over the last
+60: wins, difference with its 95 % interval, Wilcoxon p, Holm over the learning rates with
+pairs) and, seed by seed, what the section summarises: each run's first insertion, the share
+inserted late and the diverged critics; Fig. 8.3's spread of the final Q (only in whole runs)
+over the paired seeds archived whole; then each learner against the better random policy on
+the same seeds. Nothing is written. The last line is JSON.
 
 Usage: python benchmarks/peg_episode_pairs.py [--docs docs]
 """
 from __future__ import annotations
 
 import argparse
-import csv
-import gzip
 import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from qg_experiments import stats
-from qg_experiments.peg import PegRandomSpec
+from qg_experiments.episode_rows import ROWS, with_rows
+from qg_experiments.profile import load_profile
 from qg_experiments.report import peg_sections
-from qg_experiments.run_archive import archive_folder
+from qg_experiments.report.peg_block import peg_specs_of
+from qg_experiments.run_archive import archive_folder, archived_result
 
 TAIL = 60          # results.md's late window: the last fifth of 300 episodes
 
 
-def _run_of(name: str, gamma: float) -> dict[str, Any]:
-    """An empty run named ``name``: a learner's ``<algorithm>_lr<lr>_s<seed>`` or a random
-    policy's ``random_<kind>_s<seed>`` (``PegRunSpec.name``, ``PegRandomSpec.name``)."""
-    first, middle, seed = name.split("_")
-    if first == "random":
-        spec = PegRandomSpec(kind=middle, seed=int(seed[1:]))
-        return {"spec": {"kind": middle, "seed": spec.seed}, "label": spec.label, "episodes": []}
-    return {"spec": {"algorithm": first, "lr": float(middle[2:]), "seed": int(seed[1:]),
-                     "gamma": gamma}, "episodes": []}
-
-
-def csv_runs(path: Path, gamma: float = 0.99) -> dict[str, dict[str, Any]]:
-    """The runs of an episodes CSV (``run,episode,steps,success,return[,mean_q]``), by name."""
-    runs: dict[str, dict[str, Any]] = {}
-    with open(path) as rows:
-        for row in csv.DictReader(rows):
-            run = runs.setdefault(row["run"], _run_of(row["run"], gamma))
-            run["episodes"].append({"episode": int(row["episode"]), "steps": int(row["steps"]),
-                                    "success": row["success"] == "True",
-                                    "return": float(row["return"]),
-                                    **({"mean_q": float(row["mean_q"])} if "mean_q" in row
-                                       else {})})
-    for run in runs.values():
-        run["episodes"].sort(key=lambda e: e["episode"])
-    return runs
+def kept_runs(docs: Path, specs: list[Any], csv: str) -> list[dict[str, Any]]:
+    """The runs of ``specs`` archived whole under ``docs``, and the others' episode rows."""
+    archive = archive_folder(docs, "thesis")
+    whole = [run for spec in specs if (run := archived_result(archive, spec)) is not None]
+    return with_rows(whole, docs / "data" / "thesis" / csv, specs)
 
 
 def first_insertion(run: dict[str, Any]) -> int | None:
@@ -92,13 +70,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--docs", type=Path, default=Path("docs"))
     args = parser.parse_args()
-    runs = {name: {**run, "source": "csv"}
-            for name, run in csv_runs(args.docs / "data" / "thesis" / "peg_episodes.csv").items()}
-    for path in sorted((archive_folder(args.docs, "thesis") / "peg").glob("*.json.gz")):
-        run = json.loads(gzip.decompress(path.read_bytes()))
-        runs[run["name"]] = {**run, "source": "archive"}
-    results = list(runs.values())
-    sources = {s: sum(r["source"] == s for r in results) for s in ("csv", "archive")}
+    learners, random_specs = peg_specs_of(load_profile("thesis"), "peg")
+    results = kept_runs(args.docs, learners, "peg_episodes.csv")
+    sources = {"csv": sum(r.get("source") == ROWS for r in results)}
+    sources["archive"] = len(results) - sources["csv"]
     print(f"{len(results)} runs: {sources['csv']} from the episode CSV, "
           f"{sources['archive']} archived")
     pairs = peg_sections.peg_pairs(results, TAIL)
@@ -132,7 +107,7 @@ def main() -> None:
         entry["q_spread"] = q_spread_lines(pairs, lr)
         print("\n".join(f"  {line}" for line in entry["q_spread"]))
         summary["learning_rates"][f"{lr:g}"] = entry
-    randoms = list(csv_runs(args.docs / "data" / "thesis" / "peg_random_episodes.csv").values())
+    randoms = kept_runs(args.docs, random_specs, "peg_random_episodes.csv")
     print("\n".join(peg_sections.peg_against_random(results, randoms, TAIL)))
     print(json.dumps(summary))
 

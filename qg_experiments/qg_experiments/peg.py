@@ -43,7 +43,7 @@ from qg_experiments.runner import ALGORITHMS, algorithm_config, config_digest, e
 
 __all__ = ["PEG_NETWORKS", "PEG_NOISE", "PegRunSpec", "peg_specs", "peg_learner_config",
            "peg_noise_config", "run_peg", "GRID_STATES", "GRID_ACTIONS", "learning_curves",
-           "q_spread", "Q_POINTS", "PEG_ROBOTS", "PEG_RANDOM_KINDS", "PegRandomSpec",
+           "q_spread", "q_seeds", "holds_final_q", "Q_POINTS", "PEG_ROBOTS", "PEG_RANDOM_KINDS", "PegRandomSpec",
            "peg_random_specs", "run_peg_random", "random_experiment", "random_curves"]
 
 #: The robots that move the peg, and the experiment each one's runs are saved under.
@@ -372,6 +372,19 @@ def q_spread(results: list[dict[str, Any]], points: str = "given"
              ) -> dict[tuple[str, float], np.ndarray]:
     """Per (algorithm, lr): std across seeds of the final Q at each of ``points``
     (``Q_POINTS``: ``given``, the 27 x 11 state-action pairs; ``pi``, the 27 states with the
-    actor's action)."""
+    actor's action), over the runs that hold their final Q (``holds_final_q``)."""
     return {key: np.array([r[Q_POINTS[points]] for r in group]).std(axis=0).ravel()
-            for key, group in _groups(results).items() if len(group) >= 2}
+            for key, group in _groups(list(filter(holds_final_q, results))).items()
+            if len(group) >= 2}
+
+
+def q_seeds(results: list[dict[str, Any]]) -> dict[tuple[str, float], int]:
+    """Per (algorithm, lr): how many runs hold their final Q, the seeds ``q_spread`` is over."""
+    return {key: len(group)
+            for key, group in _groups(list(filter(holds_final_q, results))).items()}
+
+
+def holds_final_q(run: dict[str, Any]) -> bool:
+    """Whether a run holds its final Q at every set of ``Q_POINTS`` (a saved run does; one read
+    back from its episode rows does not)."""
+    return all(field in run for field in Q_POINTS.values())

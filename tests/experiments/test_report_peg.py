@@ -4,8 +4,7 @@ beside the thesis's findings."""
 from __future__ import annotations
 
 import numpy as np
-from qg_experiments.report.comparison import _peg_notes
-from qg_experiments.report.peg_sections import peg_paired, peg_pairs
+from qg_experiments.report.peg_sections import peg_paired, peg_pairs, peg_thesis_notes
 
 
 def _run(algorithm: str, lr: float, seed: int, returns: list[float], q: float,
@@ -41,7 +40,7 @@ def test_each_learning_rate_is_paired_by_seed_and_corrected_over_the_rates() -> 
     assert good[3].startswith("10.00 [10.00, 10.00]")
     # exact two-sided Wilcoxon with 10 of 10 one way: 2 / 2^10; Holm over 2 rates doubles it
     assert float(good[4]) == float(good[7]) == np.float64(2 * 2 / 2 ** 10).round(5)
-    assert good[8] == "1.44 / 2.87"            # the std over seeds 0..9, halved by QG's q
+    assert good[8] == "1.44 / 2.87 (10 seeds)"  # the std over seeds 0..9, halved by QG's q
     assert good[9] == "297 of 297"
     # 3 far outside [-100, 0]; -111 beyond its tenth (10), -109 within it: 4 diverged
     assert good[10] == "0 / 4"
@@ -54,8 +53,8 @@ def test_each_learning_rate_is_paired_by_seed_and_corrected_over_the_rates() -> 
     # largest, then the planned learning rate without pairs.
     curves = {("ddpg", lr): {"return_mean": np.array([-60.0 if lr == 1e-3 else -50.0])}
               for lr in (1e-3, 1e-2)}
-    notes = _peg_notes({"pairs": peg_pairs(results, tail=2), "curves": curves, "tail": 2,
-                        "robot": "peg", "planned_lrs": (1e-4, 1e-3, 1e-2)})
+    notes = peg_thesis_notes({"pairs": peg_pairs(results, tail=2), "curves": curves, "tail": 2,
+                              "robot": "peg"}, planned_lrs=(1e-4, 1e-3, 1e-2))
     assert len(notes) == 4
     assert notes[1].startswith("- Peg, lr 0.001 (10 pairs): QG-DDPG's mean return over all "
                                "episodes higher in 10 of 10, 10.00 [10.00, 10.00]")
@@ -72,7 +71,7 @@ def test_each_learning_rate_is_paired_by_seed_and_corrected_over_the_rates() -> 
 def test_no_pairs_no_table() -> None:
     pairs = peg_pairs([_run("ddpg", 1e-3, 0, [-1.0], q=0.0)], tail=1)
     assert pairs is None and peg_paired(pairs, tail=1) == []
-    assert _peg_notes({"pairs": None, "curves": {}, "tail": 1, "robot": "peg"}) == []
+    assert peg_thesis_notes({"pairs": None, "curves": {}, "tail": 1, "robot": "peg"}) == []
 
 
 def test_the_td3_reference_says_what_a_maintained_agent_did() -> None:

@@ -98,6 +98,9 @@ def test_tiny_suite_writes_results_figures_and_report(tmp_path) -> None:
     for figure in ("exp1_random_steps", "exp3_mean_q", "exp5_peg_learning", "exp5_peg_q_std",
                    "exp6_nextage_learning", "exp7_profiles", "exp7_cell_means"):
         assert (tmp_path / "docs" / "figures" / f"{figure}.png").stat().st_size > 1000
+    # The peg's sections written again alone are the page's, and the page around them stays.
+    from qg_experiments.peg_report import write_section
+    assert write_section(profile, tmp_path / "runs", tmp_path / "docs").read_text() == page
     bar = json.loads((tmp_path / "docs" / "data" / "tiny" / "random_bar.json").read_text())
     assert bar["episodes"] == 1 and bar["seeds"] == [0] and bar["low"] <= bar["mean"] <= bar["high"]
     rows = grid.cell_table([json.loads(p.read_text()) for p in (out / "grid").glob("*.json")], 0.5)

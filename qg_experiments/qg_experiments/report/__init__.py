@@ -5,7 +5,8 @@ Everything in the page is computed from ``<out>/<profile>/<experiment>/*.json`` 
 (``--report-only``) without running anything. Summary CSVs go next to the results; PNG plots go to
 ``docs/figures/exp*_*.png``.
 
-Its parts, by what they do: ``page`` (the page in order), ``grid_sections``, ``peg_sections``,
+Its parts, by what they do: ``page`` (the page in order), ``peg_block`` (the peg's sections,
+which are also written alone: ``qg_experiments.peg_report``), ``grid_sections``, ``peg_sections``,
 ``comparison`` and ``aggregate_section`` (the sections' text), ``markdown`` (numbers, tables and
 cells as text), ``plots`` (the figures), ``tables`` (CSV and JSON beside the page),
 ``divergence`` (which critics diverged).

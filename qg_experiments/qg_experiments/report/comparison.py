@@ -13,13 +13,10 @@ from qg_experiments.random_baselines import Bar
 from qg_experiments.report.divergence import divergence_counts, run_divergence
 from qg_experiments.report.grid_sections import THESIS, divergence_text, paired_line
 from qg_experiments.report.markdown import fmt, table
-from qg_experiments.report.peg_sections import PegPairs
 from qg_experiments.stalls import LAST_TRAINING, TRAINED_AT, recovery_text, stall_counts
 
 __all__ = ["graph_section", "comparison"]
 
-#: How the closing list names the peg's two sets of Q points (``peg.Q_POINTS``).
-_POINTS = {"given": "given actions", "pi": "the actor's action"}
 #: The columns' order: QG-DDPG first, as the page compares it against DDPG.
 _PAIR = tuple(reversed(COMPARED))
 
@@ -96,7 +93,7 @@ def _divergence_pairs(results: list[dict[str, Any]], gamma: float) -> str:
 
 def comparison(random_rows: list[dict[str, Any]], bar: Bar | None,
                grids: dict[str, list[dict[str, Any]]], variant_results: list[dict[str, Any]],
-               peg_data: list[dict], gamma: float) -> list[str]:
+               gamma: float) -> list[str]:
     """The closing list: where our numbers agree and disagree with the thesis."""
     notes = ["## Where our numbers agree and disagree with the thesis", ""]
     uniform = [r for r in random_rows if r["kind"] == "uniform"]
@@ -127,52 +124,4 @@ def comparison(random_rows: list[dict[str, Any]], bar: Bar | None,
                          f"{sum(1 for r in rows if r['algorithm'] == a)} cells"
                          for a in _PAIR)
         notes.append(f"- {name}: {text} (thesis: QG-DDPG did, DDPG did not).")
-    for data in peg_data:
-        notes += _peg_notes(data)
     return notes + [""]
-
-
-def _peg_notes(data: dict[str, Any]) -> list[str]:
-    """A peg experiment's lines of the closing list: per learning rate, QG-DDPG against DDPG
-    paired by seed (``peg_sections.peg_pairs``) beside the thesis's ch. 8.3.2 findings (Figs.
-    8.2 and 8.3 show curves and boxes; its text gives no numbers); then where the gain is
-    largest, and the learning rates the profile has not run yet."""
-    pairs: PegPairs | None = data.get("pairs")
-    if pairs is None:
-        return []
-    robot = "Peg" if data["robot"] == "peg" else "Nextage peg"
-    notes = []
-    for lr in pairs.lrs:
-        speed, late = pairs.compared["all"][lr], pairs.compared["late"][lr]
-        p_speed, p_late = pairs.holm["all"][lr], pairs.holm["late"][lr]
-        faster = ("not shown" if p_speed >= 0.05
-                  else "QG-DDPG faster" if speed.difference.mean > 0 else "DDPG faster")
-        worse = p_late < 0.05 and late.difference.mean < 0
-        text = (f"- {robot}, lr {lr:g} ({speed.n} pairs): QG-DDPG's mean return over all "
-                f"episodes higher in {speed.wins_a} of {speed.n}, "
-                f"{stats.format_interval(speed.difference, 2)}, p (Holm) = {p_speed:.3g}: "
-                f"{faster} (thesis Fig. 8.2: faster at every learning rate); over the last "
-                f"{data['tail']} episodes {stats.format_interval(late.difference, 2)}, "
-                f"p = {p_late:.3g}: "
-                f"{'worse' if worse else 'not worse'} (thesis: never worse)")
-        spreads = [(points, pairs.spreads(lr, points)) for points in ("given", "pi")]
-        if all(q is not None for _, q in spreads):
-            text += "; median Q spread across seeds QG-DDPG / DDPG: " + ", ".join(
-                f"{_POINTS[points]} {np.median(q['qgddpg']):.3g} / {np.median(q['ddpg']):.3g} "
-                f"(QG-DDPG's smaller at {int(np.sum(q['qgddpg'] < q['ddpg']))} of "
-                f"{q['ddpg'].size})" for points, q in spreads) + \
-                " (thesis Fig. 8.3, lr 1e-4: clearly smaller with QG-DDPG)"
-        notes.append(text + ".")
-    if len(pairs.lrs) > 1:
-        gain = {lr: pairs.compared["all"][lr].difference.mean for lr in pairs.lrs}
-        ddpg = {lr: float(np.mean(data["curves"][("ddpg", lr)]["return_mean"]))
-                for lr in pairs.lrs}
-        best, poorest = max(gain, key=gain.get), min(ddpg, key=ddpg.get)
-        notes.append(f"- {robot}: QG-DDPG's gain over all episodes is largest at lr {best:g} "
-                     f"({gain[best]:+.2f}); DDPG's mean return over all episodes is lowest at "
-                     f"lr {poorest:g} ({ddpg[poorest]:.1f}) (thesis: the gain is largest where "
-                     f"DDPG does poorly, at lr 1e-4 of its three).")
-    missing = [lr for lr in data.get("planned_lrs", ()) if lr not in pairs.lrs]
-    if missing:
-        notes.append(f"- {robot}, lr {', '.join(f'{lr:g}' for lr in missing)}: no pairs yet.")
-    return notes

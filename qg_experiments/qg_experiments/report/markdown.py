@@ -15,8 +15,8 @@ from qg_experiments import stats
 from qg_experiments.code_version import UNRECORDED
 from qg_experiments.random_baselines import Bar
 
-__all__ = ["fmt", "table", "APART_BLOCKS", "marked_blocks", "write_marked_block", "speed",
-           "bar_text", "grid_cell", "grid_table", "code_label"]
+__all__ = ["fmt", "table", "APART_BLOCKS", "PEG_BLOCK", "marked_blocks", "write_marked_block",
+           "speed", "bar_text", "grid_cell", "grid_table", "code_label"]
 
 
 def fmt(x: float | None, digits: int = 1) -> str:
@@ -134,6 +134,10 @@ STANDARD_BLOCK = ("<!-- standard tasks: written by qg_experiments.peers_report -
                   "<!-- /standard tasks -->")
 FRANKA_BLOCK = ("<!-- franka section: python -m qg_experiments.franka_report -->",
                 "<!-- end of the franka section -->")
+#: The peg's sections (``report.peg_block``): written with the page, and alone by
+#: ``python -m qg_experiments.peg_report`` while a sweep's runs come in.
+PEG_BLOCK = ("<!-- peg sections: also written alone by python -m qg_experiments.peg_report -->",
+             "<!-- end of the peg sections -->")
 APART_BLOCKS = [PEERS_BLOCK, STANDARD_BLOCK, FRANKA_BLOCK]
 
 

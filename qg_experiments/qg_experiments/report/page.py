@@ -8,7 +8,6 @@ from typing import Any
 
 from qg_experiments import grid
 from qg_experiments.core import StackSettings
-from qg_experiments.peg import random_experiment
 from qg_experiments.profile import Profile
 from qg_experiments.random_baselines import random_bar_of, summarize_baselines
 from qg_experiments.report.aggregate_section import aggregate_section
@@ -27,12 +26,8 @@ from qg_experiments.report.markdown import (
     step_label,
     table,
 )
-from qg_experiments.report.peg_sections import (
-    peg_against_random,
-    peg_budget,
-    peg_paired,
-    peg_section,
-)
+from qg_experiments.report.peg_block import PEG_EXPERIMENTS, peg_block
+from qg_experiments.report.peg_sections import peg_budget
 from qg_experiments.report.tables import episodes_csv, write_bar, write_csv
 from qg_experiments.tasks import load_results
 from qg_experiments.tensorboard_log import export_runs
@@ -67,9 +62,9 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
         return load_results(out, experiment, None if current is None else
                             current.get(experiment, set()))
 
+    # The peg's runs are its block's (``peg_block``), which writes its own data and figures.
     results_by = {name: saved(name) for name in
-                  ("random", "grid", "variants", "state_grid", "peg", "nextage",
-                   random_experiment("peg"), random_experiment("nextage"))}
+                  ("random", "grid", "variants", "state_grid")}
     random_results, grid_results = results_by["random"], results_by["grid"]
     variant_results, state_results = results_by["variants"], results_by["state_grid"]
     random_rows = summarize_baselines(random_results) if random_results else []
@@ -91,8 +86,8 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
     write_csv(data / "variants_summary.csv", grid.cell_table(variant_results, bar_mean))
     for name, results in results_by.items():      # none without runs (``write_csv``)
         episodes_csv(data / f"{name}_episodes.csv", results)
-    tensorboard = export_runs((*grid_results, *variant_results, *state_results,
-                               *results_by["peg"], *results_by["nextage"]), out / "tensorboard")
+    tensorboard = export_runs((*grid_results, *variant_results, *state_results),
+                              out / "tensorboard")
     settings = StackSettings.load(config_dir)
     gamma = settings.learner.ddpg.gamma
     q_range = (settings.learner.ddpg.r_min / (1 - gamma), settings.learner.ddpg.r_max)
@@ -100,8 +95,7 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
                       for r in results})
     timing_path = out / "timing.json"
     timing = json.loads(timing_path.read_text()) if timing_path.exists() else {}
-    robot_runs = [r for name, results in results_by.items()
-                  if name not in ("peg", random_experiment("peg")) for r in results]
+    robot_runs = [r for results in results_by.values() for r in results]
     estimator = {"ekf": "the EKF wrench estimator (as in the ROS stack)",
                  "ground_truth": "the simulator's true contact wrench (perfect sensor)"}
     lines = ["# Results: the thesis's experiments in simulation", "",
@@ -115,7 +109,7 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
              f"(`panda_scene.imperfections`; each seed is its own robot: its biases, housing "
              f"error and noise). Stack config files: "
              f"`{config_dir or 'config/'}`, digest(s) {', '.join(f'`{d}`' for d in digests)} "
-             f"(`runner.config_digest`). Every episode and every table row as CSV: "
+             f"(`runner.config_digest`; the peg's in its sections). Every episode and every table row as CSV: "
              f"[`data/{profile.name}/`](data/{profile.name}/); per-run JSON: `{out}`; "
              f"TensorBoard scalars of every learning run (Stable-Baselines3's tag names): "
              f"`tensorboard --logdir {tensorboard}`.", "",
@@ -123,8 +117,8 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
              f"{step_label(robot_runs) or 'none run'} (each section's speed line names its "
              f"own; a step ends at rest or at its limit).", "",
              f"**Code.** The commits the runs were made at: "
-             f"{code_label([r for rs in results_by.values() for r in rs]) or 'none run'} (a "
-             f"saved run is reused while its spec and config numbers match, whatever the code; "
+             f"{code_label(robot_runs) or 'none run'} (the peg's in its sections; a saved "
+             f"run is reused while its spec and config numbers match, whatever the code; "
              f"`code_version`).", "",
              f"**Seeds.** Every table below is computed on the report seeds "
              f"{', '.join(map(str, profile.seeds.report))}; every choice of the setup (the state, "
@@ -164,8 +158,10 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
         budget["nextage"] = ("Nextage peg", "(the real Nextage: ch. 8.3)",
                              peg_budget(profile.nextage))
     planned = planned or {}
+    # The peg's sections count their own runs: they are also written alone (``peg_block``).
     lines += table(["experiment", "thesis", f"profile {profile.name}", "runs finished"],
-                   [[*row, f"{len(results_by[k])} of {planned.get(k, '?')}"]
+                   [[*row, "section " + ("5" if k == "peg" else "6") if k in PEG_EXPERIMENTS
+                     else f"{len(results_by[k])} of {planned.get(k, '?')}"]
                     for k, row in budget.items()])
     earlier = sorted(path.name for path in docs.glob("results_*.md"))
     if earlier:      # pages of another setup, kept for the experiments not run again since
@@ -198,27 +194,13 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
                               state_results, bar)
     lines += q_section(grid_results, grid_rows, figures, q_range, gamma)
     lines += variant_section(variant_results, bar, gamma)
-    peg_data = []
-    for experiment in ("peg", "nextage"):
-        results = results_by[experiment]
-        if experiment == "nextage" and profile.nextage is None and not results:
-            continue
-        randoms = results_by[random_experiment(experiment)]
-        section, data = peg_section(results, figures, experiment, randoms)
-        lines += section
-        if data:
-            budget = profile.peg if experiment == "peg" else profile.nextage
-            data["planned_lrs"] = budget.lrs if budget is not None else ()
-            lines += [*peg_paired(data["pairs"], data["tail"]), ""]
-            against = peg_against_random(results, randoms, data["tail"])
-            lines += [*against, ""] if against else []
-        peg_data.append(data)
+    lines += [*peg_block(profile, out, docs, config_dir), ""]
     grids = {f"grid (`{pg.observation or settings.task.observation}`, the default)": grid_results,
              "grid with the thesis's 4-D state": state_results}
     settings_runs = {**grids, **grid.by_variant(variant_results, gamma)}
     lines += graph_section(settings_runs, bar, gamma)
     lines += aggregate_section(settings_runs, bar, profile.statistics, figures)
-    lines += comparison(random_rows, bar, grids, variant_results, peg_data, gamma)
+    lines += comparison(random_rows, bar, grids, variant_results, gamma)
     path = docs / "results.md"
     # The peers' runs come from their own benchmarks, the Franka's are whole qgl runs (realtime,
     # franky-sim): their sections follow ours, kept from the old page unless their runs are here.

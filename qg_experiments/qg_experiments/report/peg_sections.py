@@ -4,6 +4,7 @@ paired by seed, and what a maintained agent (SB3's TD3) does on the same free pe
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -18,8 +19,8 @@ from qg_experiments.report.divergence import run_divergence
 from qg_experiments.report.markdown import fmt, speed, table
 
 __all__ = ["peg_section", "PegPairs", "peg_pairs", "per_pair", "peg_paired",
-           "peg_against_random", "peg_diverged", "peg_budget", "td3_reference_line",
-           "TD3_REFERENCE"]
+           "peg_against_random", "peg_thesis_notes", "peg_diverged", "peg_budget",
+           "td3_reference_line", "TD3_REFERENCE"]
 
 #: Per peg experiment: section heading, figure-name prefix, what moved the peg.
 _PEG_PAGES = {
@@ -34,10 +35,15 @@ _PEG_PAGES = {
 
 
 def peg_section(results: list[dict[str, Any]], figures: Path, experiment: str = "peg",
-                randoms: list[dict[str, Any]] | None = None) -> tuple[list[str], dict]:
-    """The section of a peg experiment, and its curves and spread for the closing comparison
-    (empty without runs); ``randoms``: the random policies run on its seeds
-    (``peg.run_peg_random``), in the table and the figure beside the learners."""
+                randoms: list[dict[str, Any]] | None = None,
+                provenance: str = "") -> tuple[list[str], dict]:
+    """The section of a peg experiment, and its curves and pairs for its lines beside the
+    thesis (``peg_thesis_notes``; empty without runs).
+
+    :param randoms: the random policies run on its seeds (``peg.run_peg_random``), in the
+        table and the figure beside the learners.
+    :param provenance: which runs these are, closing the section's first paragraph.
+    """
     heading, prefix, robot = _PEG_PAGES[experiment]
     lines = [heading, ""]
     if not results:
@@ -45,38 +51,39 @@ def peg_section(results: list[dict[str, Any]], figures: Path, experiment: str = 
     randoms = randoms or []
     curves = peg.learning_curves(results)
     random_curves = peg.random_curves(randoms)
-    spread = peg.q_spread(results)
+    spread, spread_seeds = peg.q_spread(results), peg.q_seeds(results)
     spec = results[0]["spec"]
     tail = max(1, spec["episodes"] // 5)
     window = 5 if spec["episodes"] >= 20 else 1
     plots.peg_learning(curves, window, figures / f"{prefix}_learning.png", random_curves)
     if spread:
         plots.q_spread({points: peg.q_spread(results, points) for points in peg.Q_POINTS},
-                       figures / f"{prefix}_q_std.png")
+                       figures / f"{prefix}_q_std.png", spread_seeds)
     first = _first_insertions(results, lambda r: (r["spec"]["algorithm"], r["spec"]["lr"]))
     first_random = _first_insertions(randoms, lambda r: r["label"])
 
-    def row(name: str, lr: str, c: dict[str, Any], first: str, s: np.ndarray | None) -> list[str]:
+    def row(name: str, lr: str, c: dict[str, Any], first: str, s: np.ndarray | None = None,
+            n: int = 0) -> list[str]:
         return [name, lr, str(c["seeds"]), first,
                 fmt(float(np.mean(c["return_mean"][-tail:])), 1),
                 f"{float(np.mean(c['success_mean'][-tail:])):.0%}",
                 fmt(float(np.mean(c["steps_mean"][-tail:])), 0),
-                "n/a" if s is None else fmt(float(np.median(s)), 3)]
+                "n/a" if s is None else f"{fmt(float(np.median(s)), 3)} ({n} seeds)"]
 
-    rows = [row(label(a), f"{lr:g}", c, first[(a, lr)], spread.get((a, lr)))
-            for (a, lr), c in curves.items()]
-    rows += [row(name, "-", c, first_random[name], None) for name, c in random_curves.items()]
+    rows = [row(label(a), f"{lr:g}", c, first[(a, lr)], spread.get((a, lr)),
+                spread_seeds.get((a, lr), 0)) for (a, lr), c in curves.items()]
+    rows += [row(name, "-", c, first_random[name]) for name, c in random_curves.items()]
     lines += [f"{robot}. {spec['episodes']} episodes of at most {spec['episode_steps']} steps "
               f"per run, {spec['train_iterations']} minibatch updates after each episode (thesis: "
               "50 epochs x up to 15 minibatches, 300 episodes, 10 seeds). Networks 3 x 200, no "
               f"target networks (the thesis's initialisation: the actor He-uniform, the "
               f"critic's weights from N(0, 0.001)), actor lr = critic lr, exploration noise on "
-              f"every step. Speed: {speed(results)}."
+              f"every step. Speed: {_timed_speed(results)}."
               + (" Beside them, random policies on the same seeds, which meet the same starts "
                  "and learn nothing: " + "; ".join(
                      f"{r['label']}, {peg.PEG_RANDOM_KINDS[r['spec']['kind']]}"
                      for r in {r["label"]: r for r in randoms}.values()) + "."
-                 if randoms else ""),
+                 if randoms else "") + (f" {provenance}" if provenance else ""),
               "",
               f"![{experiment} learning curves](figures/{prefix}_learning.png)", ""]
     if spread:
@@ -90,6 +97,16 @@ def peg_section(results: list[dict[str, Any]], figures: Path, experiment: str = 
         lines += ["", td3_reference_line(json.loads(reference.read_text()))]
     return lines + [""], {"curves": curves, "pairs": peg_pairs(results, tail), "tail": tail,
                           "robot": experiment}
+
+
+def _timed_speed(results: list[dict[str, Any]]) -> str:
+    """``markdown.speed`` of the runs that kept their timing (not those read back from their
+    episode rows), saying how many they are when not all."""
+    timed = [r for r in results if "wall_time" in r]
+    if not timed:
+        return "not kept (every run read back from its episode rows)"
+    return ("" if len(timed) == len(results)
+            else f"over the {len(timed)} runs that kept their timing, ") + speed(timed)
 
 
 def _first_insertions(results: list[dict[str, Any]], key: Any) -> dict[Any, str]:
@@ -206,10 +223,10 @@ def peg_pairs(results: list[dict[str, Any]], tail: int) -> PegPairs | None:
             for name, c in compared.items()}
     diverged = per_pair(results, peg_diverged)
     # The spread across the seeds both algorithms ran (``peg.q_spread``: two seeds at least),
-    # of the runs that hold their final Q (all a sweep saves; not runs read back from episode
-    # rows, as ``benchmarks/peg_episode_pairs.py`` does).
+    # of the runs that hold their final Q (all a sweep saves; not runs read back from their
+    # episode rows, ``episode_rows``).
     paired = [r for r in results if r["spec"]["seed"] in diverged.get(r["spec"]["lr"], {})
-              and peg.Q_POINTS["given"] in r]
+              and peg.holds_final_q(r)]
     seeds = {lr: sorted({r["spec"]["seed"] for r in paired if r["spec"]["lr"] == lr})
              for lr in lrs}
     return PegPairs(lrs, compared, holm, diverged,
@@ -231,7 +248,8 @@ def peg_paired(pairs: PegPairs | None, tail: int) -> list[str]:
                      *_paired_cells(a, pairs.holm["all"][lr]),
                      *_paired_cells(b, pairs.holm["late"][lr]),
                      "n/a" if q is None else
-                     f"{np.median(q['qgddpg']):.3g} / {np.median(q['ddpg']):.3g}",
+                     f"{np.median(q['qgddpg']):.3g} / {np.median(q['ddpg']):.3g} "
+                     f"({len(pairs.spread_seeds[lr])} seeds)",
                      "n/a" if q is None else
                      f"{int(np.sum(q['qgddpg'] < q['ddpg']))} of {q['ddpg'].size}",
                      " / ".join(str(sum(runs[alg] for runs in seeds.values()))
@@ -243,8 +261,8 @@ def peg_paired(pairs: PegPairs | None, tail: int) -> list[str]:
             f"signed-rank p, Holm-corrected over the {len(pairs.lrs)} learning rates (with n "
             f"pairs the smallest p is 2 / 2^n: 0.0625 for 5, 0.002 for 10). Q spread: the "
             f"standard deviation across those seeds of each of the 27 x 11 final Q predictions "
-            f"(thesis Fig. 8.3), its median QG-DDPG / DDPG, and the points where QG-DDPG's is "
-            f"smaller. Diverged: the runs whose mean Q after an episode's updates left "
+            f"(thesis Fig. 8.3), its median QG-DDPG / DDPG over the paired seeds whose runs "
+            f"hold their final Q (how many), and the points where QG-DDPG's is smaller. Diverged: the runs whose mean Q after an episode's updates left "
             f"[-1 / (1 - gamma), 0] by more than a tenth of its width (as the grid's).",
             "", *table(["lr", "pairs (seeds)", "all: QG / DDPG / ties", "all: QG - DDPG [95 % CI]",
                         "all: p (Holm)", "late: QG / DDPG / ties", "late: QG - DDPG [95 % CI]",
@@ -298,6 +316,57 @@ def peg_against_random(results: list[dict[str, Any]], randoms: list[dict[str, An
                     "all: learner - random [95 % CI]", "all: p (Holm)",
                     "late: learner / random / ties", "late: learner - random [95 % CI]",
                     "late: p (Holm)"], rows)]
+
+
+#: How the lines beside the thesis name the peg's two sets of Q points (``peg.Q_POINTS``).
+_POINTS = {"given": "given actions", "pi": "the actor's action"}
+
+
+def peg_thesis_notes(data: dict[str, Any], planned_lrs: Iterable[float] = ()) -> list[str]:
+    """A peg experiment's lines beside the thesis: per learning rate, QG-DDPG against DDPG
+    paired by seed (``peg_pairs``) beside the thesis's ch. 8.3.2 findings (Figs.
+    8.2 and 8.3 show curves and boxes; its text gives no numbers); then where the gain is
+    largest, and the learning rates the profile has not run yet."""
+    pairs: PegPairs | None = data.get("pairs")
+    if pairs is None:
+        return []
+    robot = "Peg" if data["robot"] == "peg" else "Nextage peg"
+    notes = []
+    for lr in pairs.lrs:
+        overall, late = pairs.compared["all"][lr], pairs.compared["late"][lr]
+        p_speed, p_late = pairs.holm["all"][lr], pairs.holm["late"][lr]
+        faster = ("not shown" if p_speed >= 0.05
+                  else "QG-DDPG faster" if overall.difference.mean > 0 else "DDPG faster")
+        worse = p_late < 0.05 and late.difference.mean < 0
+        text = (f"- {robot}, lr {lr:g} ({overall.n} pairs): QG-DDPG's mean return over all "
+                f"episodes higher in {overall.wins_a} of {overall.n}, "
+                f"{stats.format_interval(overall.difference, 2)}, p (Holm) = {p_speed:.3g}: "
+                f"{faster} (thesis Fig. 8.2: faster at every learning rate); over the last "
+                f"{data['tail']} episodes {stats.format_interval(late.difference, 2)}, "
+                f"p = {p_late:.3g}: "
+                f"{'worse' if worse else 'not worse'} (thesis: never worse)")
+        spreads = [(points, pairs.spreads(lr, points)) for points in ("given", "pi")]
+        if all(q is not None for _, q in spreads):
+            text += (f"; median Q spread across seeds "
+                     f"{', '.join(map(str, pairs.spread_seeds[lr]))} QG-DDPG / DDPG: ") + ", ".join(
+                f"{_POINTS[points]} {np.median(q['qgddpg']):.3g} / {np.median(q['ddpg']):.3g} "
+                f"(QG-DDPG's smaller at {int(np.sum(q['qgddpg'] < q['ddpg']))} of "
+                f"{q['ddpg'].size})" for points, q in spreads) + \
+                " (thesis Fig. 8.3, lr 1e-4: clearly smaller with QG-DDPG)"
+        notes.append(text + ".")
+    if len(pairs.lrs) > 1:
+        gain = {lr: pairs.compared["all"][lr].difference.mean for lr in pairs.lrs}
+        ddpg = {lr: float(np.mean(data["curves"][("ddpg", lr)]["return_mean"]))
+                for lr in pairs.lrs}
+        best, poorest = max(gain, key=gain.get), min(ddpg, key=ddpg.get)
+        notes.append(f"- {robot}: QG-DDPG's gain over all episodes is largest at lr {best:g} "
+                     f"({gain[best]:+.2f}); DDPG's mean return over all episodes is lowest at "
+                     f"lr {poorest:g} ({ddpg[poorest]:.1f}) (thesis: the gain is largest where "
+                     f"DDPG does poorly, at lr 1e-4 of its three).")
+    missing = [lr for lr in planned_lrs if lr not in pairs.lrs]
+    if missing:
+        notes.append(f"- {robot}, lr {', '.join(f'{lr:g}' for lr in missing)}: no pairs yet.")
+    return notes
 
 
 def peg_budget(budget: PegBudget) -> str:

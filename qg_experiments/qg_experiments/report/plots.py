@@ -121,16 +121,18 @@ def peg_learning(curves: dict[tuple[str, float], dict[str, Any]], window: int,
     _save(fig, path)
 
 
-def q_spread(spread: dict[str, dict[tuple[str, float], np.ndarray]], path: Path) -> None:
+def q_spread(spread: dict[str, dict[tuple[str, float], np.ndarray]], path: Path,
+             seeds: dict[tuple[str, float], int]) -> None:
     """Box plots of the std of Q across seeds per (algorithm, lr), one panel per set of points
-    (``peg.Q_POINTS``: the given actions, the actor's), as thesis Fig. 8.3."""
+    (``peg.Q_POINTS``: the given actions, the actor's), as thesis Fig. 8.3; ``seeds``: how many
+    seeds each box is over (``peg.q_seeds``), under its name."""
     titles = {"given": "27 states x 11 given actions", "pi": "27 states, the actor's action"}
     fig, axes = pyplot().subplots(1, len(spread), figsize=(4.2 * len(spread), 3.5), sharey=True,
                                   squeeze=False)
     for ax, (points, boxes) in zip(axes[0], spread.items()):
         keys = sorted(boxes, key=lambda k: (-k[1], k[0]))
         ax.boxplot([boxes[k] for k in keys])
-        ax.set_xticks(range(1, len(keys) + 1), [f"{label(a)}\nlr {lr:g}" for a, lr in keys],
+        ax.set_xticks(range(1, len(keys) + 1), [f"{label(a)}\nlr {lr:g}\n{seeds[(a, lr)]} seeds" for a, lr in keys],
                       fontsize=8)
         ax.set_yscale("log")
         ax.set_title(titles.get(points, points), fontsize=9)
