@@ -6,9 +6,10 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 from qg_experiments.episode_rows import ROWS, runs_from_rows, with_rows
 from qg_experiments.peg import PegRandomSpec, PegRunSpec, peg_random_specs, peg_specs
-from qg_experiments.peg_report import write_section
+from qg_experiments.peg_report import main, write_section
 from qg_experiments.profile import load_profile
 from qg_experiments.report.markdown import PEG_BLOCK
 from qg_experiments.report.tables import episodes_csv
@@ -102,3 +103,16 @@ def test_the_peg_sections_are_written_alone_from_saved_runs_and_rows(tmp_path) -
     assert {r["name"] for r in runs_from_rows(data / "peg_episodes.csv", learners)} == \
         {spec.name for spec in learners}
     assert Path(docs / "figures" / "exp5_peg_learning.png").stat().st_size > 1000
+
+
+def test_the_command_refuses_a_missing_page_or_profile_and_writes_nothing(tmp_path, capsys
+                                                                          ) -> None:
+    for argv, message in ((["--docs", str(tmp_path / "docs")], "no page at"),
+                          (["--docs", str(tmp_path), "--profile", "nosuch"],
+                           "unknown profile 'nosuch'")):
+        (tmp_path / "results.md").write_text("page\n")
+        with pytest.raises(SystemExit) as stop:
+            main([*argv, "--out", str(tmp_path / "runs")])
+        assert stop.value.code == 2 and message in capsys.readouterr().err
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["results.md"]
+        assert (tmp_path / "results.md").read_text() == "page\n"
