@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 from qg_experiments.profile import load_profile
+from qg_experiments.report.peg_block import peg_rows
 from qg_experiments.run_archive import archive_folder
 from qg_experiments.suite import EXPERIMENTS, all_specs, restore, run_suite
 from qg_experiments.sweep_status import sweep_status
@@ -62,7 +63,8 @@ def main(argv: list[str] | None = None) -> None:
         restore(profile, args.out / profile.name, archive_folder(args.docs, profile.name),
                 args.config_dir)
         lines = sweep_status(all_specs(profile, only, args.config_dir),
-                             args.out / profile.name, args.workers)
+                             args.out / profile.name, args.workers,
+                             peg_rows(profile, args.docs, args.config_dir))
         print("\n".join([f"{profile.name} ({args.out / profile.name}):", *lines]))
         return
     command = "python -m qg_experiments " + shlex.join(

@@ -9,7 +9,7 @@ saved runs' mean CPU time, per experiment (their wall time where none recorded i
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -30,11 +30,15 @@ def _time_a_run(saved: Sequence[dict[str, Any]]) -> float:
     return float(np.mean(timed or [r["wall_time"] for r in saved]))
 
 
-def sweep_status(specs: Sequence[Any], out: Path, workers: int) -> list[str]:
+def sweep_status(specs: Sequence[Any], out: Path, workers: int,
+                 rows: Collection[str] = ()) -> list[str]:
     """Per experiment of ``specs``: runs saved, under way (with their episodes) and waiting,
     and the worker time left; last, the time left on ``workers`` workers.
 
     :param out: the profile's results folder (``<out>/<profile>``).
+    :param rows: the names of runs whose episode rows the page already reports
+        (``report.peg_block.peg_rows``): of those not saved, how many run again only for what
+        rows lack (the final Q, the timing).
     """
     lines, left_total = [], 0.0
     by_experiment: dict[str, list[Any]] = {}
@@ -48,6 +52,10 @@ def sweep_status(specs: Sequence[Any], out: Path, workers: int) -> list[str]:
         waiting = len(group) - len(saved) - len(under_way)
         lines.append(f"{experiment}: {len(saved)} of {len(group)} runs saved, "
                      f"{len(under_way)} under way, {waiting} waiting")
+        reported = sum(s.name in rows for s in group if s.name not in done)
+        if reported:
+            lines.append(f"  {reported} of the {len(group) - len(saved)} not saved are reported "
+                         f"from their episode rows; they run again for their final Q and timing")
         for spec, header in under_way:
             lines.append(f"  {spec.name}: episode {header['done']} of {header['of']}, "
                          f"{header['wall_time'] / 60:.1f} min so far")

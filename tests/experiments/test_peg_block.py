@@ -12,6 +12,7 @@ from qg_experiments.peg import PegRandomSpec, PegRunSpec, peg_random_specs, peg_
 from qg_experiments.peg_report import main, write_section
 from qg_experiments.profile import load_profile
 from qg_experiments.report.markdown import PEG_BLOCK
+from qg_experiments.report.peg_block import peg_rows
 from qg_experiments.report.tables import episodes_csv
 
 
@@ -85,6 +86,8 @@ def test_the_peg_sections_are_written_alone_from_saved_runs_and_rows(tmp_path) -
     page = docs / "results.md"
     page.write_text(before + PEG_BLOCK[0] + "\nold peg text\n" + PEG_BLOCK[1] + after)
 
+    assert peg_rows(profile, docs) == {spec.name for spec in [*learners, *randoms]
+                                       if spec.seed == 1 or spec in randoms}
     assert write_section(profile, out, docs) == page
     text = page.read_text()
     assert text.startswith(before) and text.endswith(after) and "old peg text" not in text

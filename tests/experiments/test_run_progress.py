@@ -120,6 +120,11 @@ def test_the_status_of_a_sweep_counts_saved_running_and_waiting_runs_and_the_tim
     assert lines[3] == "left in all: ~0.8 h on 2 worker(s), at the saved runs' pace"
     assert sweep_status([saved], tmp_path, workers=2) == [
         "peg: 1 of 1 runs saved, 0 under way, 0 waiting"]
+    # Runs the page reports from their episode rows (a saved one among them is not counted).
+    assert sweep_status([saved, running, waiting], tmp_path, workers=2,
+                        rows={saved.name, waiting.name})[1] == (
+        "  1 of the 2 not saved are reported from their episode rows; they run again for their "
+        "final Q and timing")
     # The waiting run saved too, without its CPU time (as runs were saved before they recorded
     # it) and with 5 h of pauses in its wall time: the estimate leaves it out.
     run_specs([waiting], tmp_path, workers=1)

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from qg_experiments import peg
-from qg_experiments.episode_rows import ROWS, with_rows
+from qg_experiments.episode_rows import ROWS, runs_from_rows, with_rows
 from qg_experiments.profile import PegBudget, Profile
 from qg_experiments.report.markdown import PEG_BLOCK, code_label
 from qg_experiments.report.peg_sections import (
@@ -27,7 +27,8 @@ from qg_experiments.report.tables import episodes_csv
 from qg_experiments.tasks import load_results
 from qg_experiments.tensorboard_log import export_runs
 
-__all__ = ["PEG_EXPERIMENTS", "peg_budget_of", "peg_specs_of", "peg_runs", "peg_block"]
+__all__ = ["PEG_EXPERIMENTS", "peg_budget_of", "peg_specs_of", "peg_runs", "peg_rows",
+           "peg_block"]
 
 #: The peg experiments, each with the robot that moves its peg (``peg.PEG_ROBOTS``).
 PEG_EXPERIMENTS = {experiment: robot for robot, experiment in peg.PEG_ROBOTS.items()}
@@ -48,6 +49,14 @@ def peg_specs_of(profile: Profile, experiment: str, config_dir: str | None = Non
             peg.peg_random_specs(budget, config_dir, robot))
 
 
+def _groups(profile: Profile, experiment: str, config_dir: str | None
+            ) -> list[tuple[str, list[Any]]]:
+    """(where its runs are saved, specs) of a peg experiment's learners, then its random
+    policies."""
+    return list(zip((experiment, peg.random_experiment(experiment)),
+                    peg_specs_of(profile, experiment, config_dir), strict=True))
+
+
 def peg_runs(profile: Profile, out: Path, docs: Path, experiment: str,
              config_dir: str | None = None
              ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
@@ -55,12 +64,20 @@ def peg_runs(profile: Profile, out: Path, docs: Path, experiment: str,
     one's saved run under ``out`` or, when it has none, its episode rows in ``docs``'s data.
     A saved run of another setting left in ``out`` is not one of them."""
     data = Path(docs) / "data" / profile.name
-    kept = []
-    for specs, name in zip(peg_specs_of(profile, experiment, config_dir),
-                           (experiment, peg.random_experiment(experiment)), strict=True):
-        saved = load_results(out, name, {spec.name for spec in specs})
-        kept.append(with_rows(saved, data / f"{name}_episodes.csv", specs))
-    return kept[0], kept[1]
+    learners, randoms = (
+        with_rows(load_results(out, name, {spec.name for spec in specs}),
+                  data / f"{name}_episodes.csv", specs)
+        for name, specs in _groups(profile, experiment, config_dir))
+    return learners, randoms
+
+
+def peg_rows(profile: Profile, docs: Path, config_dir: str | None = None) -> set[str]:
+    """The names of the profile's peg runs (learners and random policies) whose every episode
+    the rows beside the page hold: the runs its peg sections report without their JSON."""
+    data = Path(docs) / "data" / profile.name
+    return {run["name"] for experiment in PEG_EXPERIMENTS
+            for name, specs in _groups(profile, experiment, config_dir)
+            for run in runs_from_rows(data / f"{name}_episodes.csv", specs)}
 
 
 def _provenance(profile_name: str, results: list[dict[str, Any]],
