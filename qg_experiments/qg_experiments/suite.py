@@ -14,8 +14,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from qg_experiments import grid, peg, random_baselines, report
+from qg_experiments import grid, random_baselines, report
 from qg_experiments.profile import Profile
+from qg_experiments.report.peg_block import peg_specs_of
 from qg_experiments.run_archive import archive_folder
 from qg_experiments.tasks import DEFAULT_WORKERS, restore_archived, run_specs, unsaved
 
@@ -38,12 +39,10 @@ def all_specs(profile: Profile, only: tuple[str, ...] = EXPERIMENTS,
     if "variants" in only:
         specs += grid.variant_specs(profile.grid, profile.variants, profile.estimator,
                                     config_dir, arm)
-    if "nextage" in only and profile.nextage is not None:   # slower per step than the free peg
-        specs += peg.peg_specs(profile.nextage, config_dir, robot="sim_nextage")
-        specs += peg.peg_random_specs(profile.nextage, config_dir, robot="sim_nextage")
-    if "peg" in only:
-        specs += peg.peg_specs(profile.peg, config_dir)
-        specs += peg.peg_random_specs(profile.peg, config_dir)
+    for experiment in ("nextage", "peg"):     # the Nextage is slower per step than the free peg
+        if experiment in only:
+            learners, randoms = peg_specs_of(profile, experiment, config_dir)
+            specs += learners + randoms
     if "random" in only:
         specs += random_baselines.baseline_specs(profile.random, profile.estimator, config_dir,
                                                  arm)

@@ -109,7 +109,8 @@ def write_report(profile: Profile, out: Path, docs: Path, config_dir: str | None
              f"(`panda_scene.imperfections`; each seed is its own robot: its biases, housing "
              f"error and noise). Stack config files: "
              f"`{config_dir or 'config/'}`, digest(s) {', '.join(f'`{d}`' for d in digests)} "
-             f"(`runner.config_digest`; the peg's in its sections). Every episode and every table row as CSV: "
+             f"(`runner.config_digest`; the peg's in its sections). Every episode and every "
+             f"table row as CSV: "
              f"[`data/{profile.name}/`](data/{profile.name}/); per-run JSON: `{out}`; "
              f"TensorBoard scalars of every learning run (Stable-Baselines3's tag names): "
              f"`tensorboard --logdir {tensorboard}`.", "",

@@ -2,8 +2,9 @@
 written again alone (``python -m qg_experiments.peg_report``) while the page's other sections
 keep the runs they were written from.
 
-A thesis-budget peg sweep runs for days of a core and over sessions; the grid's runs it would
-otherwise have to wait for (or the page lose) are not its own. Each peg run reported is its
+A thesis-budget peg sweep takes days of a core and spans sessions; its sections show where it
+stands without the page's other experiments, whose runs are not its own (and may be gone), being
+run again. Each peg run reported is its
 saved JSON, or, when a reset machine took that, its episode rows from the CSV beside the page
 (``episode_rows``): every number of the sections comes from one of the two, and the sections
 say how many runs each gave and over which seeds the final Q (only in whole runs) is.
