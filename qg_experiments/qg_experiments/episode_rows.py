@@ -8,21 +8,40 @@ seeds), its timing and its commit are not. So a peg run whose JSON a reset machi
 back from its rows rather than run again for twenty minutes of a core: runs are deterministic
 per seed (the rerun of ``ddpg_lr0.0001_s102`` gave its 300 rows again to the last digit).
 
-Such a run is marked ``source: ROWS``; only a run of the profile's specs with every one of its
-episodes in the rows is read back.
+Rows alone do not say which run made them, and a profile edited since (another number of
+updates, another config file) names its runs alike. So beside the CSV the report keeps each
+run's identity (``<csv>.runs.json``: its spec, config digest and task settings, the
+``run_identity`` test saved runs meet), and a run is read back only where that is the identity
+of the profile's spec on this machine and every one of its episodes is in the rows. It is marked
+``source: ROWS``.
 """
 from __future__ import annotations
 
 import csv
 import dataclasses
+import json
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["ROWS", "runs_from_rows", "with_rows"]
+from qg_experiments.run_identity import is_run_of
+
+__all__ = ["ROWS", "identities_path", "identity_of", "runs_from_rows", "with_rows"]
 
 #: A run's ``source`` when it was read back from its episode rows.
 ROWS = "episode rows"
+
+
+def identities_path(rows: Path) -> Path:
+    """Where the identities of the runs of the episode rows at ``rows`` are kept."""
+    return Path(rows).with_suffix(".runs.json")
+
+
+def identity_of(result: dict[str, Any]) -> dict[str, Any]:
+    """What makes a saved ``result`` the run it is (``run_identity``), as its rows keep it."""
+    spec = {key: value for key, value in result["spec"].items() if key != "config_dir"}
+    return {"spec": spec, "config_digest": result.get("config_digest"),
+            "task_settings": result.get("task_settings", {})}
 
 
 def _value(text: str) -> Any:
@@ -38,16 +57,20 @@ def _value(text: str) -> Any:
 
 
 def runs_from_rows(path: Path, specs: Iterable[Any]) -> list[dict[str, Any]]:
-    """The runs of ``specs`` whose every episode the CSV at ``path`` holds, shaped as a saved
-    run (``experiment``, ``name``, ``spec``, a random policy's ``label``, ``episodes``), with
-    none of what rows do not keep; none without the file.
+    """The runs of ``specs`` whose every episode the CSV at ``path`` holds, made by that spec
+    on this machine's config (``identities_path``), shaped as a saved run (``experiment``,
+    ``name``, ``spec``, ``config_digest``, ``task_settings``, a random policy's ``label``,
+    ``episodes``), with none of what rows do not keep; none without the files.
 
     :param specs: run specs with ``name``, ``experiment`` and ``episodes`` (``peg.PegRunSpec``,
         ``peg.PegRandomSpec``).
     """
-    by_name = {spec.name: spec for spec in specs}
-    if not Path(path).is_file():
+    ids = identities_path(path)
+    if not Path(path).is_file() or not ids.is_file():
         return []
+    identities = json.loads(ids.read_text())
+    by_name = {spec.name: spec for spec in specs
+               if spec.name in identities and is_run_of(identities[spec.name], spec)}
     episodes: dict[str, list[dict[str, Any]]] = {}
     with open(path, newline="") as rows:
         for row in csv.DictReader(rows):
@@ -60,8 +83,10 @@ def runs_from_rows(path: Path, specs: Iterable[Any]) -> list[dict[str, Any]]:
         kept.sort(key=lambda e: e["episode"])
         if [e["episode"] for e in kept] != list(range(spec.episodes)):
             continue                                 # a run cut short is not a run
+        identity = identities[name]
         run = {"experiment": spec.experiment, "name": name, "spec": dataclasses.asdict(spec),
-               "episodes": kept, "source": ROWS}
+               "config_digest": identity["config_digest"],
+               "task_settings": identity["task_settings"], "episodes": kept, "source": ROWS}
         if hasattr(spec, "label"):
             run["label"] = spec.label
         runs.append(run)

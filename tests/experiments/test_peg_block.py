@@ -2,12 +2,14 @@
 runs whose JSON is gone (``episode_rows``, ``report.peg_block``, ``peg_report``)."""
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
-from qg_experiments.episode_rows import ROWS, runs_from_rows, with_rows
+from qg_experiments.core.stack_settings import config_digest
+from qg_experiments.episode_rows import ROWS, identities_path, runs_from_rows, with_rows
 from qg_experiments.peg import PegRandomSpec, PegRunSpec, peg_random_specs, peg_specs
 from qg_experiments.peg_report import main, write_section
 from qg_experiments.profile import load_profile
@@ -27,15 +29,17 @@ def _episodes(spec, seed: int) -> list[dict]:
 
 
 def _run(spec, whole: bool) -> dict:
-    """A run of ``spec`` as the sweep saves it; ``whole``: with its final Q and timing."""
+    """A run of ``spec`` as the sweep saves it, on this machine's config; ``whole``: with its
+    final Q and timing (what rows do not keep)."""
     run = {"experiment": spec.experiment, "name": spec.name, "spec": spec.__dict__.copy(),
+           "config_digest": config_digest(), "task_settings": spec.task_settings,
            "episodes": _episodes(spec, spec.seed * 7 + len(spec.name))}
     if isinstance(spec, PegRandomSpec):
         run["label"] = spec.label
     if whole:
         q = 1.0 + spec.seed
         run.update({"q_given": np.full((27, 11), q).tolist(), "q_pi": np.full(27, q).tolist(),
-                    "wall_time": 2.0, "cpu_time": 1.5, "rl_steps": 7, "config_digest": "abc",
+                    "wall_time": 2.0, "cpu_time": 1.5, "rl_steps": 7,
                     "code": {"commit": "f" * 40, "modified": False}})
     return run
 
@@ -56,10 +60,20 @@ def test_a_run_reads_back_from_its_rows_as_it_was_saved(tmp_path) -> None:
         assert read[run["name"]]["spec"] == run["spec"] and read[run["name"]]["source"] == ROWS
     assert read[random.name]["label"] == "random (uniform)"
     assert "q_given" not in read[learner.name] and "wall_time" not in read[learner.name]
+    # Rows made by another run of the same name are not this run's: another number of updates
+    # after each episode, other config files.
+    edited = dataclasses.replace(learner, train_iterations=learner.train_iterations + 1)
+    assert runs_from_rows(tmp_path / "peg_episodes.csv", [edited]) == []
+    other = json.loads(identities_path(tmp_path / "peg_episodes.csv").read_text())
+    other[learner.name]["config_digest"] = "another arm"
+    identities_path(tmp_path / "peg_episodes.csv").write_text(json.dumps(other))
+    assert [r["name"] for r in runs_from_rows(tmp_path / "peg_episodes.csv",
+                                              [learner, random])] == [random.name]
     # Rows of a run the specs do not name are not read; a saved run wins over its rows.
     assert runs_from_rows(tmp_path / "peg_episodes.csv", [random]) == [read[random.name]]
     saved = {**runs[0], "episodes": runs[0]["episodes"][::-1]}
     merged = with_rows([saved], tmp_path / "peg_episodes.csv", [learner, random])
+    assert "another arm" not in json.dumps(merged)
     assert [r["name"] for r in merged] == sorted([learner.name, random.name])
     assert merged[[r["name"] for r in merged].index(learner.name)] is saved
     assert runs_from_rows(tmp_path / "absent.csv", [learner]) == []
@@ -98,7 +112,7 @@ def test_the_peg_sections_are_written_alone_from_saved_runs_and_rows(tmp_path) -
             f"{len(randoms)} random policies. {2 + len(randoms)} of them are read back from "
             f"their episode rows") in block
     assert "over the 2 runs that kept their timing, 14 RL steps in 0.1 worker-minutes" in block
-    assert "config digest(s) `abc`; made at `ffffffffff` (2 runs)" in block
+    assert f"config digest(s) `{config_digest()}`; made at `ffffffffff` (2 runs)" in block
     (pair,) = [line for line in block.splitlines() if line.startswith("| 0.001 | 2 (0, 1) |")]
     assert pair.count("n/a") == 2                    # the spread needs two whole seeds
     assert "| random (uniform) | - | 2 |" in block

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from qg_experiments.episode_rows import identities_path, identity_of
 from qg_experiments.random_baselines import Bar
 
 __all__ = ["write_csv", "episodes_csv", "write_bar"]
@@ -33,8 +34,15 @@ def write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
 
 
 def episodes_csv(path: Path, results: list[dict[str, Any]]) -> None:
-    """Every episode of ``results``, one row each, with its run's name."""
+    """Every episode of ``results``, one row each, with its run's name; beside it, each run's
+    identity (``episode_rows``: what lets a run whose JSON is gone be read back)."""
     write_csv(path, [{"run": r["name"], **e} for r in results for e in r["episodes"]])
+    identities = identities_path(path)
+    if path.exists():
+        identities.write_text(json.dumps({r["name"]: identity_of(r) for r in results
+                                          if "spec" in r}, indent=1, sort_keys=True) + "\n")
+    else:
+        identities.unlink(missing_ok=True)
 
 
 def write_bar(path: Path, bar: Bar, seeds: list[int]) -> None:
