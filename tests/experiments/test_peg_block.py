@@ -14,7 +14,7 @@ from qg_experiments.peg import PegRandomSpec, PegRunSpec, peg_random_specs, peg_
 from qg_experiments.peg_report import main, write_section
 from qg_experiments.profile import load_profile
 from qg_experiments.report.markdown import PEG_BLOCK
-from qg_experiments.report.peg_block import peg_rows
+from qg_experiments.report.peg_block import peg_rows, peg_runs
 from qg_experiments.report.tables import episodes_csv
 
 
@@ -120,6 +120,15 @@ def test_the_peg_sections_are_written_alone_from_saved_runs_and_rows(tmp_path) -
     assert {r["name"] for r in runs_from_rows(data / "peg_episodes.csv", learners)} == \
         {spec.name for spec in learners}
     assert Path(docs / "figures" / "exp5_peg_learning.png").stat().st_size > 1000
+    # A saved run made under other config files is not the profile's run, nor are its rows.
+    stale = next(spec for spec in learners if spec.seed == 0)
+    path = out / profile.name / "peg" / f"{stale.name}.json"
+    path.write_text(json.dumps({**_run(stale, whole=True), "config_digest": "another arm"}))
+    identities = json.loads(identities_path(data / "peg_episodes.csv").read_text())
+    identities[stale.name]["config_digest"] = "another arm"
+    identities_path(data / "peg_episodes.csv").write_text(json.dumps(identities))
+    results, _ = peg_runs(profile, out / profile.name, docs, "peg")
+    assert sorted(r["name"] for r in results) == sorted(s.name for s in learners if s != stale)
 
 
 def test_the_command_refuses_a_missing_page_or_profile_and_writes_nothing(tmp_path, capsys

@@ -25,7 +25,7 @@ from qg_experiments.report.peg_sections import (
     peg_thesis_notes,
 )
 from qg_experiments.report.tables import episodes_csv
-from qg_experiments.tasks import load_results
+from qg_experiments.tasks import saved_result
 from qg_experiments.tensorboard_log import export_runs
 
 __all__ = ["PEG_EXPERIMENTS", "peg_budget_of", "peg_specs_of", "peg_runs", "peg_rows",
@@ -63,10 +63,10 @@ def peg_runs(profile: Profile, out: Path, docs: Path, experiment: str,
              ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """The learners' and the random policies' runs of a peg experiment of ``profile``: each
     one's saved run under ``out`` or, when it has none, its episode rows in ``docs``'s data.
-    A saved run of another setting left in ``out`` is not one of them."""
+    A saved run or rows of another setting (``run_identity``) are not one of them."""
     data = Path(docs) / "data" / profile.name
     learners, randoms = (
-        with_rows(load_results(out, name, {spec.name for spec in specs}),
+        with_rows([run for spec in specs if (run := saved_result(out, spec)) is not None],
                   data / f"{name}_episodes.csv", specs)
         for name, specs in _groups(profile, experiment, config_dir))
     return learners, randoms
