@@ -44,7 +44,8 @@ from qg_experiments.runner import ALGORITHMS, algorithm_config, config_digest, e
 __all__ = ["PEG_NETWORKS", "PEG_NOISE", "PegRunSpec", "peg_specs", "peg_learner_config",
            "peg_noise_config", "run_peg", "GRID_STATES", "GRID_ACTIONS", "learning_curves",
            "q_spread", "q_seeds", "holds_final_q", "Q_POINTS", "PEG_ROBOTS", "PEG_RANDOM_KINDS",
-           "PegRandomSpec", "peg_random_specs", "run_peg_random", "random_experiment", "random_curves"]
+           "PegRandomSpec", "peg_random_specs", "run_peg_random", "random_experiment",
+           "random_curves"]
 
 #: The robots that move the peg, and the experiment each one's runs are saved under.
 PEG_ROBOTS = {"free": "peg", "sim_nextage": "nextage"}

@@ -4,10 +4,10 @@ keep the runs they were written from.
 
 A thesis-budget peg sweep takes days of a core and spans sessions; its sections show where it
 stands without the page's other experiments, whose runs are not its own (and may be gone), being
-run again. Each peg run reported is its
-saved JSON, or, when a reset machine took that, its episode rows from the CSV beside the page
-(``episode_rows``): every number of the sections comes from one of the two, and the sections
-say how many runs each gave and over which seeds the final Q (only in whole runs) is.
+run again. Each peg run reported is its saved JSON or, when a reset machine took that, its
+episode rows from the CSV beside the page (``episode_rows``): every number of the sections comes
+from one of the two, and the sections say how many runs each gave and over which seeds the final
+Q (only in whole runs) is.
 """
 from __future__ import annotations
 

@@ -262,7 +262,8 @@ def peg_paired(pairs: PegPairs | None, tail: int) -> list[str]:
             f"pairs the smallest p is 2 / 2^n: 0.0625 for 5, 0.002 for 10). Q spread: the "
             f"standard deviation across those seeds of each of the 27 x 11 final Q predictions "
             f"(thesis Fig. 8.3), its median QG-DDPG / DDPG over the paired seeds whose runs "
-            f"hold their final Q (how many), and the points where QG-DDPG's is smaller. Diverged: the runs whose mean Q after an episode's updates left "
+            f"hold their final Q (how many), and the points where QG-DDPG's is smaller. "
+            f"Diverged: the runs whose mean Q after an episode's updates left "
             f"[-1 / (1 - gamma), 0] by more than a tenth of its width (as the grid's).",
             "", *table(["lr", "pairs (seeds)", "all: QG / DDPG / ties", "all: QG - DDPG [95 % CI]",
                         "all: p (Holm)", "late: QG / DDPG / ties", "late: QG - DDPG [95 % CI]",
@@ -324,9 +325,9 @@ _POINTS = {"given": "given actions", "pi": "the actor's action"}
 
 def peg_thesis_notes(data: dict[str, Any], planned_lrs: Iterable[float] = ()) -> list[str]:
     """A peg experiment's lines beside the thesis: per learning rate, QG-DDPG against DDPG
-    paired by seed (``peg_pairs``) beside the thesis's ch. 8.3.2 findings (Figs.
-    8.2 and 8.3 show curves and boxes; its text gives no numbers); then where the gain is
-    largest, and the learning rates the profile has not run yet."""
+    paired by seed (``peg_pairs``) beside the thesis's ch. 8.3.2 findings (Figs. 8.2 and 8.3
+    show curves and boxes; its text gives no numbers); then where the gain is largest, and the
+    learning rates of ``planned_lrs`` without pairs yet."""
     pairs: PegPairs | None = data.get("pairs")
     if pairs is None:
         return []
@@ -347,8 +348,8 @@ def peg_thesis_notes(data: dict[str, Any], planned_lrs: Iterable[float] = ()) ->
                 f"{'worse' if worse else 'not worse'} (thesis: never worse)")
         spreads = [(points, pairs.spreads(lr, points)) for points in ("given", "pi")]
         if all(q is not None for _, q in spreads):
-            text += (f"; median Q spread across seeds "
-                     f"{', '.join(map(str, pairs.spread_seeds[lr]))} QG-DDPG / DDPG: ") + ", ".join(
+            seeds = ", ".join(map(str, pairs.spread_seeds[lr]))
+            text += f"; median Q spread across seeds {seeds} QG-DDPG / DDPG: " + ", ".join(
                 f"{_POINTS[points]} {np.median(q['qgddpg']):.3g} / {np.median(q['ddpg']):.3g} "
                 f"(QG-DDPG's smaller at {int(np.sum(q['qgddpg'] < q['ddpg']))} of "
                 f"{q['ddpg'].size})" for points, q in spreads) + \

@@ -132,7 +132,8 @@ def q_spread(spread: dict[str, dict[tuple[str, float], np.ndarray]], path: Path,
     for ax, (points, boxes) in zip(axes[0], spread.items()):
         keys = sorted(boxes, key=lambda k: (-k[1], k[0]))
         ax.boxplot([boxes[k] for k in keys])
-        ax.set_xticks(range(1, len(keys) + 1), [f"{label(a)}\nlr {lr:g}\n{seeds[(a, lr)]} seeds" for a, lr in keys],
+        ax.set_xticks(range(1, len(keys) + 1),
+                      [f"{label(a)}\nlr {lr:g}\n{seeds[(a, lr)]} seeds" for a, lr in keys],
                       fontsize=8)
         ax.set_yscale("log")
         ax.set_title(titles.get(points, points), fontsize=9)
