@@ -43,15 +43,16 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--docs", type=Path, default=Path("docs"))
     parser.add_argument("--config-dir", default=None)
     args = parser.parse_args(argv)
-    if not (args.docs / "results.md").is_file():   # a section has a page to go into
-        parser.error(f"no page at {args.docs / 'results.md'}: write the whole page first "
+    page = args.docs / "results.md"
+    if not page.is_file() or PEG_BLOCK[0] not in page.read_text():  # a place to go into
+        parser.error(f"no peg sections between markers in {page}: write the whole page once "
                      f"(python -m qg_experiments --profile {args.profile} --report-only)")
     try:
         profile = load_profile(args.profile, args.profiles_file)
     except (OSError, ValueError) as error:
         parser.error(str(error))
-    page = write_section(profile, args.out, args.docs, args.config_dir)
-    print(f"wrote the peg's sections of {page}")
+    print(f"wrote the peg's sections of "
+          f"{write_section(profile, args.out, args.docs, args.config_dir)}")
 
 
 if __name__ == "__main__":

@@ -131,14 +131,17 @@ def test_the_peg_sections_are_written_alone_from_saved_runs_and_rows(tmp_path) -
     assert sorted(r["name"] for r in results) == sorted(s.name for s in learners if s != stale)
 
 
-def test_the_command_refuses_a_missing_page_or_profile_and_writes_nothing(tmp_path, capsys
-                                                                          ) -> None:
-    for argv, message in ((["--docs", str(tmp_path / "docs")], "no page at"),
-                          (["--docs", str(tmp_path), "--profile", "nosuch"],
-                           "unknown profile 'nosuch'")):
-        (tmp_path / "results.md").write_text("page\n")
+def test_the_command_refuses_a_page_without_the_block_or_a_profile_and_writes_nothing(
+        tmp_path, capsys) -> None:
+    page = f"# Results\n\n{PEG_BLOCK[0]}\n{PEG_BLOCK[1]}\n"
+    for argv, text, message in (
+            (["--docs", str(tmp_path / "docs")], page, "no peg sections between markers in"),
+            (["--docs", str(tmp_path)], "# An older page\n\n## 5. Clearance-fit peg\n",
+             "write the whole page once"),
+            (["--docs", str(tmp_path), "--profile", "nosuch"], page, "unknown profile 'nosuch'")):
+        (tmp_path / "results.md").write_text(text)
         with pytest.raises(SystemExit) as stop:
             main([*argv, "--out", str(tmp_path / "runs")])
         assert stop.value.code == 2 and message in capsys.readouterr().err
         assert sorted(p.name for p in tmp_path.iterdir()) == ["results.md"]
-        assert (tmp_path / "results.md").read_text() == "page\n"
+        assert (tmp_path / "results.md").read_text() == text
