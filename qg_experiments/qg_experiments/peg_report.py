@@ -44,7 +44,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--config-dir", default=None)
     args = parser.parse_args(argv)
     page = args.docs / "results.md"
-    if not page.is_file() or PEG_BLOCK[0] not in page.read_text():  # a place to go into
+    if not page.is_file() or not all(marker in page.read_text() for marker in PEG_BLOCK):
         parser.error(f"no peg sections between markers in {page}: write the whole page once "
                      f"(python -m qg_experiments --profile {args.profile} --report-only)")
     try:
