@@ -68,6 +68,22 @@ def test_each_learning_rate_is_paired_by_seed_and_corrected_over_the_rates() -> 
     assert notes[3] == "- Peg, lr 0.0001: no pairs yet."
 
 
+def test_the_q_spread_is_over_the_seeds_whose_runs_both_hold_their_final_q() -> None:
+    """Runs read back from their episode rows have no final Q: DDPG's whole on seeds 0-2,
+    QG-DDPG's on 1-3, so both spreads are over seeds 1 and 2 only."""
+    results = []
+    for seed in range(5):
+        for algorithm, whole, q in (("ddpg", seed <= 2, seed), ("qgddpg", 1 <= seed <= 3,
+                                                                 0.5 * seed)):
+            run = _run(algorithm, 1e-3, seed, [-100.0 + seed] * 4, q=q)
+            if not whole:
+                del run["q_given"], run["q_pi"]
+            results.append(run)
+    pairs = peg_pairs(results, tail=2)
+    assert pairs.spread_seeds == {1e-3: [1, 2]}
+    assert _row(peg_paired(pairs, tail=2), "0.001")[8] == "0.25 / 0.5 (2 seeds)"
+
+
 def test_no_pairs_no_table() -> None:
     pairs = peg_pairs([_run("ddpg", 1e-3, 0, [-1.0], q=0.0)], tail=1)
     assert pairs is None and peg_paired(pairs, tail=1) == []

@@ -222,13 +222,12 @@ def peg_pairs(results: list[dict[str, Any]], tail: int) -> PegPairs | None:
     holm = {name: dict(zip(lrs, stats.holm([c[lr].wilcoxon_p for lr in lrs]), strict=True))
             for name, c in compared.items()}
     diverged = per_pair(results, peg_diverged)
-    # The spread across the seeds both algorithms ran (``peg.q_spread``: two seeds at least),
-    # of the runs that hold their final Q (all a sweep saves; not runs read back from their
-    # episode rows, ``episode_rows``).
-    paired = [r for r in results if r["spec"]["seed"] in diverged.get(r["spec"]["lr"], {})
-              and peg.holds_final_q(r)]
-    seeds = {lr: sorted({r["spec"]["seed"] for r in paired if r["spec"]["lr"] == lr})
-             for lr in lrs}
+    # The spread across the seeds on which both algorithms' runs hold their final Q
+    # (``peg.q_spread``: two seeds at least; all a sweep saves, not runs read back from their
+    # episode rows, ``episode_rows``), so that both spreads are over the same seeds.
+    whole = per_pair(list(filter(peg.holds_final_q, results)), lambda run: run)
+    paired = [run for lr in lrs for runs in whole.get(lr, {}).values() for run in runs.values()]
+    seeds = {lr: sorted(whole.get(lr, {})) for lr in lrs}
     return PegPairs(lrs, compared, holm, diverged,
                     {points: peg.q_spread(paired, points) for points in peg.Q_POINTS}, seeds)
 
