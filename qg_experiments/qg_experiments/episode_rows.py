@@ -26,7 +26,7 @@ from typing import Any
 
 from qg_experiments.run_identity import is_run_of
 
-__all__ = ["ROWS", "identities_path", "identity_of", "runs_from_rows", "with_rows"]
+__all__ = ["ROWS", "identities_path", "runs_from_rows", "with_rows"]
 
 #: A run's ``source`` when it was read back from its episode rows.
 ROWS = "episode rows"
@@ -35,13 +35,6 @@ ROWS = "episode rows"
 def identities_path(rows: Path) -> Path:
     """Where the identities of the runs of the episode rows at ``rows`` are kept."""
     return Path(rows).with_suffix(".runs.json")
-
-
-def identity_of(result: dict[str, Any]) -> dict[str, Any]:
-    """What makes a saved ``result`` the run it is (``run_identity``), as its rows keep it."""
-    spec = {key: value for key, value in result["spec"].items() if key != "config_dir"}
-    return {"spec": spec, "config_digest": result.get("config_digest"),
-            "task_settings": result.get("task_settings", {})}
 
 
 def _value(text: str) -> Any:

@@ -15,7 +15,7 @@ from typing import Any
 
 from qg_experiments.core.stack_settings import config_digest
 
-__all__ = ["run_identity", "saved_identity", "is_run_of"]
+__all__ = ["run_identity", "result_identity", "saved_identity", "is_run_of"]
 
 
 def _fields(values: dict[str, Any]) -> dict[str, Any]:
@@ -31,15 +31,21 @@ def run_identity(spec: Any) -> dict[str, Any]:
             "task_settings": json.loads(json.dumps(getattr(spec, "task_settings", {})))}
 
 
+def result_identity(result: dict[str, Any], defaults: dict[str, Any] | None = None
+                    ) -> dict[str, Any]:
+    """The identity a saved ``result`` holds, its spec's missing fields taken from
+    ``defaults``; what is kept beside a run's episode rows (``episode_rows``)."""
+    return {"spec": _fields({**(defaults or {}), **result.get("spec", {})}),
+            "config_digest": result.get("config_digest"),
+            "task_settings": result.get("task_settings", {})}
+
+
 def saved_identity(result: dict[str, Any], spec: Any) -> dict[str, Any]:
     """The identity of a saved ``result`` of a run of ``spec``'s kind. A spec field added after
     the run was saved, at its default, leaves it the same run; a run saved before task settings
     existed had none."""
-    defaults = {f.name: f.default for f in dataclasses.fields(spec)
-                if f.default is not dataclasses.MISSING}
-    return {"spec": _fields({**defaults, **result.get("spec", {})}),
-            "config_digest": result.get("config_digest"),
-            "task_settings": result.get("task_settings", {})}
+    return result_identity(result, {f.name: f.default for f in dataclasses.fields(spec)
+                                    if f.default is not dataclasses.MISSING})
 
 
 def is_run_of(result: dict[str, Any], spec: Any) -> bool:

@@ -10,8 +10,9 @@ from typing import Any
 
 import numpy as np
 
-from qg_experiments.episode_rows import identities_path, identity_of
+from qg_experiments.episode_rows import identities_path
 from qg_experiments.random_baselines import Bar
+from qg_experiments.run_identity import result_identity
 
 __all__ = ["write_csv", "episodes_csv", "write_bar"]
 
@@ -39,7 +40,7 @@ def episodes_csv(path: Path, results: list[dict[str, Any]]) -> None:
     write_csv(path, [{"run": r["name"], **e} for r in results for e in r["episodes"]])
     identities = identities_path(path)
     if path.exists():
-        identities.write_text(json.dumps({r["name"]: identity_of(r) for r in results
+        identities.write_text(json.dumps({r["name"]: result_identity(r) for r in results
                                           if "spec" in r}, indent=1, sort_keys=True) + "\n")
     else:
         identities.unlink(missing_ok=True)
