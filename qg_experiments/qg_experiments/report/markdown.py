@@ -78,7 +78,13 @@ def speed(results: list[dict[str, Any]]) -> str:
     """The step's engine and limit, RL steps, worker time and simulated time of ``results``,
     as one phrase. The worker time is the runs' CPU time when every run recorded it
     (``run_worker.run_one``): a sweep paused or sharing its cores counts its wall time, not its
-    work."""
+    work. Runs read back from their episode rows (``episode_rows``) kept no timing: the phrase
+    is over the others, and says how many they are."""
+    timed = [r for r in results if "wall_time" in r]
+    if not timed:
+        return "not kept (every run read back from its episode rows)"
+    if len(timed) < len(results):
+        return f"over the {len(timed)} runs that kept their timing, {speed(timed)}"
     steps = sum(r.get("rl_steps", 0) for r in results)
     wall = sum(r["wall_time"] for r in results)
     sim = sum(r.get("sim_time", 0.0) for r in results)

@@ -78,7 +78,7 @@ def peg_section(results: list[dict[str, Any]], figures: Path, experiment: str = 
               "50 epochs x up to 15 minibatches, 300 episodes, 10 seeds). Networks 3 x 200, no "
               f"target networks (the thesis's initialisation: the actor He-uniform, the "
               f"critic's weights from N(0, 0.001)), actor lr = critic lr, exploration noise on "
-              f"every step. Speed: {_timed_speed(results)}."
+              f"every step. Speed: {speed(results)}."
               + (" Beside them, random policies on the same seeds, which meet the same starts "
                  "and learn nothing: " + "; ".join(
                      f"{r['label']}, {peg.PEG_RANDOM_KINDS[r['spec']['kind']]}"
@@ -97,16 +97,6 @@ def peg_section(results: list[dict[str, Any]], figures: Path, experiment: str = 
         lines += ["", td3_reference_line(json.loads(reference.read_text()))]
     return lines + [""], {"curves": curves, "pairs": peg_pairs(results, tail), "tail": tail,
                           "robot": experiment}
-
-
-def _timed_speed(results: list[dict[str, Any]]) -> str:
-    """``markdown.speed`` of the runs that kept their timing (not those read back from their
-    episode rows), saying how many they are when not all."""
-    timed = [r for r in results if "wall_time" in r]
-    if not timed:
-        return "not kept (every run read back from its episode rows)"
-    return ("" if len(timed) == len(results)
-            else f"over the {len(timed)} runs that kept their timing, ") + speed(timed)
 
 
 def _first_insertions(results: list[dict[str, Any]], key: Any) -> dict[Any, str]:
