@@ -68,11 +68,14 @@ class Launcher:
     :param out: where prefixed lines go (default stdout); ``None`` silences them.
     :param log_dir: if set, each process's output is also written to ``<log_dir>/<name>.log``
         (a restarted process's is appended).
+    :param append_logs: append to the logs already in ``log_dir``, each start marked: a run
+        that continues keeps what its earlier sessions said (the crash it continues after).
     :param policy: how often a respawning process may die (:class:`RespawnPolicy`).
     """
     env: dict[str, str]
     out: IO[str] | None = field(default_factory=lambda: sys.stdout)
     log_dir: Path | None = None
+    append_logs: bool = False
     policy: RespawnPolicy = field(default_factory=RespawnPolicy)
     running: list[_Running] = field(default_factory=list)
     #: name -> why a process that died is not restarted (its last words for the user).
@@ -111,9 +114,13 @@ class Launcher:
         log = None
         if self.log_dir is not None:
             self.log_dir.mkdir(parents=True, exist_ok=True)
-            log = open(self.log_dir / f"{spec.name}.log", "a" if append else "w")
+            log = open(self.log_dir / f"{spec.name}.log", "a" if append or self.append_logs
+                       else "w")
             if append:
                 log.write(f"--- restarted by the launcher (pid {popen.pid})\n")
+            elif self.append_logs:
+                log.write(f"--- started by the launcher (pid {popen.pid}) at "
+                          f"{time.strftime('%Y-%m-%d %H:%M:%S')}\n")
         assert popen.stdout is not None
         for line in popen.stdout:
             if log is not None:

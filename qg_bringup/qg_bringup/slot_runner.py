@@ -94,11 +94,16 @@ class SlotRunner:
         self.refusals, deaths, self.deaths = 0, self.deaths, []
         if outcome.state == "done":
             record = self._learner_after(outcome.episode_id)
-            if record is not None or not self.learner_died:
+            if record is not None:
+                self._check_count(outcome.episode_id, outcome.steps, record)
                 self.journal.complete(outcome, record)
-                return
-            self._cut(job, outcome.episode_id, "the learner restarted before it checkpointed "
-                      "the episode: its transitions are lost", outcome.steps)
+            elif self.learner_died:
+                self._cut(job, outcome.episode_id, "the learner restarted before it "
+                          "checkpointed the episode: its transitions are lost", outcome.steps)
+            else:
+                self._cut(job, outcome.episode_id, "the learner did not checkpoint the episode "
+                          f"within {CHECKPOINT_WAIT:.0f} s: it did not learn from it",
+                          outcome.steps)
             return
         said = outcome.message or "aborted"     # the guard's stop already names its death
         self._cut(job, outcome.episode_id,
@@ -142,8 +147,9 @@ class SlotRunner:
                                f"{reason}")
 
     def _learner_after(self, episode_id: str) -> dict[str, Any] | None:
-        """The learner's record once it has checkpointed after ``episode_id``; None (with a
-        warning) if it did not within ``CHECKPOINT_WAIT`` seconds."""
+        """The learner's record once it has checkpointed after ``episode_id``; None if it
+        died first or did not within ``CHECKPOINT_WAIT`` seconds (a learner that missed the
+        whole episode never names it)."""
         deadline = time.monotonic() + CHECKPOINT_WAIT
         while time.monotonic() < deadline:
             record = learner_record(self.run_dir)
@@ -153,6 +159,14 @@ class SlotRunner:
             if self.learner_died:               # its checkpoint of this episode never comes
                 return None
             self.cli.executor.spin_once(timeout_sec=CHECKPOINT_POLL)
-        print(f"[{self.label}] the learner did not checkpoint after {episode_id} within "
-              f"{CHECKPOINT_WAIT:.0f} s; the journal goes on without its count", flush=True)
         return None
+
+    def _check_count(self, episode_id: str, steps: int, record: dict[str, Any]) -> None:
+        """Warn when the learner holds fewer transitions than the completed episodes, this
+        one included, sent (it missed some: the count stays in the journal)."""
+        expected = self.journal.steps() + steps
+        held = record.get("transitions")
+        if isinstance(held, int) and held < expected:
+            print(f"[{self.label}] warning: after {episode_id} the learner holds {held} "
+                  f"transitions, the completed episodes sent {expected}: it missed "
+                  f"{expected - held}", flush=True)

@@ -95,14 +95,16 @@ def start_stack(run_dir: Path, settings: DemoSettings, config: Path,
     one learner, ``fleet.py``); episodes, checkpoints, logs and ROS logs go under
     ``run_dir``; processes respawn as the stack file says. :param robot: the robot plugin to
     run (``None``: the processes' default). :param resume: the learner starts from the
-    checkpoint in ``run_dir`` if there is one (a training run that continues).
+    checkpoint in ``run_dir`` if there is one (a training run that continues), and the
+    logs of the run's earlier sessions are kept (appended to).
     :returns: the launcher (stop it, its ``running`` specs) and the stack's environment."""
     env = stack_env(log_dir=run_dir / "ros_log")
     env["QG_RUNS_DIR"] = str(run_dir)     # episodes/ (MCAP) and checkpoints/ go here
     if domain_id is not None:
         env["ROS_DOMAIN_ID"] = domain_id
     specs, policy = load_stack(config)
-    launcher = Launcher(env=env, out=None, log_dir=run_dir / "logs", policy=policy)
+    launcher = Launcher(env=env, out=None, log_dir=run_dir / "logs", policy=policy,
+                        append_logs=resume)
     specs = [with_run_settings(spec, settings, robot) for spec in specs]
     if resume:
         specs = [with_parameters(s, {"resume": "true"}) if is_learner(s) else s for s in specs]

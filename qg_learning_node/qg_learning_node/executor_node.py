@@ -61,6 +61,7 @@ from qg_learning_node.executor.parameters import (
 from qg_learning_node.executor.peg_task import PegTask, PegTaskConfig
 from qg_learning_node.executor.residual_task import ResidualTask, TaskConfig
 from qg_learning_node.executor.stall_recovery import StallRecovery, StallRecoveryConfig
+from qg_learning_node.executor.transition_readers import learner_reads_transitions
 from qg_learning_node.learner.actor_mlp import ActorMLP
 from qg_learning_node.policy_file import Policy, frozen_policy
 
@@ -125,8 +126,8 @@ class ExecutorNode(Node):
         if self.frozen is None:
             self.create_subscription(ActorParameters, topics.ACTOR_PARAMETERS, self._on_actor,
                                      LATCHED, callback_group=callbacks)
-        self.create_subscription(LearnerDiagnostics, topics.LEARNER_DIAGNOSTICS, self._on_learner,
-                                 10, callback_group=callbacks)
+        self.heartbeats = self.create_subscription(LearnerDiagnostics, topics.LEARNER_DIAGNOSTICS,
+                                                   self._on_learner, 10, callback_group=callbacks)
         self.create_subscription(AtRest, topics.EE_AT_REST, self._on_at_rest, 10,
                                  callback_group=callbacks)
         self.start_client = self.create_client(MoveToStart, topics.MOVE_TO_START,
@@ -214,9 +215,12 @@ class ExecutorNode(Node):
                 return False
         return True
 
-    def _await_first_learner_contact(self, timeout: float) -> None:
-        """Give a learner that was never heard from ``timeout`` seconds to be discovered."""
-        self._wait_until(lambda: self.last_learner_time != -float("inf"), timeout)
+    def _await_learner(self, timeout: float) -> None:
+        """Give a learner not heard from lately ``timeout`` seconds to speak: one never heard
+        from may not be discovered yet, and a restarted one is often up (the run that restarted
+        it has heard it) before this process has discovered it. Its transitions would be lost
+        to an episode that ran degraded meanwhile."""
+        self._wait_until(self.learner_alive, timeout)
 
     def _await_learner_reading_transitions(self, timeout: float) -> None:
         """Wait until the learner, once heard from, also reads our transitions.
@@ -224,18 +228,20 @@ class ExecutorNode(Node):
         Discovery runs per direction: a (re)started learner's heartbeat can reach us seconds
         before our transitions publisher has matched its subscription on a loaded host, and a
         reliable publisher delivers nothing to a reader it has not matched: the episode's
-        first transitions would be lost to the learner. Done when the learner's reader is in
-        the graph and every reader in the graph is matched; after ``timeout`` the episode runs
-        anyway, with a warning.
+        first transitions would be lost to the learner. A restarted learner's predecessor
+        leaves its reader in the graph, matched, for seconds, so the readers are counted per
+        process (``transition_readers.py``). After ``timeout`` the episode runs anyway, with a
+        warning.
         """
         if not self.learner_alive():
             return
         topic = self.transition_pub.topic_name
 
         def learner_matched() -> bool:
-            readers = self.get_subscriptions_info_by_topic(topic)
-            return (any(r.node_name == topics.LEARNER_NODE for r in readers)
-                    and self.transition_pub.get_subscription_count() >= len(readers))
+            return learner_reads_transitions(
+                self.get_subscriptions_info_by_topic(topic),
+                self.get_publishers_info_by_topic(self.heartbeats.topic_name),
+                self.transition_pub.get_subscription_count())
 
         if not self._wait_until(learner_matched, timeout):
             self.get_logger().warning(f"the learner is alive but not matched on {topic} after "
@@ -330,7 +336,7 @@ class ExecutorNode(Node):
             observation = observation_from_msg(self._reset(episode))
             episode.begin(observation)
             if self.frozen is None:
-                self._await_first_learner_contact(self.config.learner_grace)
+                self._await_learner(self.config.learner_grace)
                 self._await_learner_reading_transitions(self.config.learner_grace)
             self._set_state("running")
             while not episode.done:

@@ -3,7 +3,7 @@ delay, with its respawn arguments; one that keeps dying is given up on with the 
 
 The processes here are tiny Python programs (``ProcessSpec`` with package ""), so the timing
 of exits and restarts is the launcher's alone; the real stack's respawn is tested in
-``test_respawn_stack.py``.
+``test_training_run.py``.
 """
 from __future__ import annotations
 
@@ -68,6 +68,24 @@ def test_a_restarted_process_gets_its_respawn_args_and_runs_on(tmp_path):
     assert first_pid > 0
     log = (tmp_path / "logs" / "learner.log").read_text()
     assert "restarted by the launcher" in log
+
+
+def test_a_continued_runs_launcher_appends_to_the_logs_of_its_earlier_sessions(tmp_path):
+    def session(said: str, **launcher) -> None:
+        run = Launcher(env={"PATH": "/usr/bin:/bin"}, out=None, log_dir=tmp_path / "logs",
+                       **launcher)
+        run.start([_python("learner", f"print({said!r})")])
+        assert run.wait_any(period=0.01) == ("learner", 0)
+        run.stop(grace=2.0)
+
+    log = tmp_path / "logs" / "learner.log"
+    session("crashed in the first session")
+    session("continued", append_logs=True)
+    lines = log.read_text().splitlines()
+    assert lines[0] == "crashed in the first session" and lines[-1] == "continued", lines
+    assert len(lines) == 3 and lines[1].startswith("--- started by the launcher (pid "), lines
+    session("a new run in the same folder")        # without append_logs: a fresh log
+    assert log.read_text() == "a new run in the same folder\n"
 
 
 def test_a_process_refusing_its_parameters_or_without_respawn_is_not_restarted(tmp_path):

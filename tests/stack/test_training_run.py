@@ -91,11 +91,12 @@ def _first_session(command: list[str], env: dict, run_dir: Path) -> None:
         _wait(lambda: (_journal(run_dir).get("running") or {}).get("slot") == 2, 180.0, first,
               "the third episode running")
         first.send_signal(signal.SIGINT)
-        assert first.wait(timeout=60) == 130
+        code = first.wait(timeout=60)
     finally:
         if first.poll() is None:
             first.kill()
         out = first.stdout.read()
+    assert code == 130, out[-4000:]
     stopped = _journal(run_dir)
     done_before = len(stopped["completed"])
     assert done_before == 2, (stopped, out)

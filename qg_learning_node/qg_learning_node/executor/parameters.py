@@ -37,8 +37,9 @@ class ExecutorConfig:
     :param learner_timeout: [s] no word from the learner this long -> degraded (zero residual).
     :param robot_grace: [s] an episode start waits this long for a robot (``move_to_start``) not
         discovered yet before it refuses.
-    :param learner_grace: [s] an episode's first step waits this long for a learner never heard
-        from (it may not be discovered yet) before it runs degraded with the zero residual.
+    :param learner_grace: [s] an episode's first step waits this long for a learner not heard
+        from lately (not discovered yet, or restarting) before it runs degraded with the zero
+        residual.
     """
     step_timeout: float = 10.0
     reset_timeout: float = 30.0

@@ -47,7 +47,7 @@ LEARNER_DIAGNOSTICS = "learner/diagnostics"
 START_EPISODE = "executor/start_episode"       # service
 STOP_EPISODE = "executor/stop_episode"         # service
 TASK_SPEC = "executor/task_spec"               # latched: state and action sizes for the learner
-#: The learner's node name: the executor looks for it among the readers of its transitions.
+#: The learner's node name.
 LEARNER_NODE = "learner"
 
 
