@@ -114,7 +114,7 @@ def test_the_peg_sections_are_written_alone_from_saved_runs_and_rows(tmp_path) -
     assert "over the 2 runs that kept their timing, 14 RL steps in 0.1 worker-minutes" in block
     assert f"config digest(s) `{config_digest()}`; made at `ffffffffff` (2 runs)" in block
     (pair,) = [line for line in block.splitlines() if line.startswith("| 0.001 | 2 (0, 1) |")]
-    assert pair.count("n/a") == 2                    # the spread needs two whole seeds
+    assert pair.count("n/a") == 3          # the spread needs two whole seeds, its ratio five
     assert "| random (uniform) | - | 2 |" in block
     # The CSV keeps seed 1's rows and gains seed 0's, read from its saved runs.
     assert {r["name"] for r in runs_from_rows(data / "peg_episodes.csv", learners)} == \

@@ -42,11 +42,13 @@ def test_each_learning_rate_is_paired_by_seed_and_corrected_over_the_rates() -> 
     assert float(good[4]) == float(good[7]) == np.float64(2 * 2 / 2 ** 10).round(5)
     assert good[8] == "1.44 / 2.87 (10 seeds)"  # the std over seeds 0..9, halved by QG's q
     assert good[9] == "297 of 297"
+    assert good[10] == "0.5 [0.5, 0.5]"        # half of DDPG's on every resample of the seeds
     # 3 far outside [-100, 0]; -111 beyond its tenth (10), -109 within it: 4 diverged
-    assert good[10] == "0 / 4"
+    assert good[11] == "0 / 4"
     coin = _row(lines, "0.01")
     assert float(coin[4]) > 0.05
     assert coin[9] == "0 of 297"               # equal spreads: QG's is not smaller anywhere
+    assert coin[10] == "n/a"                   # DDPG's spread is 0: no ratio
 
 
     # The closing list: each learning rate beside the thesis's findings, then where the gain is
@@ -60,8 +62,10 @@ def test_each_learning_rate_is_paired_by_seed_and_corrected_over_the_rates() -> 
                                "episodes higher in 10 of 10, 10.00 [10.00, 10.00]")
     assert ": QG-DDPG faster (thesis Fig. 8.2" in notes[1] and ": not worse (" in notes[1]
     # the actor's points: q_pi = 2 q, so its spread is twice the given actions' (0.5 q for QG)
-    assert "given actions 1.44 / 2.87 (QG-DDPG's smaller at 297 of 297)" in notes[1]
-    assert "the actor's action 2.87 / 5.74 (QG-DDPG's smaller at 27 of 27)" in notes[1]
+    assert "given actions 1.44 / 2.87 (QG-DDPG's smaller at 297 of 297; ratio 0.5 [0.5, 0.5])" \
+        in notes[1]
+    assert "the actor's action 2.87 / 5.74 (QG-DDPG's smaller at 27 of 27; ratio 0.5 [0.5, " \
+        "0.5])" in notes[1]
     assert ": not shown (thesis" in notes[0]
     assert "largest at lr 0.001 (+10.00); DDPG's mean return over all episodes is lowest at " \
            "lr 0.001 (-60.0)" in notes[2]
@@ -82,6 +86,30 @@ def test_the_q_spread_is_over_the_seeds_whose_runs_both_hold_their_final_q() -> 
     pairs = peg_pairs(results, tail=2)
     assert pairs.spread_seeds == {1e-3: [1, 2]}
     assert _row(peg_paired(pairs, tail=2), "0.001")[8] == "0.25 / 0.5 (2 seeds)"
+    assert _row(peg_paired(pairs, tail=2), "0.001")[10] == "n/a"   # 2 seeds: no interval
+
+
+def test_the_spread_ratios_interval_resamples_the_seeds_and_tells_narrower_from_alike() -> None:
+    """Final Q drawn per seed: QG-DDPG's with half DDPG's spread, then with the same. The
+    interval is below 1 for the first and holds 1 for the second; it holds its estimate."""
+    from qg_experiments.report.peg_sections import q_spread_ratio
+    rng = np.random.default_rng(3)
+
+    def pairs(qg_scale: float) -> list[dict]:
+        return [{"qgddpg": {"q_given": rng.normal(-50.0, qg_scale, (27, 11)).tolist()},
+                 "ddpg": {"q_given": rng.normal(-50.0, 1.0, (27, 11)).tolist()}}
+                for _ in range(10)]
+
+    narrower, alike = q_spread_ratio(pairs(0.5)), q_spread_ratio(pairs(1.0))
+    assert narrower.n == alike.n == 10
+    assert 0.4 < narrower.mean < 0.6 and narrower.high < 1.0, narrower
+    assert alike.low < 1.0 < alike.high and 0.9 < alike.mean < 1.1, alike
+    for interval in (narrower, alike):
+        assert interval.low <= interval.mean <= interval.high
+    # the same data and generator seed, the same interval
+    data = pairs(1.0)
+    assert q_spread_ratio(data, resamples=500, seed=1) == q_spread_ratio(data, resamples=500,
+                                                                         seed=1)
 
 
 def test_no_pairs_no_table() -> None:

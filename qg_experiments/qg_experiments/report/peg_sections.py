@@ -18,7 +18,7 @@ from qg_experiments.report import plots
 from qg_experiments.report.divergence import run_divergence
 from qg_experiments.report.markdown import fmt, speed, table
 
-__all__ = ["peg_section", "PegPairs", "peg_pairs", "per_pair", "peg_paired",
+__all__ = ["peg_section", "PegPairs", "peg_pairs", "q_spread_ratio", "per_pair", "peg_paired",
            "peg_against_random", "peg_thesis_notes", "peg_diverged", "peg_budget",
            "td3_reference_line", "TD3_REFERENCE"]
 
@@ -180,6 +180,8 @@ class PegPairs:
     :param spread: per set of points (``peg.Q_POINTS``) and (algorithm, lr), the std of the
         final Q across the paired seeds.
     :param spread_seeds: per lr, the paired seeds whose runs hold their final Q (the spread's).
+    :param spread_ratio: per set of points and lr, QG-DDPG's median spread over DDPG's with
+        its interval over those seeds (``q_spread_ratio``; lrs with ``RATIO_SEEDS`` of them).
     """
     lrs: list[float]
     compared: dict[str, dict[float, stats.PairedComparison]]
@@ -187,6 +189,7 @@ class PegPairs:
     diverged: dict[float, dict[int, dict[str, bool]]]
     spread: dict[str, dict[tuple[str, float], np.ndarray]]
     spread_seeds: dict[float, list[int]]
+    spread_ratio: dict[str, dict[float, stats.Interval]]
 
     def spreads(self, lr: float, points: str = "given") -> dict[str, np.ndarray] | None:
         """QG-DDPG's and DDPG's spread at ``lr``, or None (fewer than two paired seeds)."""
@@ -218,8 +221,54 @@ def peg_pairs(results: list[dict[str, Any]], tail: int) -> PegPairs | None:
     whole = per_pair(list(filter(peg.holds_final_q, results)), lambda run: run)
     paired = [run for lr in lrs for runs in whole.get(lr, {}).values() for run in runs.values()]
     seeds = {lr: sorted(whole.get(lr, {})) for lr in lrs}
+    ratio = {points: {lr: q for lr in lrs if len(seeds[lr]) >= RATIO_SEEDS
+                      and (q := q_spread_ratio(list(whole[lr].values()), points)) is not None}
+             for points in peg.Q_POINTS}
     return PegPairs(lrs, compared, holm, diverged,
-                    {points: peg.q_spread(paired, points) for points in peg.Q_POINTS}, seeds)
+                    {points: peg.q_spread(paired, points) for points in peg.Q_POINTS}, seeds,
+                    ratio)
+
+
+#: Paired seeds holding their final Q that a spread ratio's interval needs (the report's
+#: least number of seeds for a claim).
+RATIO_SEEDS = 5
+
+
+def q_spread_ratio(pairs: list[dict[str, dict[str, Any]]], points: str = "given",
+                   resamples: int = stats.RESAMPLES, seed: int = 0) -> stats.Interval | None:
+    """QG-DDPG's median Q spread over DDPG's (thesis Fig. 8.3: below 1 if the graph narrows
+    it), with a 95 % percentile bootstrap interval that resamples the seeds.
+
+    A spread is a property of a set of seeds, not of one run, so the seeds are what is
+    resampled, the same resample for both algorithms (they are paired by seed): the interval
+    says how much the ratio owes to which seeds ran. None if DDPG's spread is 0.
+    :param pairs: per seed, algorithm -> run holding its final Q (``peg.holds_final_q``).
+    """
+    field = peg.Q_POINTS[points]
+    q = {alg: np.array([np.ravel(pair[alg][field]) for pair in pairs], dtype=float)
+         for alg in ("qgddpg", "ddpg")}
+
+    def ratio(rows: np.ndarray) -> np.ndarray:
+        """The ratio for each resample (a row of seed indices)."""
+        median = {alg: np.median(v[rows].std(axis=-2), axis=-1) for alg, v in q.items()}
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return median["qgddpg"] / median["ddpg"]
+
+    whole = np.arange(len(pairs))
+    estimate = float(ratio(whole))
+    if not np.isfinite(estimate):
+        return None
+    rng = np.random.default_rng(seed)
+    draws = np.concatenate([ratio(rng.integers(0, len(pairs), (min(1000, left), len(pairs))))
+                            for left in range(resamples, 0, -1000)])
+    low, high = np.nanpercentile(draws, [50 * (1 - stats.CONFIDENCE),
+                                         50 * (1 + stats.CONFIDENCE)])
+    return stats.Interval(estimate, float(low), float(high), len(pairs))
+
+
+def _ratio_cell(interval: stats.Interval | None) -> str:
+    return "n/a" if interval is None else \
+        f"{interval.mean:.3g} [{interval.low:.3g}, {interval.high:.3g}]"
 
 
 def peg_paired(pairs: PegPairs | None, tail: int) -> list[str]:
@@ -241,6 +290,7 @@ def peg_paired(pairs: PegPairs | None, tail: int) -> list[str]:
                      f"({len(pairs.spread_seeds[lr])} seeds)",
                      "n/a" if q is None else
                      f"{int(np.sum(q['qgddpg'] < q['ddpg']))} of {q['ddpg'].size}",
+                     _ratio_cell(pairs.spread_ratio["given"].get(lr)),
                      " / ".join(str(sum(runs[alg] for runs in seeds.values()))
                                 for alg in ("qgddpg", "ddpg"))])
     return [f"QG-DDPG against DDPG per learning rate, paired by seed (the seeds both ran). "
@@ -251,13 +301,16 @@ def peg_paired(pairs: PegPairs | None, tail: int) -> list[str]:
             f"pairs the smallest p is 2 / 2^n: 0.0625 for 5, 0.002 for 10). Q spread: the "
             f"standard deviation across those seeds of each of the 27 x 11 final Q predictions "
             f"(thesis Fig. 8.3), its median QG-DDPG / DDPG over the paired seeds whose runs "
-            f"hold their final Q (how many), and the points where QG-DDPG's is smaller. "
+            f"hold their final Q (how many), the points where QG-DDPG's is smaller, and QG-DDPG's "
+            f"median over DDPG's with its 95 % interval from resampling those seeds (given "
+            f"{RATIO_SEEDS} of them at least; below 1: the graph narrows the spread). "
             f"Diverged: the runs whose mean Q after an episode's updates left "
             f"[-1 / (1 - gamma), 0] by more than a tenth of its width (as the grid's).",
             "", *table(["lr", "pairs (seeds)", "all: QG / DDPG / ties", "all: QG - DDPG [95 % CI]",
                         "all: p (Holm)", "late: QG / DDPG / ties", "late: QG - DDPG [95 % CI]",
                         "late: p (Holm)", "median Q spread QG / DDPG",
-                        "QG spread smaller", "diverged QG / DDPG"], rows)]
+                        "QG spread smaller", "spread QG / DDPG [95 % CI]",
+                        "diverged QG / DDPG"], rows)]
 
 
 def peg_against_random(results: list[dict[str, Any]], randoms: list[dict[str, Any]],
@@ -341,7 +394,10 @@ def peg_thesis_notes(data: dict[str, Any], planned_lrs: Iterable[float] = ()) ->
             text += f"; median Q spread across seeds {seeds} QG-DDPG / DDPG: " + ", ".join(
                 f"{_POINTS[points]} {np.median(q['qgddpg']):.3g} / {np.median(q['ddpg']):.3g} "
                 f"(QG-DDPG's smaller at {int(np.sum(q['qgddpg'] < q['ddpg']))} of "
-                f"{q['ddpg'].size})" for points, q in spreads) + \
+                f"{q['ddpg'].size}"
+                + (f"; ratio {_ratio_cell(r)}"
+                   if (r := pairs.spread_ratio[points].get(lr)) is not None else "")
+                + ")" for points, q in spreads) + \
                 " (thesis Fig. 8.3, lr 1e-4: clearly smaller with QG-DDPG)"
         notes.append(text + ".")
     if len(pairs.lrs) > 1:
