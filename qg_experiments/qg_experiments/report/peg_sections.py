@@ -261,6 +261,7 @@ def q_spread_ratio(pairs: list[dict[str, dict[str, Any]]], points: str = "given"
     rng = np.random.default_rng(seed)
     draws = np.concatenate([ratio(rng.integers(0, len(pairs), (min(1000, left), len(pairs))))
                             for left in range(resamples, 0, -1000)])
+    # (a resample of one seed drawn every time has no spread, 0 / 0: left out)
     low, high = np.nanpercentile(draws, [50 * (1 - stats.CONFIDENCE),
                                          50 * (1 + stats.CONFIDENCE)])
     return stats.Interval(estimate, float(low), float(high), len(pairs))
