@@ -241,8 +241,10 @@ def q_spread_ratio(pairs: list[dict[str, dict[str, Any]]], points: str = "given"
 
     A spread is a property of a set of seeds, not of one run, so the seeds are what is
     resampled, the same resample for both algorithms (they are paired by seed): the interval
-    says how much the ratio owes to which seeds ran. None if DDPG's spread is 0.
+    says how much the ratio owes to which seeds ran.
     :param pairs: per seed, algorithm -> run holding its final Q (``peg.holds_final_q``).
+    :returns: the ratio (as the interval's ``mean``) and its interval over ``n`` seeds; None if
+        DDPG's spread is 0.
     """
     field = peg.Q_POINTS[points]
     q = {alg: np.array([np.ravel(pair[alg][field]) for pair in pairs], dtype=float)
@@ -268,6 +270,7 @@ def q_spread_ratio(pairs: list[dict[str, dict[str, Any]]], points: str = "given"
 
 
 def _ratio_cell(interval: stats.Interval | None) -> str:
+    """``q_spread_ratio``'s ratio and interval for a table or a line."""
     return "n/a" if interval is None else \
         f"{interval.mean:.3g} [{interval.low:.3g}, {interval.high:.3g}]"
 
